@@ -1,0 +1,19 @@
+//! wlnav's numerical core: the wheel-loader model, a simulated machine, the
+//! critic and actor kernels and the MPC. Pure computation: no I/O, no async, no
+//! global state; functions take buffers and return results.
+
+pub mod actor;
+pub mod cost;
+pub mod critic;
+pub mod encoder;
+pub mod mlp;
+pub mod model;
+pub mod plant;
+pub mod weights;
+
+pub use actor::{Actor, ActorWorkspace};
+pub use cost::CostWeights;
+pub use critic::{Critic, CriticWorkspace, Derivatives, HessianMode, TerminalDerivatives};
+pub use encoder::Encoder;
+pub use model::{Control, Goal, MachineParams, State};
+pub use plant::{Plant, PlantConfig, VelocityCommand};

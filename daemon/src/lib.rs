@@ -1,0 +1,3 @@
+//! wlnavd library: configuration, CAN, control loop.
+
+pub mod can;

@@ -1,0 +1,19 @@
+#!/usr/bin/env bash
+# Runs every test of the workspace on a fresh machine: installs what the tests
+# need, then `cargo test` over all crates. Used by CI (.ci/run) and by people.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+need_apt=()
+# Packages some crates' tests need (kept in one place; see README).
+for pkg in $(cat scripts/apt-packages.txt 2>/dev/null | grep -v '^#'); do
+  dpkg -s "$pkg" >/dev/null 2>&1 || need_apt+=("$pkg")
+done
+if [ ${#need_apt[@]} -gt 0 ]; then
+  echo "installing: ${need_apt[*]}"
+  export DEBIAN_FRONTEND=noninteractive
+  apt-get update -qq
+  apt-get install -y -qq --no-install-recommends "${need_apt[@]}"
+fi
+
+cargo test --workspace --locked "$@"

@@ -1,0 +1,918 @@
+//! The two ends of the connection: [`DaemonEndpoint`] (used by `wlnavd`) and [`Client`]
+//! (used by the CLI, tests, localization bridges).
+//!
+//! All ports use iceoryx2's `ipc_threadsafe` service flavour, so endpoints are `Send + Sync`
+//! and can move between the daemon's tokio I/O tasks and threads; the wire format is the
+//! same as the plain `ipc` flavour, so C/C++/Python peers interoperate unchanged.
+
+use core::time::Duration;
+use std::os::fd::RawFd;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Instant;
+
+use iceoryx2::node::{Node, NodeBuilder, NodeName};
+use iceoryx2::port::client::Client as IoxClient;
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::server::Server;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::{ipc_threadsafe, EventId, FileDescriptorBased, ServiceName};
+use iceoryx2::service::port_factory::{event, publish_subscribe, request_response};
+use iceoryx2::signal_handling_mode::SignalHandlingMode;
+
+use crate::config::{IpcConfig, ServiceNames};
+use crate::error::{ClientError, IpcError};
+use crate::msg::{GoalReply, GoalRequest, Obstacle, Pose2, PoseEstimate, Telemetry};
+
+/// The iceoryx2 service flavour used for every port (see the module docs).
+pub type IpcService = ipc_threadsafe::Service;
+
+/// Event ids sent on the event services paired with each data service. A listener may see
+/// ids it does not care about (the goal event service carries both directions); they are
+/// only wake-ups, the data is always read from the data service.
+pub mod event_ids {
+    /// A client sent a [`crate::GoalRequest`] (on `{prefix}/v1/goal`).
+    pub const GOAL_REQUEST: usize = 1;
+    /// The daemon sent a [`crate::GoalReply`] (on `{prefix}/v1/goal`).
+    pub const GOAL_REPLY: usize = 2;
+    /// A [`crate::PoseEstimate`] was published (on `{prefix}/v1/pose`).
+    pub const POSE: usize = 3;
+    /// A [`crate::Telemetry`] sample was published (on `{prefix}/v1/telemetry`).
+    pub const TELEMETRY: usize = 4;
+}
+
+/// Service quality-of-service settings. They are requirements when opening an existing
+/// service, so every wlnav process must use the same values; documented in the crate root
+/// for foreign peers (who may leave them at iceoryx2's defaults when only opening).
+pub mod qos {
+    /// One goal server per prefix: a second daemon is refused instead of both answering.
+    pub const GOAL_MAX_SERVERS: usize = 1;
+    /// Clients per goal service (CLI invocations, tests, GUIs).
+    pub const GOAL_MAX_CLIENTS: usize = 32;
+    /// Requests one client may have in flight.
+    pub const GOAL_MAX_ACTIVE_REQUESTS_PER_CLIENT: usize = 16;
+    /// Nodes per service.
+    pub const MAX_NODES: usize = 64;
+    /// Telemetry subscribers (watchers, recorders).
+    pub const TELEMETRY_MAX_SUBSCRIBERS: usize = 16;
+    /// Telemetry publishers: the daemon (2 leaves room for a replay tool).
+    pub const TELEMETRY_MAX_PUBLISHERS: usize = 2;
+    /// Pose publishers (localization, simulated backend, replay).
+    pub const POSE_MAX_PUBLISHERS: usize = 4;
+    /// Pose subscribers.
+    pub const POSE_MAX_SUBSCRIBERS: usize = 8;
+    /// Per-subscriber buffer; older samples are overwritten (safe overflow) so a slow
+    /// reader never blocks a publisher.
+    pub const SUBSCRIBER_BUFFER: usize = 16;
+    /// History delivered to a new subscriber: the latest sample, so `watch` shows something
+    /// at once and the daemon gets a pose without waiting a period.
+    pub const HISTORY: usize = 1;
+    /// Listeners and notifiers per event service.
+    pub const EVENT_MAX_PORTS: usize = 64;
+}
+
+type GoalFactory = request_response::PortFactory<IpcService, GoalRequest, (), GoalReply, ()>;
+type GoalServer = Server<IpcService, GoalRequest, (), GoalReply, ()>;
+type GoalClient = IoxClient<IpcService, GoalRequest, (), GoalReply, ()>;
+type GoalPending =
+    iceoryx2::pending_response::PendingResponse<IpcService, GoalRequest, (), GoalReply, ()>;
+type GoalActive =
+    iceoryx2::active_request::ActiveRequest<IpcService, GoalRequest, (), GoalReply, ()>;
+
+fn boxed<E: std::error::Error + Send + Sync + 'static>(e: E) -> crate::error::BoxedSource {
+    Box::new(e)
+}
+
+/// What stale-node clean-up found at start-up.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct CleanupReport {
+    /// Dead nodes seen by `Node::list` before cleaning.
+    pub dead_nodes_found: u64,
+    /// Dead nodes whose resources were removed.
+    pub cleaned: u64,
+    /// Dead nodes that could not be removed (other user's files, or another process is
+    /// cleaning them right now).
+    pub failed: u64,
+}
+
+/// The node and the three services, opened or created with the crate's QoS. Shared setup
+/// of both endpoints.
+struct Connection {
+    node: Node<IpcService>,
+    names: ServiceNames,
+    goal: GoalFactory,
+    goal_event: event::PortFactory<IpcService>,
+    pose: publish_subscribe::PortFactory<IpcService, PoseEstimate, ()>,
+    pose_event: event::PortFactory<IpcService>,
+    telemetry: publish_subscribe::PortFactory<IpcService, Telemetry, ()>,
+    telemetry_event: event::PortFactory<IpcService>,
+    cleanup: CleanupReport,
+}
+
+fn service_name(name: &str) -> Result<ServiceName, IpcError> {
+    ServiceName::new(name).map_err(|e| IpcError::InvalidServiceName {
+        name: name.to_owned(),
+        source: boxed(e),
+    })
+}
+
+impl Connection {
+    fn open(config: &IpcConfig, node_name: &str) -> Result<Self, IpcError> {
+        let names = config.service_names()?;
+        let node_name = NodeName::new(node_name).map_err(|e| IpcError::Node(boxed(e)))?;
+        // Signal handling stays with the application (the daemon uses tokio's signals);
+        // iceoryx2 must not install its own SIGINT/SIGTERM handlers.
+        let node = NodeBuilder::new()
+            .name(&node_name)
+            .signal_handling_mode(SignalHandlingMode::Disabled)
+            .create::<IpcService>()
+            .map_err(|e| IpcError::Node(boxed(e)))?;
+
+        let cleanup = if config.cleanup_stale_nodes {
+            cleanup_stale_nodes(&node)?
+        } else {
+            CleanupReport::default()
+        };
+
+        let goal = node
+            .service_builder(&service_name(&names.goal)?)
+            .request_response::<GoalRequest, GoalReply>()
+            .max_servers(qos::GOAL_MAX_SERVERS)
+            .max_clients(qos::GOAL_MAX_CLIENTS)
+            .max_active_requests_per_client(qos::GOAL_MAX_ACTIVE_REQUESTS_PER_CLIENT)
+            .max_nodes(qos::MAX_NODES)
+            .open_or_create()
+            .map_err(|e| IpcError::Service {
+                service: names.goal.clone(),
+                pattern: "request-response",
+                source: boxed(e),
+            })?;
+        let pose = node
+            .service_builder(&service_name(&names.pose)?)
+            .publish_subscribe::<PoseEstimate>()
+            .max_publishers(qos::POSE_MAX_PUBLISHERS)
+            .max_subscribers(qos::POSE_MAX_SUBSCRIBERS)
+            .subscriber_max_buffer_size(qos::SUBSCRIBER_BUFFER)
+            .history_size(qos::HISTORY)
+            .enable_safe_overflow(true)
+            .max_nodes(qos::MAX_NODES)
+            .open_or_create()
+            .map_err(|e| IpcError::Service {
+                service: names.pose.clone(),
+                pattern: "publish-subscribe",
+                source: boxed(e),
+            })?;
+        let telemetry = node
+            .service_builder(&service_name(&names.telemetry)?)
+            .publish_subscribe::<Telemetry>()
+            .max_publishers(qos::TELEMETRY_MAX_PUBLISHERS)
+            .max_subscribers(qos::TELEMETRY_MAX_SUBSCRIBERS)
+            .subscriber_max_buffer_size(qos::SUBSCRIBER_BUFFER)
+            .history_size(qos::HISTORY)
+            .enable_safe_overflow(true)
+            .max_nodes(qos::MAX_NODES)
+            .open_or_create()
+            .map_err(|e| IpcError::Service {
+                service: names.telemetry.clone(),
+                pattern: "publish-subscribe",
+                source: boxed(e),
+            })?;
+        let event = |name: &str| -> Result<event::PortFactory<IpcService>, IpcError> {
+            node.service_builder(&service_name(name)?)
+                .event()
+                .max_listeners(qos::EVENT_MAX_PORTS)
+                .max_notifiers(qos::EVENT_MAX_PORTS)
+                .max_nodes(qos::MAX_NODES)
+                .open_or_create()
+                .map_err(|e| IpcError::Service {
+                    service: name.to_owned(),
+                    pattern: "event",
+                    source: boxed(e),
+                })
+        };
+        let goal_event = event(&names.goal)?;
+        let pose_event = event(&names.pose)?;
+        let telemetry_event = event(&names.telemetry)?;
+        Ok(Self {
+            node,
+            names,
+            goal,
+            goal_event,
+            pose,
+            pose_event,
+            telemetry,
+            telemetry_event,
+            cleanup,
+        })
+    }
+
+    fn notifier(
+        factory: &event::PortFactory<IpcService>,
+        service: &str,
+    ) -> Result<Notifier<IpcService>, IpcError> {
+        factory
+            .notifier_builder()
+            .create()
+            .map_err(|e| IpcError::Port {
+                port: "notifier",
+                service: service.to_owned(),
+                source: boxed(e),
+            })
+    }
+
+    fn listener(
+        factory: &event::PortFactory<IpcService>,
+        service: &str,
+    ) -> Result<Listener<IpcService>, IpcError> {
+        factory
+            .listener_builder()
+            .create()
+            .map_err(|e| IpcError::Port {
+                port: "listener",
+                service: service.to_owned(),
+                source: boxed(e),
+            })
+    }
+}
+
+/// Removes the resources of iceoryx2 nodes whose process died (crash, `kill -9`). Without
+/// this, a crashed daemon's goal server would keep its slot (max one server per prefix)
+/// and the restarted daemon could not serve goals. Idempotent and safe to run concurrently
+/// from several processes.
+fn cleanup_stale_nodes(node: &Node<IpcService>) -> Result<CleanupReport, IpcError> {
+    let mut dead = 0u64;
+    Node::<IpcService>::list(node.config(), |state| {
+        if matches!(state, iceoryx2::node::NodeState::Dead(_)) {
+            dead += 1;
+        }
+        iceoryx2::prelude::CallbackProgression::Continue
+    })
+    .map_err(|e| IpcError::NodeList(boxed(e)))?;
+    let state = if dead > 0 {
+        node.try_cleanup_dead_nodes()
+    } else {
+        iceoryx2::node::CleanupState {
+            cleanups: 0,
+            failed_cleanups: 0,
+        }
+    };
+    Ok(CleanupReport {
+        dead_nodes_found: dead,
+        cleaned: state.cleanups,
+        failed: state.failed_cleanups,
+    })
+}
+
+/// Which event sources woke [`DaemonEndpoint::wait`].
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Wakeup {
+    /// Goal requests may be waiting: call [`DaemonEndpoint::receive_goal`] until `None`.
+    pub goal: bool,
+    /// Poses may be waiting: call [`DaemonEndpoint::latest_pose`].
+    pub pose: bool,
+}
+
+impl Wakeup {
+    /// True if anything woke the wait (false on timeout or a signal).
+    pub fn any(&self) -> bool {
+        self.goal || self.pose
+    }
+}
+
+/// Waits until one of the file descriptors is readable or `timeout` passes. Returns which
+/// were readable; an interrupting signal counts as a timeout (callers loop anyway).
+fn poll_fds(fds: &[RawFd], timeout: Option<Duration>) -> Result<Vec<bool>, std::io::Error> {
+    let mut pfds: Vec<libc::pollfd> = fds
+        .iter()
+        .map(|&fd| libc::pollfd {
+            fd,
+            events: libc::POLLIN,
+            revents: 0,
+        })
+        .collect();
+    let timeout_ms: libc::c_int = match timeout {
+        None => -1,
+        // Round up so a 0.5 ms timeout does not become a busy 0 ms poll.
+        Some(t) => t
+            .as_micros()
+            .div_ceil(1000)
+            .try_into()
+            .unwrap_or(libc::c_int::MAX),
+    };
+    // SAFETY: `pfds` is a valid, exclusively borrowed array of `pfds.len()` pollfd structs.
+    let rc = unsafe { libc::poll(pfds.as_mut_ptr(), pfds.len() as libc::nfds_t, timeout_ms) };
+    if rc < 0 {
+        let err = std::io::Error::last_os_error();
+        if err.kind() == std::io::ErrorKind::Interrupted {
+            return Ok(vec![false; fds.len()]);
+        }
+        return Err(err);
+    }
+    Ok(pfds
+        .iter()
+        .map(|p| p.revents & (libc::POLLIN | libc::POLLERR | libc::POLLHUP) != 0)
+        .collect())
+}
+
+fn listener_fd(listener: &Listener<IpcService>) -> RawFd {
+    // SAFETY: the descriptor stays valid as long as the listener, which the caller owns;
+    // we only hand out the number.
+    unsafe { listener.file_descriptor().native_handle() }
+}
+
+fn drain(listener: &Listener<IpcService>, service: &str) -> Result<(), IpcError> {
+    listener
+        .try_wait(|_| {})
+        .map(|_| ())
+        .map_err(|e| IpcError::Event {
+            service: service.to_owned(),
+            source: boxed(e),
+        })
+}
+
+fn notify(notifier: &Notifier<IpcService>, id: usize, service: &str) -> Result<(), IpcError> {
+    notifier
+        .notify_with_custom_event_id(EventId::new(id))
+        .map(|_| ())
+        .map_err(|e| IpcError::Event {
+            service: service.to_owned(),
+            source: boxed(e),
+        })
+}
+
+/// The daemon's side: serves goal requests, publishes telemetry, subscribes to poses.
+///
+/// Typical I/O loop (blocking thread; with tokio wrap [`DaemonEndpoint::goal_event_fd`] and
+/// [`DaemonEndpoint::pose_event_fd`] in `AsyncFd` instead of calling `wait`):
+///
+/// ```no_run
+/// # use shm_ipc::*;
+/// # use std::time::Duration;
+/// # fn main() -> Result<(), Box<dyn std::error::Error>> {
+/// let ep = DaemonEndpoint::new(&IpcConfig::default())?;
+/// let validator = GoalValidator::default();
+/// loop {
+///     let woke = ep.wait(Some(Duration::from_millis(200)))?;
+///     while let Some(goal) = ep.receive_goal()? {
+///         let (result, reply) = validator.validate_and_reply(goal.request());
+///         goal.reply(reply)?;
+///         // hand `result` to the control thread ...
+///         # let _ = result;
+///     }
+///     if let Some(pose) = ep.latest_pose()? { /* ... */ # let _ = pose; }
+///     # let _ = woke; break;
+/// }
+/// # Ok(()) }
+/// ```
+pub struct DaemonEndpoint {
+    conn: Connection,
+    server: GoalServer,
+    goal_notifier: Notifier<IpcService>,
+    goal_listener: Listener<IpcService>,
+    telemetry_pub: Publisher<IpcService, Telemetry, ()>,
+    telemetry_notifier: Notifier<IpcService>,
+    pose_sub: Subscriber<IpcService, PoseEstimate, ()>,
+    pose_listener: Listener<IpcService>,
+}
+
+impl core::fmt::Debug for DaemonEndpoint {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("DaemonEndpoint")
+            .field("services", &self.conn.names)
+            .finish_non_exhaustive()
+    }
+}
+
+impl DaemonEndpoint {
+    /// Opens or creates the services for `config.prefix` and the daemon's ports. Fails with
+    /// [`IpcError::AlreadyServed`] if a live daemon already serves that prefix.
+    pub fn new(config: &IpcConfig) -> Result<Self, IpcError> {
+        let conn = Connection::open(config, "wlnavd")?;
+        let names = &conn.names;
+        let server = conn.goal.server_builder().create().map_err(|e| {
+            if e == iceoryx2::service::port_factory::server::ServerCreateError::ExceedsMaxSupportedServers
+            {
+                IpcError::AlreadyServed {
+                    service: names.goal.clone(),
+                }
+            } else {
+                IpcError::Port {
+                    port: "server",
+                    service: names.goal.clone(),
+                    source: boxed(e),
+                }
+            }
+        })?;
+        let goal_notifier = Connection::notifier(&conn.goal_event, &names.goal)?;
+        let goal_listener = Connection::listener(&conn.goal_event, &names.goal)?;
+        let telemetry_pub =
+            conn.telemetry
+                .publisher_builder()
+                .create()
+                .map_err(|e| IpcError::Port {
+                    port: "publisher",
+                    service: names.telemetry.clone(),
+                    source: boxed(e),
+                })?;
+        let telemetry_notifier = Connection::notifier(&conn.telemetry_event, &names.telemetry)?;
+        let pose_sub = conn
+            .pose
+            .subscriber_builder()
+            .buffer_size(qos::SUBSCRIBER_BUFFER)
+            .create()
+            .map_err(|e| IpcError::Port {
+                port: "subscriber",
+                service: names.pose.clone(),
+                source: boxed(e),
+            })?;
+        let pose_listener = Connection::listener(&conn.pose_event, &names.pose)?;
+        Ok(Self {
+            conn,
+            server,
+            goal_notifier,
+            goal_listener,
+            telemetry_pub,
+            telemetry_notifier,
+            pose_sub,
+            pose_listener,
+        })
+    }
+
+    /// The service names in use.
+    pub fn service_names(&self) -> &ServiceNames {
+        &self.conn.names
+    }
+
+    /// What the start-up stale-node clean-up did.
+    pub fn cleanup_report(&self) -> CleanupReport {
+        self.conn.cleanup
+    }
+
+    /// Takes the next pending goal request without blocking. Answer it with
+    /// [`IncomingGoal::reply`]; dropping it unanswered makes the client see
+    /// [`ClientError::Dropped`].
+    pub fn receive_goal(&self) -> Result<Option<IncomingGoal<'_>>, IpcError> {
+        let active = self.server.receive().map_err(|e| IpcError::Receive {
+            service: self.conn.names.goal.clone(),
+            source: boxed(e),
+        })?;
+        Ok(active.map(|active| IncomingGoal {
+            request: *active.payload(),
+            active,
+            endpoint: self,
+        }))
+    }
+
+    /// Answers every pending request with `handler`'s reply; returns how many were served.
+    /// The reply's `request_id` is set to the request's.
+    pub fn serve_goals(
+        &self,
+        mut handler: impl FnMut(&GoalRequest) -> GoalReply,
+    ) -> Result<usize, IpcError> {
+        let mut n = 0;
+        while let Some(goal) = self.receive_goal()? {
+            let reply = handler(goal.request());
+            goal.reply(reply)?;
+            n += 1;
+        }
+        Ok(n)
+    }
+
+    /// Publishes one telemetry sample and wakes the subscribers.
+    pub fn publish_telemetry(&self, telemetry: &Telemetry) -> Result<(), IpcError> {
+        let service = &self.conn.names.telemetry;
+        self.telemetry_pub
+            .send_copy(*telemetry)
+            .map_err(|e| IpcError::Send {
+                service: service.clone(),
+                source: boxed(e),
+            })?;
+        notify(&self.telemetry_notifier, event_ids::TELEMETRY, service)
+    }
+
+    /// Takes the next pose sample without blocking (oldest first).
+    pub fn receive_pose(&self) -> Result<Option<PoseEstimate>, IpcError> {
+        self.pose_sub
+            .receive()
+            .map(|s| s.map(|s| *s.payload()))
+            .map_err(|e| IpcError::Receive {
+                service: self.conn.names.pose.clone(),
+                source: boxed(e),
+            })
+    }
+
+    /// Drains all pending pose samples and returns the newest, if any. Validity is not
+    /// judged here: check [`PoseEstimate::is_usable`] and the timestamp.
+    pub fn latest_pose(&self) -> Result<Option<PoseEstimate>, IpcError> {
+        let mut latest = None;
+        while let Some(p) = self.receive_pose()? {
+            latest = Some(p);
+        }
+        Ok(latest)
+    }
+
+    /// Blocks until a goal request or pose notification arrives, or `timeout` passes
+    /// (`None`: forever). Consumes the notifications, so read the data afterwards until
+    /// empty. Spurious wake-ups are possible (e.g. the goal event service also carries the
+    /// daemon's own reply notifications); a signal returns an empty [`Wakeup`].
+    pub fn wait(&self, timeout: Option<Duration>) -> Result<Wakeup, IpcError> {
+        let ready = poll_fds(
+            &[listener_fd(&self.goal_listener), listener_fd(&self.pose_listener)],
+            timeout,
+        )
+        .map_err(|e| IpcError::Event {
+            service: self.conn.names.goal.clone(),
+            source: boxed(e),
+        })?;
+        self.drain_events()?;
+        Ok(Wakeup {
+            goal: ready.first().copied().unwrap_or(false),
+            pose: ready.get(1).copied().unwrap_or(false),
+        })
+    }
+
+    /// Consumes pending notifications on both listeners (call after an `AsyncFd` readiness
+    /// before reading the data, so the descriptors stop being readable).
+    pub fn drain_events(&self) -> Result<(), IpcError> {
+        drain(&self.goal_listener, &self.conn.names.goal)?;
+        drain(&self.pose_listener, &self.conn.names.pose)
+    }
+
+    /// File descriptor that becomes readable when a goal request may be waiting.
+    pub fn goal_event_fd(&self) -> RawFd {
+        listener_fd(&self.goal_listener)
+    }
+
+    /// File descriptor that becomes readable when a pose may be waiting.
+    pub fn pose_event_fd(&self) -> RawFd {
+        listener_fd(&self.pose_listener)
+    }
+}
+
+/// A goal request taken from the service, waiting for its answer.
+pub struct IncomingGoal<'a> {
+    request: GoalRequest,
+    active: GoalActive,
+    endpoint: &'a DaemonEndpoint,
+}
+
+impl core::fmt::Debug for IncomingGoal<'_> {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("IncomingGoal")
+            .field("request", &self.request)
+            .finish_non_exhaustive()
+    }
+}
+
+impl IncomingGoal<'_> {
+    /// The request as received (a copy out of shared memory; validate before use).
+    pub fn request(&self) -> &GoalRequest {
+        &self.request
+    }
+
+    /// Sends `reply` (its `request_id` is overwritten with the request's) and wakes the
+    /// client. A client that already gave up is not an error.
+    pub fn reply(self, mut reply: GoalReply) -> Result<(), IpcError> {
+        let service = &self.endpoint.conn.names.goal;
+        reply.request_id = self.request.request_id;
+        if self.active.is_connected() {
+            self.active.send_copy(reply).map_err(|e| IpcError::Send {
+                service: service.clone(),
+                source: boxed(e),
+            })?;
+        }
+        drop(self.active);
+        notify(
+            &self.endpoint.goal_notifier,
+            event_ids::GOAL_REPLY,
+            service,
+        )
+    }
+}
+
+/// The client's side: sends goals, cancels, stops; publishes poses; subscribes to
+/// telemetry.
+pub struct Client {
+    conn: Connection,
+    client: GoalClient,
+    goal_notifier: Notifier<IpcService>,
+    goal_listener: Listener<IpcService>,
+    /// Created on first [`Client::publish_pose`], so read-only clients take no publisher slot.
+    pose_pub: std::sync::Mutex<Option<(Publisher<IpcService, PoseEstimate, ()>, Notifier<IpcService>)>>,
+    next_id: AtomicU64,
+}
+
+impl core::fmt::Debug for Client {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("Client")
+            .field("services", &self.conn.names)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Client {
+    /// Opens or creates the services for `config.prefix`. Succeeds without a daemon (the
+    /// services are created on demand); requests then fail with [`ClientError::NoDaemon`].
+    pub fn new(config: &IpcConfig) -> Result<Self, IpcError> {
+        let conn = Connection::open(config, "wlnav-client")?;
+        let names = &conn.names;
+        let client = conn
+            .goal
+            .client_builder()
+            .create()
+            .map_err(|e| IpcError::Port {
+                port: "client",
+                service: names.goal.clone(),
+                source: boxed(e),
+            })?;
+        let goal_notifier = Connection::notifier(&conn.goal_event, &names.goal)?;
+        let goal_listener = Connection::listener(&conn.goal_event, &names.goal)?;
+        // Ids start at the monotonic clock so two clients (or two runs) are unlikely to
+        // reuse an id the daemon reports in telemetry.
+        let start = crate::monotonic_now_ns().max(1);
+        Ok(Self {
+            conn,
+            client,
+            goal_notifier,
+            goal_listener,
+            pose_pub: std::sync::Mutex::new(None),
+            next_id: AtomicU64::new(start),
+        })
+    }
+
+    /// The service names in use.
+    pub fn service_names(&self) -> &ServiceNames {
+        &self.conn.names
+    }
+
+    /// What the start-up stale-node clean-up did.
+    pub fn cleanup_report(&self) -> CleanupReport {
+        self.conn.cleanup
+    }
+
+    /// A fresh request id (unique within this client, never 0).
+    pub fn next_request_id(&self) -> u64 {
+        self.next_id.fetch_add(1, Ordering::Relaxed)
+    }
+
+    /// Sends `request` as is (the caller chose its `request_id`) and returns a handle to
+    /// await the reply. Dropping the handle abandons the reply and frees the slot (at most
+    /// 16 requests in flight per client).
+    pub fn submit(&self, request: &GoalRequest) -> Result<PendingGoal<'_>, ClientError> {
+        let service = &self.conn.names.goal;
+        let pending = self
+            .client
+            .send_copy(*request)
+            .map_err(|e| IpcError::Send {
+                service: service.clone(),
+                source: boxed(e),
+            })?;
+        if pending.number_of_server_connections() == 0 {
+            return Err(ClientError::NoDaemon {
+                service: service.clone(),
+            });
+        }
+        notify(&self.goal_notifier, event_ids::GOAL_REQUEST, service)?;
+        Ok(PendingGoal {
+            pending,
+            request_id: request.request_id,
+            client: self,
+        })
+    }
+
+    /// Sends `request` and waits up to `timeout` for the reply. A rejection is a successful
+    /// call: inspect [`GoalReply::is_accepted`], [`GoalReply::reject_code`] and
+    /// [`GoalReply::reason_text`].
+    pub fn request(
+        &self,
+        request: &GoalRequest,
+        timeout: Duration,
+    ) -> Result<GoalReply, ClientError> {
+        self.submit(request)?.wait(timeout)
+    }
+
+    /// Asks the daemon to drive to `goal` around `obstacles` (≤ 8).
+    pub fn set_goal(
+        &self,
+        goal: Pose2,
+        obstacles: &[Obstacle],
+        timeout: Duration,
+    ) -> Result<GoalReply, ClientError> {
+        let req = GoalRequest::set_goal(self.next_request_id(), goal, obstacles)
+            .ok_or(ClientError::TooManyObstacles(obstacles.len()))?;
+        self.request(&req, timeout)
+    }
+
+    /// Asks the daemon to drop its goal and stop.
+    pub fn cancel(&self, timeout: Duration) -> Result<GoalReply, ClientError> {
+        self.request(&GoalRequest::cancel(self.next_request_id()), timeout)
+    }
+
+    /// Asks the daemon for a controlled stop.
+    pub fn stop(&self, timeout: Duration) -> Result<GoalReply, ClientError> {
+        self.request(&GoalRequest::stop(self.next_request_id()), timeout)
+    }
+
+    /// Publishes a pose estimate (the publisher is created on first use) and wakes the
+    /// daemon.
+    pub fn publish_pose(&self, pose: &PoseEstimate) -> Result<(), IpcError> {
+        let service = &self.conn.names.pose;
+        // A poisoned lock only means another thread panicked mid-send; the ports are fine.
+        let mut guard = self
+            .pose_pub
+            .lock()
+            .unwrap_or_else(|poisoned| poisoned.into_inner());
+        if guard.is_none() {
+            let publisher = self
+                .conn
+                .pose
+                .publisher_builder()
+                .create()
+                .map_err(|e| IpcError::Port {
+                    port: "publisher",
+                    service: service.clone(),
+                    source: boxed(e),
+                })?;
+            let notifier = Connection::notifier(&self.conn.pose_event, service)?;
+            *guard = Some((publisher, notifier));
+        }
+        let Some((publisher, notifier)) = guard.as_ref() else {
+            return Ok(());
+        };
+        publisher.send_copy(*pose).map_err(|e| IpcError::Send {
+            service: service.clone(),
+            source: boxed(e),
+        })?;
+        notify(notifier, event_ids::POSE, service)
+    }
+
+    /// A new telemetry subscription. It receives the latest sample already published (if
+    /// any) and everything after; up to 16 unread samples are kept, older ones dropped.
+    pub fn subscribe_telemetry(&self) -> Result<TelemetrySubscriber, IpcError> {
+        let service = self.conn.names.telemetry.clone();
+        let subscriber = self
+            .conn
+            .telemetry
+            .subscriber_builder()
+            .buffer_size(qos::SUBSCRIBER_BUFFER)
+            .create()
+            .map_err(|e| IpcError::Port {
+                port: "subscriber",
+                service: service.clone(),
+                source: boxed(e),
+            })?;
+        let listener = Connection::listener(&self.conn.telemetry_event, &service)?;
+        Ok(TelemetrySubscriber {
+            subscriber,
+            listener,
+            service,
+        })
+    }
+}
+
+/// A sent goal request awaiting its reply.
+pub struct PendingGoal<'a> {
+    pending: GoalPending,
+    request_id: u64,
+    client: &'a Client,
+}
+
+impl core::fmt::Debug for PendingGoal<'_> {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("PendingGoal")
+            .field("request_id", &self.request_id)
+            .finish_non_exhaustive()
+    }
+}
+
+impl PendingGoal<'_> {
+    /// The id of the request.
+    pub fn request_id(&self) -> u64 {
+        self.request_id
+    }
+
+    /// The reply if it has arrived, without blocking.
+    pub fn try_reply(&self) -> Result<Option<GoalReply>, ClientError> {
+        let response = self.pending.receive().map_err(|e| IpcError::Receive {
+            service: self.client.conn.names.goal.clone(),
+            source: boxed(e),
+        })?;
+        match response {
+            None => Ok(None),
+            Some(r) => {
+                let reply = *r.payload();
+                if reply.request_id != self.request_id {
+                    return Err(ClientError::ReplyMismatch {
+                        expected: self.request_id,
+                        got: reply.request_id,
+                    });
+                }
+                Ok(Some(reply))
+            }
+        }
+    }
+
+    /// Waits up to `timeout` for the reply, sleeping on the goal event service.
+    pub fn wait(self, timeout: Duration) -> Result<GoalReply, ClientError> {
+        let deadline = Instant::now() + timeout;
+        let service = &self.client.conn.names.goal;
+        loop {
+            if let Some(reply) = self.try_reply()? {
+                return Ok(reply);
+            }
+            if !self.pending.is_connected() {
+                // The server may have replied and dropped the request between the two
+                // checks; look once more before giving up.
+                return match self.try_reply()? {
+                    Some(reply) => Ok(reply),
+                    None => Err(ClientError::Dropped {
+                        request_id: self.request_id,
+                    }),
+                };
+            }
+            let now = Instant::now();
+            if now >= deadline {
+                return Err(ClientError::Timeout {
+                    request_id: self.request_id,
+                    timeout,
+                });
+            }
+            self.client
+                .goal_listener
+                .timed_wait(|_| {}, deadline - now)
+                .map_err(|e| IpcError::Event {
+                    service: service.clone(),
+                    source: boxed(e),
+                })?;
+        }
+    }
+}
+
+/// A telemetry subscription (see [`Client::subscribe_telemetry`]).
+pub struct TelemetrySubscriber {
+    subscriber: Subscriber<IpcService, Telemetry, ()>,
+    listener: Listener<IpcService>,
+    service: String,
+}
+
+impl core::fmt::Debug for TelemetrySubscriber {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("TelemetrySubscriber")
+            .field("service", &self.service)
+            .finish_non_exhaustive()
+    }
+}
+
+impl TelemetrySubscriber {
+    /// The next unread sample (oldest first), without blocking.
+    pub fn try_recv(&self) -> Result<Option<Telemetry>, IpcError> {
+        self.subscriber
+            .receive()
+            .map(|s| s.map(|s| *s.payload()))
+            .map_err(|e| IpcError::Receive {
+                service: self.service.clone(),
+                source: boxed(e),
+            })
+    }
+
+    /// The next sample, waiting up to `timeout` for one to be published (`Ok(None)` on
+    /// timeout).
+    pub fn recv_timeout(&self, timeout: Duration) -> Result<Option<Telemetry>, IpcError> {
+        let deadline = Instant::now() + timeout;
+        loop {
+            if let Some(t) = self.try_recv()? {
+                return Ok(Some(t));
+            }
+            let now = Instant::now();
+            if now >= deadline {
+                return Ok(None);
+            }
+            self.listener
+                .timed_wait(|_| {}, deadline - now)
+                .map_err(|e| IpcError::Event {
+                    service: self.service.clone(),
+                    source: boxed(e),
+                })?;
+        }
+    }
+
+    /// Drains everything unread and returns the newest sample.
+    pub fn latest(&self) -> Result<Option<Telemetry>, IpcError> {
+        let mut latest = None;
+        while let Some(t) = self.try_recv()? {
+            latest = Some(t);
+        }
+        Ok(latest)
+    }
+
+    /// Consumes pending notifications (after an `AsyncFd` readiness, before reading).
+    pub fn drain_events(&self) -> Result<(), IpcError> {
+        drain(&self.listener, &self.service)
+    }
+
+    /// File descriptor that becomes readable when a sample is published.
+    pub fn event_fd(&self) -> RawFd {
+        listener_fd(&self.listener)
+    }
+}

@@ -1,0 +1,129 @@
+//! Error types. iceoryx2's own errors are small enums; they are kept as the boxed `source`
+//! so callers can still downcast, while our variants say *which* step failed.
+
+use core::time::Duration;
+
+/// A boxed iceoryx2 error.
+pub type BoxedSource = Box<dyn std::error::Error + Send + Sync + 'static>;
+
+/// Setting up or using the shared-memory transport failed.
+#[derive(Debug, thiserror::Error)]
+pub enum IpcError {
+    /// The configured service-name prefix is not acceptable.
+    #[error("invalid service-name prefix {prefix:?}: {why}")]
+    InvalidPrefix {
+        /// The prefix given
+        prefix: String,
+        /// What is wrong with it
+        why: &'static str,
+    },
+    /// iceoryx2 rejected a service name.
+    #[error("invalid service name {name:?}: {source}")]
+    InvalidServiceName {
+        /// The name
+        name: String,
+        /// iceoryx2's reason
+        source: BoxedSource,
+    },
+    /// The iceoryx2 node could not be created (permissions on /dev/shm or /tmp/iceoryx2?).
+    #[error("cannot create iceoryx2 node: {0}")]
+    Node(BoxedSource),
+    /// Opening or creating a service failed (e.g. a peer created it with an incompatible
+    /// payload type or settings: an old wire version under the same name).
+    #[error("cannot open or create service {service:?} ({pattern}): {source}")]
+    Service {
+        /// Service name
+        service: String,
+        /// Messaging pattern
+        pattern: &'static str,
+        /// iceoryx2's reason
+        source: BoxedSource,
+    },
+    /// Another process already serves goals under this prefix.
+    #[error("another daemon already serves {service:?}; use a different prefix")]
+    AlreadyServed {
+        /// Service name
+        service: String,
+    },
+    /// Creating a port (publisher, subscriber, client, server, notifier, listener) failed,
+    /// most often because the service's port limit is reached.
+    #[error("cannot create {port} on {service:?}: {source}")]
+    Port {
+        /// Port kind
+        port: &'static str,
+        /// Service name
+        service: String,
+        /// iceoryx2's reason
+        source: BoxedSource,
+    },
+    /// Sending a message failed.
+    #[error("cannot send on {service:?}: {source}")]
+    Send {
+        /// Service name
+        service: String,
+        /// iceoryx2's reason
+        source: BoxedSource,
+    },
+    /// Receiving a message failed.
+    #[error("cannot receive on {service:?}: {source}")]
+    Receive {
+        /// Service name
+        service: String,
+        /// iceoryx2's reason
+        source: BoxedSource,
+    },
+    /// Sending or waiting for an event notification failed.
+    #[error("event error on {service:?}: {source}")]
+    Event {
+        /// Service name
+        service: String,
+        /// iceoryx2's reason
+        source: BoxedSource,
+    },
+    /// Waiting was interrupted by a signal; the caller decides whether to retry.
+    #[error("wait interrupted by a signal")]
+    Interrupted,
+    /// Listing nodes for stale clean-up failed.
+    #[error("cannot list iceoryx2 nodes: {0}")]
+    NodeList(BoxedSource),
+}
+
+/// A client request did not produce a usable reply.
+#[derive(Debug, thiserror::Error)]
+pub enum ClientError {
+    /// Transport failure.
+    #[error(transparent)]
+    Ipc(#[from] IpcError),
+    /// No daemon is serving goals under this prefix.
+    #[error("no daemon is serving goals on {service:?}")]
+    NoDaemon {
+        /// Service name
+        service: String,
+    },
+    /// No reply within the timeout.
+    #[error("no reply to request {request_id} within {timeout:?}")]
+    Timeout {
+        /// The request
+        request_id: u64,
+        /// The timeout that expired
+        timeout: Duration,
+    },
+    /// The daemon dropped the request without answering (it shut down, or its request
+    /// buffer overflowed during a flood).
+    #[error("request {request_id} was dropped without a reply")]
+    Dropped {
+        /// The request
+        request_id: u64,
+    },
+    /// The reply carries a different request id (a misbehaving server).
+    #[error("reply for request {got} received while waiting for {expected}")]
+    ReplyMismatch {
+        /// The id sent
+        expected: u64,
+        /// The id received
+        got: u64,
+    },
+    /// More than [`crate::MAX_OBSTACLES`] obstacles were given.
+    #[error("{0} obstacles given, at most {max} fit in a request", max = crate::MAX_OBSTACLES)]
+    TooManyObstacles(usize),
+}

@@ -1,0 +1,193 @@
+//! # shm-ipc: how programs talk to `wlnavd`
+//!
+//! Goals, poses and telemetry travel over [iceoryx2](https://docs.rs/iceoryx2/0.10) shared
+//! memory (no broker, zero-copy, C/C++/Python bindings). This crate holds the wire types,
+//! the service names, a goal validator the daemon uses, and a small client library:
+//!
+//! * [`DaemonEndpoint`]: the daemon's side (serve goal requests, publish [`Telemetry`],
+//!   read [`PoseEstimate`]s, wait on events).
+//! * [`Client`]: everyone else (send a goal and get accept/reject with a reason, cancel,
+//!   stop, publish poses, [`Client::subscribe_telemetry`]).
+//! * [`GoalValidator`]: finite numbers, inside the workspace, ≤ 8 obstacles with positive
+//!   radius, goal not inside an obstacle; rejections carry a [`RejectReason`].
+//!
+//! ```no_run
+//! use shm_ipc::{Client, IpcConfig, Pose2};
+//! use std::time::Duration;
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! let client = Client::new(&IpcConfig::default())?;
+//! let reply = client.set_goal(Pose2::new(4.5, 0.0, 0.0), &[], Duration::from_secs(1))?;
+//! if !reply.is_accepted() {
+//!     eprintln!("rejected: {}", reply.reason_text());
+//! }
+//! # Ok(()) }
+//! ```
+//!
+//! ## Services
+//!
+//! With prefix `P` (default `wlnav`, see [`IpcConfig`]; different prefixes never meet, which
+//! is how parallel tests and several daemons on one host stay apart):
+//!
+//! | service name | pattern | payload | paired event service (same name) |
+//! |---|---|---|---|
+//! | `P/v1/goal` | request-response | [`GoalRequest`] → [`GoalReply`] | event id 1 after a request, 2 after a reply |
+//! | `P/v1/pose` | publish-subscribe | [`PoseEstimate`] | event id 3 after each sample |
+//! | `P/v1/telemetry` | publish-subscribe | [`Telemetry`] (one per control tick) | event id 4 after each sample |
+//!
+//! iceoryx2 has no async API, so every data service has an event service of the **same
+//! name** (iceoryx2 distinguishes services by name and messaging pattern). A sender
+//! notifies after sending; a receiver sleeps on its listener (or on the listener's file
+//! descriptor, e.g. with tokio `AsyncFd`) and then reads the data service until empty.
+//! Nobody busy-polls. A foreign peer that sends must notify likewise, or the daemon only
+//! sees its message at its next periodic wake-up.
+//!
+//! Service settings used when creating (a peer that only *opens* may keep iceoryx2's
+//! defaults; if it sets values, they must not exceed these): goal: max 1 server, 32
+//! clients, 16 active requests per client, 64 nodes, safe overflow on; pose: 4 publishers,
+//! 8 subscribers; telemetry: 2 publishers, 16 subscribers; both: subscriber buffer 16, history
+//! 1, safe overflow on, 64 nodes; events: 64 listeners, 64 notifiers, 64 nodes. User headers
+//! are empty (`()`, size 0). Each payload is registered under the type name given below
+//! (the `type_name` iceoryx2 compares when opening; in C++ set `IOX2_TYPE_NAME` to it).
+//!
+//! ## Payload layout (wire format v1)
+//!
+//! All payloads are `#[repr(C)]`, little-endian (the host's; shared memory never leaves the
+//! host), 8-byte aligned, without pointers and **without implicit padding** (spare bytes
+//! are explicit `_reserved` fields, written as zero). `f64` is IEEE-754 binary64, angles are
+//! radians (counter-clockwise, world frame), lengths metres, times nanoseconds of
+//! `CLOCK_MONOTONIC` (see [`monotonic_now_ns`]). Enumerations and flags are `u32`; unknown
+//! codes are rejected or ignored, never trusted. Sizes and offsets are checked at compile
+//! time in `msg.rs`.
+//!
+//! Shared structs:
+//!
+//! | struct (type name) | size | fields (offset: type name \[unit\]) |
+//! |---|---|---|
+//! | `Pose2` (`wlnav::v1::Pose2`) | 24 | 0: f64 x \[m\]; 8: f64 y \[m\]; 16: f64 heading \[rad\] |
+//! | `Obstacle` (`wlnav::v1::Obstacle`) | 24 | 0: f64 x \[m\]; 8: f64 y \[m\]; 16: f64 r \[m\] |
+//! | `MachineState` (`wlnav::v1::MachineState`) | 48 | 0: f64 x_f \[m\]; 8: f64 y_f \[m\]; 16: f64 theta_f \[rad\]; 24: f64 beta \[rad\]; 32: f64 beta_dot \[rad/s\]; 40: f64 v_f \[m/s\] |
+//! | `Command` (`wlnav::v1::Command`) | 16 | 0: f64 beta_dot \[rad/s\]; 8: f64 v \[m/s\] |
+//!
+//! [`GoalRequest`] (`wlnav::v1::GoalRequest`), 232 bytes:
+//!
+//! | offset | type | field | meaning |
+//! |---|---|---|---|
+//! | 0 | u64 | request_id | chosen by the client, echoed in the reply |
+//! | 8 | u32 | kind | 1 set goal, 2 cancel, 3 stop ([`GoalKind`]) |
+//! | 12 | u32 | obstacle_count | 0..=8 valid entries in `obstacles` |
+//! | 16 | Pose2 | goal | front-axle goal pose (set goal only) |
+//! | 40 | Obstacle\[8\] | obstacles | circular obstacles, radius already inflated; unused entries zero |
+//!
+//! [`GoalReply`] (`wlnav::v1::GoalReply`), 152 bytes:
+//!
+//! | offset | type | field | meaning |
+//! |---|---|---|---|
+//! | 0 | u64 | request_id | the request answered |
+//! | 8 | u32 | accepted | 1 accepted, 0 rejected |
+//! | 12 | u32 | reason_code | [`RejectCode`]: 0 none, 1 non-finite, 2 out of workspace, 3 too many obstacles, 4 bad obstacle radius, 5 goal inside obstacle, 6 unknown kind, 7 not ready, 8 other |
+//! | 16 | u32 | reason_len | valid bytes in `reason` (≤ 128) |
+//! | 20 | u32 | _reserved | 0 |
+//! | 24 | u8\[128\] | reason | UTF-8 text, zero-filled after `reason_len` |
+//!
+//! [`PoseEstimate`] (`wlnav::v1::PoseEstimate`), 112 bytes:
+//!
+//! | offset | type | field | meaning |
+//! |---|---|---|---|
+//! | 0 | u64 | timestamp_ns | measurement time, `CLOCK_MONOTONIC` \[ns\] |
+//! | 8 | u32 | sequence | publisher's counter (wraps) |
+//! | 12 | u32 | flags | bit 0 valid, bit 1 covariance valid ([`pose_flags`]) |
+//! | 16 | f64 | x | front-axle centre \[m\] |
+//! | 24 | f64 | y | front-axle centre \[m\] |
+//! | 32 | f64 | heading | front-body heading θ_f \[rad\] |
+//! | 40 | f64\[9\] | covariance | row-major 3×3 of (x, y, heading) \[m², m·rad, rad²\] |
+//!
+//! [`Telemetry`] (`wlnav::v1::Telemetry`), 2136 bytes:
+//!
+//! | offset | type | field | meaning |
+//! |---|---|---|---|
+//! | 0 | u64 | tick | control tick counter |
+//! | 8 | u64 | timestamp_ns | tick start, `CLOCK_MONOTONIC` \[ns\] |
+//! | 16 | u64 | goal_request_id | request id of the active goal, 0 if none |
+//! | 24 | u32 | mode | [`Mode`]: 0 startup, 1 idle, 2 tracking, 3 reached, 4 stopping, 5 fault |
+//! | 28 | u32 | fault_flags | [`fault_flags`] bits |
+//! | 32 | u32 | goal_active | 1 if `goal` is valid |
+//! | 36 | u32 | trajectory_len | valid entries in `trajectory` (≤ 41) |
+//! | 40 | u32 | qp_iterations | QP iterations this tick |
+//! | 44 | u32 | sqp_iterations | SQP iterations this tick |
+//! | 48 | f64 | solve_time_us | solve wall time \[µs\] |
+//! | 56 | f64 | cost | optimal cost |
+//! | 64 | f64 | pose_error_xy | position error to the goal \[m\] |
+//! | 72 | f64 | pose_error_heading | wrapped heading error \[rad\] |
+//! | 80 | MachineState | state | x = \[x_f, y_f, θ_f, β, β̇, v_f\] |
+//! | 128 | Pose2 | goal | active goal |
+//! | 152 | Command | command | (β̇_cmd, v_cmd) sent this tick |
+//! | 168 | MachineState\[41\] | trajectory | planned x₀..x_N |
+//!
+//! A C declaration that matches byte for byte:
+//!
+//! ```c
+//! typedef struct { double x, y, heading; } wlnav_pose2;              /* 24 */
+//! typedef struct { double x, y, r; } wlnav_obstacle;                 /* 24 */
+//! typedef struct { double x_f, y_f, theta_f, beta, beta_dot, v_f; } wlnav_state; /* 48 */
+//! typedef struct { double beta_dot, v; } wlnav_command;              /* 16 */
+//! typedef struct { uint64_t request_id; uint32_t kind, obstacle_count;
+//!                  wlnav_pose2 goal; wlnav_obstacle obstacles[8]; } wlnav_goal_request; /* 232 */
+//! typedef struct { uint64_t request_id; uint32_t accepted, reason_code, reason_len, reserved;
+//!                  uint8_t reason[128]; } wlnav_goal_reply;          /* 152 */
+//! typedef struct { uint64_t timestamp_ns; uint32_t sequence, flags;
+//!                  double x, y, heading, covariance[9]; } wlnav_pose_estimate; /* 112 */
+//! typedef struct { uint64_t tick, timestamp_ns, goal_request_id;
+//!                  uint32_t mode, fault_flags, goal_active, trajectory_len, qp_iterations, sqp_iterations;
+//!                  double solve_time_us, cost, pose_error_xy, pose_error_heading;
+//!                  wlnav_state state; wlnav_pose2 goal; wlnav_command command;
+//!                  wlnav_state trajectory[41]; } wlnav_telemetry;    /* 2136 */
+//! ```
+//!
+//! ## Start-up clean-up
+//!
+//! iceoryx2 has no central daemon: a process that dies leaves its node's files under
+//! `/dev/shm/iox2_*` and `/tmp/iceoryx2`. Both endpoints list the nodes on start
+//! (`Node::list`) and remove dead ones ([`IpcConfig::cleanup_stale_nodes`], on by default),
+//! so a restarted daemon finds its goal server slot free.
+
+#![warn(missing_docs)]
+
+mod config;
+mod endpoint;
+mod error;
+mod msg;
+mod validate;
+
+pub use config::{
+    validate_prefix, IpcConfig, ServiceNames, API_VERSION, DEFAULT_PREFIX, MAX_PREFIX_LEN,
+};
+pub use endpoint::{
+    event_ids, qos, CleanupReport, Client, DaemonEndpoint, IncomingGoal, IpcService,
+    PendingGoal, TelemetrySubscriber, Wakeup,
+};
+pub use error::{BoxedSource, ClientError, IpcError};
+pub use msg::{
+    fault_flags, pose_flags, Command, GoalKind, GoalReply, GoalRequest, MachineState, Mode,
+    Obstacle, Pose2, PoseEstimate, RejectCode, Telemetry, MAX_OBSTACLES, MAX_TRAJECTORY,
+    REASON_TEXT_CAPACITY,
+};
+pub use validate::{heapless_obstacles, GoalValidator, RejectReason, ValidRequest, Workspace};
+
+/// Now, in nanoseconds of `CLOCK_MONOTONIC`: the clock of [`PoseEstimate::timestamp_ns`] and
+/// [`Telemetry::timestamp_ns`]. Monotonic because poses are judged stale by age, which must
+/// not jump with NTP; shared memory implies one host, so all processes share this clock.
+/// (Rust's `Instant` uses the same clock on Linux but does not expose its value.)
+pub fn monotonic_now_ns() -> u64 {
+    let mut ts = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: `ts` is a valid, writable timespec; CLOCK_MONOTONIC always exists on Linux.
+    let rc = unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };
+    if rc != 0 {
+        return 0;
+    }
+    (ts.tv_sec as u64)
+        .saturating_mul(1_000_000_000)
+        .saturating_add(ts.tv_nsec as u64)
+}

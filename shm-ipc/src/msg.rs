@@ -1,0 +1,652 @@
+//! The `#[repr(C)]` payloads exchanged over shared memory.
+//!
+//! Every type here is plain old data: fixed size, no pointers, no Rust enums or `bool`s
+//! (a peer written in another language, or a buggy one, can put any bit pattern into shared
+//! memory, and an invalid `bool`/enum discriminant would be undefined behaviour on read).
+//! Discriminants are therefore `u32` codes that are decoded with `TryFrom`, and every
+//! struct spells out its padding as `_reserved` fields so the byte layout is identical in
+//! every language and contains no uninitialised bytes.
+//!
+//! The layout is documented in the crate root and frozen by the compile-time assertions at
+//! the bottom of this file; changing it requires a new service version (`v2`).
+
+use core::mem::{align_of, offset_of, size_of};
+
+use iceoryx2::prelude::ZeroCopySend;
+
+/// Maximum number of circular obstacles in one goal request.
+pub const MAX_OBSTACLES: usize = 8;
+/// Maximum number of states in the planned trajectory of a telemetry sample
+/// (x₀..x_N for horizons up to N = 40).
+pub const MAX_TRAJECTORY: usize = 41;
+/// Capacity in bytes of the UTF-8 reject reason text in a [`GoalReply`].
+pub const REASON_TEXT_CAPACITY: usize = 128;
+
+/// A planar pose: position in metres, heading in radians (world frame, counter-clockwise
+/// from the x axis).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("wlnav::v1::Pose2")]
+pub struct Pose2 {
+    /// x [m]
+    pub x: f64,
+    /// y [m]
+    pub y: f64,
+    /// Heading [rad]
+    pub heading: f64,
+}
+
+impl Pose2 {
+    /// A pose from its components.
+    pub const fn new(x: f64, y: f64, heading: f64) -> Self {
+        Self { x, y, heading }
+    }
+
+    /// True if every component is finite.
+    pub fn is_finite(&self) -> bool {
+        self.x.is_finite() && self.y.is_finite() && self.heading.is_finite()
+    }
+}
+
+/// A circular obstacle: centre in metres, radius in metres (already inflated by the
+/// machine's own radius, DESIGN §5).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("wlnav::v1::Obstacle")]
+pub struct Obstacle {
+    /// Centre x [m]
+    pub x: f64,
+    /// Centre y [m]
+    pub y: f64,
+    /// Radius [m], must be positive and finite
+    pub r: f64,
+}
+
+impl Obstacle {
+    /// An obstacle from its centre and radius.
+    pub const fn new(x: f64, y: f64, r: f64) -> Self {
+        Self { x, y, r }
+    }
+}
+
+/// The machine state x = [x_f, y_f, θ_f, β, β̇, v_f] (DESIGN §2): front-axle pose, articulation
+/// angle and rate, front speed.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("wlnav::v1::MachineState")]
+pub struct MachineState {
+    /// Front-axle centre x [m]
+    pub x_f: f64,
+    /// Front-axle centre y [m]
+    pub y_f: f64,
+    /// Front-body heading [rad]
+    pub theta_f: f64,
+    /// Articulation angle β [rad], positive bends the front body to the left
+    pub beta: f64,
+    /// Articulation rate β̇ [rad/s]
+    pub beta_dot: f64,
+    /// Front speed v_f [m/s]
+    pub v_f: f64,
+}
+
+impl MachineState {
+    /// All zeros (at rest at the origin).
+    pub const ZERO: Self = Self {
+        x_f: 0.0,
+        y_f: 0.0,
+        theta_f: 0.0,
+        beta: 0.0,
+        beta_dot: 0.0,
+        v_f: 0.0,
+    };
+
+    /// The state as an array in the order of DESIGN §2.
+    pub const fn to_array(&self) -> [f64; 6] {
+        [
+            self.x_f,
+            self.y_f,
+            self.theta_f,
+            self.beta,
+            self.beta_dot,
+            self.v_f,
+        ]
+    }
+
+    /// The state from an array in the order of DESIGN §2.
+    pub const fn from_array(a: [f64; 6]) -> Self {
+        Self {
+            x_f: a[0],
+            y_f: a[1],
+            theta_f: a[2],
+            beta: a[3],
+            beta_dot: a[4],
+            v_f: a[5],
+        }
+    }
+}
+
+/// The velocity command sent to the machine's low-level controller.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("wlnav::v1::Command")]
+pub struct Command {
+    /// Commanded articulation rate β̇_cmd [rad/s]
+    pub beta_dot: f64,
+    /// Commanded front speed v_cmd [m/s]
+    pub v: f64,
+}
+
+/// What a [`GoalRequest`] asks for. Sent on the wire as a `u32` ([`GoalRequest::kind`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[repr(u32)]
+pub enum GoalKind {
+    /// Drive to [`GoalRequest::goal`] avoiding [`GoalRequest::obstacles`]; replaces any
+    /// previous goal (the newest valid goal wins).
+    SetGoal = 1,
+    /// Drop the current goal and come to a controlled stop; new goals are accepted again.
+    Cancel = 2,
+    /// Controlled stop now (like cancel, but also meant for operators: "stop the machine").
+    Stop = 3,
+}
+
+impl GoalKind {
+    /// The wire code.
+    pub const fn code(self) -> u32 {
+        self as u32
+    }
+}
+
+impl TryFrom<u32> for GoalKind {
+    type Error = u32;
+    /// Decodes a wire code; the unknown code is returned as the error.
+    fn try_from(v: u32) -> Result<Self, u32> {
+        match v {
+            1 => Ok(Self::SetGoal),
+            2 => Ok(Self::Cancel),
+            3 => Ok(Self::Stop),
+            other => Err(other),
+        }
+    }
+}
+
+/// Request on `{prefix}/v1/goal` (request-response). 232 bytes, alignment 8.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[type_name("wlnav::v1::GoalRequest")]
+pub struct GoalRequest {
+    /// Chosen by the client, echoed in [`GoalReply::request_id`]; also reported in telemetry
+    /// as the id of the active goal. 0 is allowed but means "unidentified".
+    pub request_id: u64,
+    /// A [`GoalKind`] code (1 set goal, 2 cancel, 3 stop); 0 and others are rejected.
+    pub kind: u32,
+    /// Number of valid entries at the front of [`GoalRequest::obstacles`]; > 8 is rejected.
+    pub obstacle_count: u32,
+    /// Goal pose of the front axle (x [m], y [m], heading [rad]); ignored unless set goal.
+    pub goal: Pose2,
+    /// Circular obstacles; entries at index ≥ `obstacle_count` are ignored (send zeros).
+    pub obstacles: [Obstacle; MAX_OBSTACLES],
+}
+
+impl GoalRequest {
+    /// A set-goal request. Returns `None` if more than [`MAX_OBSTACLES`] obstacles are
+    /// given (the wire format cannot carry them).
+    pub fn set_goal(request_id: u64, goal: Pose2, obstacles: &[Obstacle]) -> Option<Self> {
+        if obstacles.len() > MAX_OBSTACLES {
+            return None;
+        }
+        let mut req = Self::empty(request_id, GoalKind::SetGoal);
+        req.goal = goal;
+        req.obstacle_count = obstacles.len() as u32;
+        req.obstacles[..obstacles.len()].copy_from_slice(obstacles);
+        Some(req)
+    }
+
+    /// A cancel request.
+    pub const fn cancel(request_id: u64) -> Self {
+        Self::empty(request_id, GoalKind::Cancel)
+    }
+
+    /// A stop request.
+    pub const fn stop(request_id: u64) -> Self {
+        Self::empty(request_id, GoalKind::Stop)
+    }
+
+    const fn empty(request_id: u64, kind: GoalKind) -> Self {
+        Self {
+            request_id,
+            kind: kind.code(),
+            obstacle_count: 0,
+            goal: Pose2::new(0.0, 0.0, 0.0),
+            obstacles: [Obstacle::new(0.0, 0.0, 0.0); MAX_OBSTACLES],
+        }
+    }
+
+    /// The decoded kind, or the unknown code.
+    pub fn kind(&self) -> Result<GoalKind, u32> {
+        GoalKind::try_from(self.kind)
+    }
+
+    /// The valid obstacles, or `None` if `obstacle_count` exceeds [`MAX_OBSTACLES`].
+    pub fn obstacles(&self) -> Option<&[Obstacle]> {
+        self.obstacles.get(..self.obstacle_count as usize)
+    }
+}
+
+/// Why a goal request was rejected. Sent on the wire as a `u32` ([`GoalReply::reason_code`]).
+///
+/// Codes 1–5 are produced by [`crate::GoalValidator`]; the others by the daemon itself.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[repr(u32)]
+pub enum RejectCode {
+    /// Accepted: no reason.
+    None = 0,
+    /// A goal or obstacle number is NaN or infinite.
+    NonFinite = 1,
+    /// The goal position lies outside the configured workspace rectangle.
+    OutOfWorkspace = 2,
+    /// `obstacle_count` exceeds [`MAX_OBSTACLES`].
+    TooManyObstacles = 3,
+    /// An obstacle radius is zero, negative or not finite.
+    BadObstacle = 4,
+    /// The goal position lies inside an obstacle.
+    GoalInsideObstacle = 5,
+    /// The request kind code is unknown.
+    UnknownKind = 6,
+    /// The daemon is not ready to drive (starting up, faulted, or stopped by an operator).
+    NotReady = 7,
+    /// Any other daemon-side reason; see the text.
+    Other = 8,
+}
+
+impl RejectCode {
+    /// The wire code.
+    pub const fn code(self) -> u32 {
+        self as u32
+    }
+}
+
+impl TryFrom<u32> for RejectCode {
+    type Error = u32;
+    /// Decodes a wire code; the unknown code is returned as the error.
+    fn try_from(v: u32) -> Result<Self, u32> {
+        Ok(match v {
+            0 => Self::None,
+            1 => Self::NonFinite,
+            2 => Self::OutOfWorkspace,
+            3 => Self::TooManyObstacles,
+            4 => Self::BadObstacle,
+            5 => Self::GoalInsideObstacle,
+            6 => Self::UnknownKind,
+            7 => Self::NotReady,
+            8 => Self::Other,
+            other => return Err(other),
+        })
+    }
+}
+
+/// Reply on `{prefix}/v1/goal`. 152 bytes, alignment 8.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[type_name("wlnav::v1::GoalReply")]
+pub struct GoalReply {
+    /// The [`GoalRequest::request_id`] this answers.
+    pub request_id: u64,
+    /// 1 accepted, 0 rejected (any non-zero value reads as accepted).
+    pub accepted: u32,
+    /// A [`RejectCode`]; 0 when accepted.
+    pub reason_code: u32,
+    /// Number of valid bytes in [`GoalReply::reason`] (≤ 128).
+    pub reason_len: u32,
+    /// Zero; keeps `reason` 8-byte aligned and the struct free of implicit padding.
+    pub _reserved: u32,
+    /// UTF-8 human-readable reason, `reason_len` bytes, rest zero-filled (so it is also
+    /// NUL-terminated whenever shorter than 128 bytes).
+    pub reason: [u8; REASON_TEXT_CAPACITY],
+}
+
+impl GoalReply {
+    /// An acceptance of `request_id`.
+    pub const fn accept(request_id: u64) -> Self {
+        Self {
+            request_id,
+            accepted: 1,
+            reason_code: RejectCode::None.code(),
+            reason_len: 0,
+            _reserved: 0,
+            reason: [0; REASON_TEXT_CAPACITY],
+        }
+    }
+
+    /// A rejection of `request_id` with a code and a message. The message is truncated at a
+    /// character boundary to [`REASON_TEXT_CAPACITY`] bytes.
+    pub fn reject(request_id: u64, code: RejectCode, message: &str) -> Self {
+        let mut reply = Self {
+            request_id,
+            accepted: 0,
+            reason_code: code.code(),
+            reason_len: 0,
+            _reserved: 0,
+            reason: [0; REASON_TEXT_CAPACITY],
+        };
+        let mut end = message.len().min(REASON_TEXT_CAPACITY);
+        while !message.is_char_boundary(end) {
+            end -= 1;
+        }
+        reply.reason[..end].copy_from_slice(&message.as_bytes()[..end]);
+        reply.reason_len = end as u32;
+        reply
+    }
+
+    /// True if the goal was accepted.
+    pub fn is_accepted(&self) -> bool {
+        self.accepted != 0
+    }
+
+    /// The decoded reject code, or the unknown wire code.
+    pub fn reject_code(&self) -> Result<RejectCode, u32> {
+        RejectCode::try_from(self.reason_code)
+    }
+
+    /// The reason text. Never fails: an out-of-range length is clamped and invalid UTF-8
+    /// from a foreign peer is cut at the first bad byte.
+    pub fn reason_text(&self) -> &str {
+        let len = (self.reason_len as usize).min(REASON_TEXT_CAPACITY);
+        let bytes = &self.reason[..len];
+        match core::str::from_utf8(bytes) {
+            Ok(s) => s,
+            // `valid_up_to` is a char boundary by definition, so this cannot fail.
+            Err(e) => core::str::from_utf8(&bytes[..e.valid_up_to()]).unwrap_or(""),
+        }
+    }
+}
+
+/// Bits of [`PoseEstimate::flags`].
+pub mod pose_flags {
+    /// The pose is valid (localization is converged). A pose without this bit is ignored.
+    pub const VALID: u32 = 1 << 0;
+    /// [`super::PoseEstimate::covariance`] is filled in.
+    pub const COVARIANCE_VALID: u32 = 1 << 1;
+}
+
+/// Published on `{prefix}/v1/pose` by localization (or the simulated backend). 112 bytes,
+/// alignment 8.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[type_name("wlnav::v1::PoseEstimate")]
+pub struct PoseEstimate {
+    /// Measurement time in nanoseconds of `CLOCK_MONOTONIC` on this host (shared memory means
+    /// same host, so all processes share that clock); see [`crate::monotonic_now_ns`]. The
+    /// daemon uses it to detect stale poses and to compensate latency.
+    pub timestamp_ns: u64,
+    /// Publisher's sequence counter (wraps); lets a reader notice dropped samples.
+    pub sequence: u32,
+    /// [`pose_flags`] bits.
+    pub flags: u32,
+    /// Front-axle centre x [m], world frame.
+    pub x: f64,
+    /// Front-axle centre y [m], world frame.
+    pub y: f64,
+    /// Front-body heading θ_f [rad].
+    pub heading: f64,
+    /// Row-major 3×3 covariance of (x, y, heading) [m², m·rad, rad²]; meaningful only with
+    /// [`pose_flags::COVARIANCE_VALID`].
+    pub covariance: [f64; 9],
+}
+
+impl PoseEstimate {
+    /// A valid pose without covariance.
+    pub const fn new(timestamp_ns: u64, sequence: u32, pose: Pose2) -> Self {
+        Self {
+            timestamp_ns,
+            sequence,
+            flags: pose_flags::VALID,
+            x: pose.x,
+            y: pose.y,
+            heading: pose.heading,
+            covariance: [0.0; 9],
+        }
+    }
+
+    /// The pose part.
+    pub const fn pose(&self) -> Pose2 {
+        Pose2::new(self.x, self.y, self.heading)
+    }
+
+    /// True if flagged valid and the pose is finite (the daemon must ignore it otherwise).
+    pub fn is_usable(&self) -> bool {
+        self.flags & pose_flags::VALID != 0 && self.pose().is_finite()
+    }
+}
+
+/// The daemon's operating mode. Sent on the wire as a `u32` ([`Telemetry::mode`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[repr(u32)]
+pub enum Mode {
+    /// Starting up (weights loading, first solve not done yet).
+    Startup = 0,
+    /// No goal: holding still.
+    Idle = 1,
+    /// Driving towards the goal.
+    Tracking = 2,
+    /// Goal reached (DESIGN §7 success test), holding still.
+    Reached = 3,
+    /// Controlled stop in progress (cancel, stop request, or a fault).
+    Stopping = 4,
+    /// A fault is active; see [`Telemetry::fault_flags`].
+    Fault = 5,
+}
+
+impl Mode {
+    /// The wire code.
+    pub const fn code(self) -> u32 {
+        self as u32
+    }
+}
+
+impl TryFrom<u32> for Mode {
+    type Error = u32;
+    /// Decodes a wire code; the unknown code is returned as the error.
+    fn try_from(v: u32) -> Result<Self, u32> {
+        Ok(match v {
+            0 => Self::Startup,
+            1 => Self::Idle,
+            2 => Self::Tracking,
+            3 => Self::Reached,
+            4 => Self::Stopping,
+            5 => Self::Fault,
+            other => return Err(other),
+        })
+    }
+}
+
+/// Bits of [`Telemetry::fault_flags`].
+pub mod fault_flags {
+    /// No pose received yet, or the newest is older than the configured limit.
+    pub const POSE_STALE: u32 = 1 << 0;
+    /// Machine state (CAN) missing or older than the configured limit.
+    pub const MACHINE_STATE_STALE: u32 = 1 << 1;
+    /// A CAN frame failed its CRC-8 check.
+    pub const CAN_CRC: u32 = 1 << 2;
+    /// A CAN frame's alive counter did not advance as expected.
+    pub const CAN_ALIVE: u32 = 1 << 3;
+    /// The solver failed or returned non-finite values.
+    pub const SOLVE_FAILED: u32 = 1 << 4;
+    /// Driving on the shifted previous plan after a failed solve.
+    pub const FALLBACK_PLAN: u32 = 1 << 5;
+    /// The previous tick missed its deadline.
+    pub const OVERRUN: u32 = 1 << 6;
+    /// An operator stop request is active.
+    pub const STOP_REQUESTED: u32 = 1 << 7;
+    /// The CAN bus reported an error or is off.
+    pub const CAN_BUS: u32 = 1 << 8;
+}
+
+/// Published on `{prefix}/v1/telemetry` by the daemon once per control tick. 2136 bytes,
+/// alignment 8.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[type_name("wlnav::v1::Telemetry")]
+pub struct Telemetry {
+    /// Control tick counter since daemon start.
+    pub tick: u64,
+    /// Tick start time, nanoseconds of `CLOCK_MONOTONIC`.
+    pub timestamp_ns: u64,
+    /// [`GoalRequest::request_id`] of the active goal (0 when there is none).
+    pub goal_request_id: u64,
+    /// A [`Mode`] code.
+    pub mode: u32,
+    /// [`fault_flags`] bits.
+    pub fault_flags: u32,
+    /// 1 if [`Telemetry::goal`] holds an active goal, else 0.
+    pub goal_active: u32,
+    /// Number of valid states at the front of [`Telemetry::trajectory`] (N + 1, ≤ 41).
+    pub trajectory_len: u32,
+    /// QP (interior-point) iterations spent this tick.
+    pub qp_iterations: u32,
+    /// SQP iterations spent this tick (1 for plain RTI).
+    pub sqp_iterations: u32,
+    /// Wall time of this tick's solve [µs].
+    pub solve_time_us: f64,
+    /// Optimal cost of this tick's solution (dimensionless).
+    pub cost: f64,
+    /// Position error ‖(x_f − x_g, y_f − y_g)‖ [m].
+    pub pose_error_xy: f64,
+    /// Wrapped heading error θ_f − θ_g [rad].
+    pub pose_error_heading: f64,
+    /// Measured (delay-compensated) state x at this tick.
+    pub state: MachineState,
+    /// Active goal (meaningful only if `goal_active` = 1).
+    pub goal: Pose2,
+    /// Command sent to the machine this tick.
+    pub command: Command,
+    /// Planned trajectory x₀..x_N, `trajectory_len` valid entries, rest zero.
+    pub trajectory: [MachineState; MAX_TRAJECTORY],
+}
+
+impl Telemetry {
+    /// All zeros, mode [`Mode::Startup`].
+    pub const ZERO: Self = Self {
+        tick: 0,
+        timestamp_ns: 0,
+        goal_request_id: 0,
+        mode: Mode::Startup as u32,
+        fault_flags: 0,
+        goal_active: 0,
+        trajectory_len: 0,
+        qp_iterations: 0,
+        sqp_iterations: 0,
+        solve_time_us: 0.0,
+        cost: 0.0,
+        pose_error_xy: 0.0,
+        pose_error_heading: 0.0,
+        state: MachineState::ZERO,
+        goal: Pose2::new(0.0, 0.0, 0.0),
+        command: Command {
+            beta_dot: 0.0,
+            v: 0.0,
+        },
+        trajectory: [MachineState::ZERO; MAX_TRAJECTORY],
+    };
+
+    /// The decoded mode, or the unknown wire code.
+    pub fn mode(&self) -> Result<Mode, u32> {
+        Mode::try_from(self.mode)
+    }
+
+    /// The valid part of the planned trajectory (clamped to [`MAX_TRAJECTORY`], so a corrupt
+    /// length cannot make this panic).
+    pub fn trajectory(&self) -> &[MachineState] {
+        &self.trajectory[..(self.trajectory_len as usize).min(MAX_TRAJECTORY)]
+    }
+
+    /// Copies `states` into the trajectory (at most [`MAX_TRAJECTORY`], the rest is
+    /// zeroed) and sets the length. Returns how many were stored.
+    pub fn set_trajectory(&mut self, states: &[MachineState]) -> usize {
+        let n = states.len().min(MAX_TRAJECTORY);
+        self.trajectory[..n].copy_from_slice(&states[..n]);
+        self.trajectory[n..].fill(MachineState::ZERO);
+        self.trajectory_len = n as u32;
+        n
+    }
+
+    /// The active goal, if any.
+    pub fn active_goal(&self) -> Option<Pose2> {
+        (self.goal_active != 0).then_some(self.goal)
+    }
+}
+
+impl Default for Telemetry {
+    fn default() -> Self {
+        Self::ZERO
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// Layout freeze. These are the numbers documented in the crate root; a C/C++/Python peer
+// relies on them. If one fails, you changed the wire format: bump the service version.
+// ---------------------------------------------------------------------------------------
+
+const _: () = assert!(size_of::<Pose2>() == 24 && align_of::<Pose2>() == 8);
+const _: () = assert!(offset_of!(Pose2, x) == 0);
+const _: () = assert!(offset_of!(Pose2, y) == 8);
+const _: () = assert!(offset_of!(Pose2, heading) == 16);
+
+const _: () = assert!(size_of::<Obstacle>() == 24 && align_of::<Obstacle>() == 8);
+const _: () = assert!(offset_of!(Obstacle, x) == 0);
+const _: () = assert!(offset_of!(Obstacle, y) == 8);
+const _: () = assert!(offset_of!(Obstacle, r) == 16);
+
+const _: () = assert!(size_of::<MachineState>() == 48 && align_of::<MachineState>() == 8);
+const _: () = assert!(offset_of!(MachineState, x_f) == 0);
+const _: () = assert!(offset_of!(MachineState, y_f) == 8);
+const _: () = assert!(offset_of!(MachineState, theta_f) == 16);
+const _: () = assert!(offset_of!(MachineState, beta) == 24);
+const _: () = assert!(offset_of!(MachineState, beta_dot) == 32);
+const _: () = assert!(offset_of!(MachineState, v_f) == 40);
+
+const _: () = assert!(size_of::<Command>() == 16 && align_of::<Command>() == 8);
+const _: () = assert!(offset_of!(Command, beta_dot) == 0);
+const _: () = assert!(offset_of!(Command, v) == 8);
+
+const _: () = assert!(size_of::<GoalRequest>() == 232 && align_of::<GoalRequest>() == 8);
+const _: () = assert!(offset_of!(GoalRequest, request_id) == 0);
+const _: () = assert!(offset_of!(GoalRequest, kind) == 8);
+const _: () = assert!(offset_of!(GoalRequest, obstacle_count) == 12);
+const _: () = assert!(offset_of!(GoalRequest, goal) == 16);
+const _: () = assert!(offset_of!(GoalRequest, obstacles) == 40);
+
+const _: () = assert!(size_of::<GoalReply>() == 152 && align_of::<GoalReply>() == 8);
+const _: () = assert!(offset_of!(GoalReply, request_id) == 0);
+const _: () = assert!(offset_of!(GoalReply, accepted) == 8);
+const _: () = assert!(offset_of!(GoalReply, reason_code) == 12);
+const _: () = assert!(offset_of!(GoalReply, reason_len) == 16);
+const _: () = assert!(offset_of!(GoalReply, _reserved) == 20);
+const _: () = assert!(offset_of!(GoalReply, reason) == 24);
+
+const _: () = assert!(size_of::<PoseEstimate>() == 112 && align_of::<PoseEstimate>() == 8);
+const _: () = assert!(offset_of!(PoseEstimate, timestamp_ns) == 0);
+const _: () = assert!(offset_of!(PoseEstimate, sequence) == 8);
+const _: () = assert!(offset_of!(PoseEstimate, flags) == 12);
+const _: () = assert!(offset_of!(PoseEstimate, x) == 16);
+const _: () = assert!(offset_of!(PoseEstimate, y) == 24);
+const _: () = assert!(offset_of!(PoseEstimate, heading) == 32);
+const _: () = assert!(offset_of!(PoseEstimate, covariance) == 40);
+
+const _: () = assert!(size_of::<Telemetry>() == 2136 && align_of::<Telemetry>() == 8);
+const _: () = assert!(offset_of!(Telemetry, tick) == 0);
+const _: () = assert!(offset_of!(Telemetry, timestamp_ns) == 8);
+const _: () = assert!(offset_of!(Telemetry, goal_request_id) == 16);
+const _: () = assert!(offset_of!(Telemetry, mode) == 24);
+const _: () = assert!(offset_of!(Telemetry, fault_flags) == 28);
+const _: () = assert!(offset_of!(Telemetry, goal_active) == 32);
+const _: () = assert!(offset_of!(Telemetry, trajectory_len) == 36);
+const _: () = assert!(offset_of!(Telemetry, qp_iterations) == 40);
+const _: () = assert!(offset_of!(Telemetry, sqp_iterations) == 44);
+const _: () = assert!(offset_of!(Telemetry, solve_time_us) == 48);
+const _: () = assert!(offset_of!(Telemetry, cost) == 56);
+const _: () = assert!(offset_of!(Telemetry, pose_error_xy) == 64);
+const _: () = assert!(offset_of!(Telemetry, pose_error_heading) == 72);
+const _: () = assert!(offset_of!(Telemetry, state) == 80);
+const _: () = assert!(offset_of!(Telemetry, goal) == 128);
+const _: () = assert!(offset_of!(Telemetry, command) == 152);
+const _: () = assert!(offset_of!(Telemetry, trajectory) == 168);

@@ -1,0 +1,302 @@
+//! Goal validation: the daemon calls [`GoalValidator::validate`] on every request so that
+//! nothing malformed ever reaches the MPC, and the sender learns why in plain words.
+
+use crate::msg::{GoalKind, GoalReply, GoalRequest, Obstacle, Pose2, RejectCode, MAX_OBSTACLES};
+
+/// An axis-aligned rectangle of the world frame inside which goals may lie [m].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Workspace {
+    /// Lower x bound [m]
+    pub x_min: f64,
+    /// Upper x bound [m]
+    pub x_max: f64,
+    /// Lower y bound [m]
+    pub y_min: f64,
+    /// Upper y bound [m]
+    pub y_max: f64,
+}
+
+impl Workspace {
+    /// A workspace from its bounds. Returns `None` unless all bounds are finite and
+    /// `min < max` on both axes (a daemon misconfiguration must not silently accept or
+    /// reject everything).
+    pub fn new(x_min: f64, x_max: f64, y_min: f64, y_max: f64) -> Option<Self> {
+        let ok = [x_min, x_max, y_min, y_max].iter().all(|v| v.is_finite())
+            && x_min < x_max
+            && y_min < y_max;
+        ok.then_some(Self {
+            x_min,
+            x_max,
+            y_min,
+            y_max,
+        })
+    }
+
+    /// True if the point lies inside or on the boundary.
+    pub fn contains(&self, x: f64, y: f64) -> bool {
+        (self.x_min..=self.x_max).contains(&x) && (self.y_min..=self.y_max).contains(&y)
+    }
+}
+
+impl Default for Workspace {
+    /// ±50 m around the origin: generous for the paper's goals (≤ 10 m) while still
+    /// catching unit mistakes (mm instead of m).
+    fn default() -> Self {
+        Self {
+            x_min: -50.0,
+            x_max: 50.0,
+            y_min: -50.0,
+            y_max: 50.0,
+        }
+    }
+}
+
+/// Why a goal request is rejected, with the details a human needs. `Display` is the
+/// message sent back in [`GoalReply::reason`]; [`RejectReason::code`] the wire code.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RejectReason {
+    /// A goal component is NaN or infinite.
+    #[error("goal {field} is not finite ({value})")]
+    NonFiniteGoal {
+        /// `x`, `y` or `heading`
+        field: &'static str,
+        /// The offending value
+        value: f64,
+    },
+    /// An obstacle centre is NaN or infinite.
+    #[error("obstacle {index} centre {field} is not finite ({value})")]
+    NonFiniteObstacle {
+        /// Obstacle index
+        index: usize,
+        /// `x` or `y`
+        field: &'static str,
+        /// The offending value
+        value: f64,
+    },
+    /// The goal lies outside the workspace rectangle.
+    #[error(
+        "goal ({x:.3}, {y:.3}) m is outside the workspace x [{:.1}, {:.1}] y [{:.1}, {:.1}] m",
+        workspace.x_min, workspace.x_max, workspace.y_min, workspace.y_max
+    )]
+    OutOfWorkspace {
+        /// Goal x [m]
+        x: f64,
+        /// Goal y [m]
+        y: f64,
+        /// The configured workspace
+        workspace: Workspace,
+    },
+    /// More obstacles than the wire format and the MPC support.
+    #[error("{count} obstacles given, at most {MAX_OBSTACLES} are supported")]
+    TooManyObstacles {
+        /// The `obstacle_count` received
+        count: u32,
+    },
+    /// An obstacle radius is zero, negative or not finite.
+    #[error("obstacle {index} radius {r} m must be positive and finite")]
+    BadObstacleRadius {
+        /// Obstacle index
+        index: usize,
+        /// The offending radius [m]
+        r: f64,
+    },
+    /// The goal position lies inside an obstacle, so it can never be reached.
+    #[error(
+        "goal ({x:.3}, {y:.3}) m lies inside obstacle {index} at ({:.3}, {:.3}) m, r = {:.3} m",
+        obstacle.x, obstacle.y, obstacle.r
+    )]
+    GoalInsideObstacle {
+        /// Goal x [m]
+        x: f64,
+        /// Goal y [m]
+        y: f64,
+        /// Obstacle index
+        index: usize,
+        /// The obstacle
+        obstacle: Obstacle,
+    },
+    /// The request kind code is not one of [`GoalKind`].
+    #[error("unknown request kind {0}")]
+    UnknownKind(u32),
+}
+
+impl RejectReason {
+    /// The wire code of this reason.
+    pub fn code(&self) -> RejectCode {
+        match self {
+            Self::NonFiniteGoal { .. } | Self::NonFiniteObstacle { .. } => RejectCode::NonFinite,
+            Self::OutOfWorkspace { .. } => RejectCode::OutOfWorkspace,
+            Self::TooManyObstacles { .. } => RejectCode::TooManyObstacles,
+            Self::BadObstacleRadius { .. } => RejectCode::BadObstacle,
+            Self::GoalInsideObstacle { .. } => RejectCode::GoalInsideObstacle,
+            Self::UnknownKind(_) => RejectCode::UnknownKind,
+        }
+    }
+
+    /// The reply that rejects `request_id` for this reason.
+    pub fn to_reply(&self, request_id: u64) -> GoalReply {
+        GoalReply::reject(request_id, self.code(), &self.to_string())
+    }
+}
+
+/// A request that passed validation, decoded into Rust types.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ValidRequest {
+    /// Drive to `goal` avoiding `obstacles` (at most [`MAX_OBSTACLES`], all finite, radii > 0).
+    SetGoal {
+        /// The request id to report in telemetry
+        request_id: u64,
+        /// Goal pose
+        goal: Pose2,
+        /// Obstacles (a copy; no allocation beyond the fixed array)
+        obstacles: heapless_obstacles::Obstacles,
+    },
+    /// Drop the goal, stop.
+    Cancel {
+        /// The request id
+        request_id: u64,
+    },
+    /// Controlled stop.
+    Stop {
+        /// The request id
+        request_id: u64,
+    },
+}
+
+/// A fixed-capacity obstacle list so validation never allocates (it runs on the daemon's
+/// I/O path, possibly thousands of times a second during a flood).
+pub mod heapless_obstacles {
+    use crate::msg::{Obstacle, MAX_OBSTACLES};
+
+    /// Up to [`MAX_OBSTACLES`] obstacles.
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    pub struct Obstacles {
+        items: [Obstacle; MAX_OBSTACLES],
+        len: usize,
+    }
+
+    impl Obstacles {
+        /// Copies `src`; `None` if it is longer than [`MAX_OBSTACLES`].
+        pub fn from_slice(src: &[Obstacle]) -> Option<Self> {
+            if src.len() > MAX_OBSTACLES {
+                return None;
+            }
+            let mut items = [Obstacle::default(); MAX_OBSTACLES];
+            items[..src.len()].copy_from_slice(src);
+            Some(Self {
+                items,
+                len: src.len(),
+            })
+        }
+
+        /// The obstacles as a slice.
+        pub fn as_slice(&self) -> &[Obstacle] {
+            &self.items[..self.len]
+        }
+    }
+
+    impl core::ops::Deref for Obstacles {
+        type Target = [Obstacle];
+        fn deref(&self) -> &[Obstacle] {
+            self.as_slice()
+        }
+    }
+}
+
+/// Checks goal requests against the configured workspace. Cheap and allocation-free on the
+/// success path.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct GoalValidator {
+    /// Goals must lie inside this rectangle.
+    pub workspace: Workspace,
+}
+
+impl GoalValidator {
+    /// A validator for `workspace`.
+    pub const fn new(workspace: Workspace) -> Self {
+        Self { workspace }
+    }
+
+    /// Validates one request. Checks run in a fixed order (kind, obstacle count, finiteness,
+    /// workspace, obstacle radii, goal inside obstacle) so the reported reason is
+    /// deterministic when several apply. Cancel and stop are always valid: the goal fields
+    /// of such a request are ignored, and refusing to stop over garbage there would be unsafe.
+    pub fn validate(&self, req: &GoalRequest) -> Result<ValidRequest, RejectReason> {
+        let request_id = req.request_id;
+        let kind = req.kind().map_err(RejectReason::UnknownKind)?;
+        match kind {
+            GoalKind::Cancel => return Ok(ValidRequest::Cancel { request_id }),
+            GoalKind::Stop => return Ok(ValidRequest::Stop { request_id }),
+            GoalKind::SetGoal => {}
+        }
+        let obstacles = req.obstacles().ok_or(RejectReason::TooManyObstacles {
+            count: req.obstacle_count,
+        })?;
+        let g = req.goal;
+        for (field, value) in [("x", g.x), ("y", g.y), ("heading", g.heading)] {
+            if !value.is_finite() {
+                return Err(RejectReason::NonFiniteGoal { field, value });
+            }
+        }
+        for (index, o) in obstacles.iter().enumerate() {
+            for (field, value) in [("x", o.x), ("y", o.y)] {
+                if !value.is_finite() {
+                    return Err(RejectReason::NonFiniteObstacle {
+                        index,
+                        field,
+                        value,
+                    });
+                }
+            }
+        }
+        if !self.workspace.contains(g.x, g.y) {
+            return Err(RejectReason::OutOfWorkspace {
+                x: g.x,
+                y: g.y,
+                workspace: self.workspace,
+            });
+        }
+        for (index, o) in obstacles.iter().enumerate() {
+            // `!(r > 0)` also catches NaN.
+            if !(o.r > 0.0 && o.r.is_finite()) {
+                return Err(RejectReason::BadObstacleRadius { index, r: o.r });
+            }
+        }
+        for (index, o) in obstacles.iter().enumerate() {
+            // Strictly inside: the MPC's constraint is distance ≥ r, so a goal exactly on the
+            // (inflated) boundary is still reachable.
+            if (g.x - o.x).hypot(g.y - o.y) < o.r {
+                return Err(RejectReason::GoalInsideObstacle {
+                    x: g.x,
+                    y: g.y,
+                    index,
+                    obstacle: *o,
+                });
+            }
+        }
+        let obstacles = heapless_obstacles::Obstacles::from_slice(obstacles).ok_or(
+            RejectReason::TooManyObstacles {
+                count: req.obstacle_count,
+            },
+        )?;
+        Ok(ValidRequest::SetGoal {
+            request_id,
+            goal: g,
+            obstacles,
+        })
+    }
+
+    /// Validates and builds the matching reply in one go: accept, or reject with code and
+    /// message.
+    pub fn validate_and_reply(
+        &self,
+        req: &GoalRequest,
+    ) -> (Result<ValidRequest, RejectReason>, GoalReply) {
+        let result = self.validate(req);
+        let reply = match &result {
+            Ok(_) => GoalReply::accept(req.request_id),
+            Err(reason) => reason.to_reply(req.request_id),
+        };
+        (result, reply)
+    }
+}
