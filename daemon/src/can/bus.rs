@@ -199,7 +199,9 @@ mod tests {
     async fn usable_as_trait_object() {
         let (a, mut b) = LoopbackBus::pair("dyn");
         let mut bus: Box<dyn CanBus> = Box::new(a);
-        bus.send(&CanFrame::new(0x1, &[1, 2]).unwrap()).await.unwrap();
+        bus.send(&CanFrame::new(0x1, &[1, 2]).unwrap())
+            .await
+            .unwrap();
         assert_eq!(b.recv().await.unwrap().data(), &[1, 2]);
         assert_eq!(bus.name(), "dyn.a");
     }

@@ -366,9 +366,9 @@ impl TryFrom<u8> for MachineStatus {
 /// The velocity command (message [`VELOCITY_COMMAND`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct VelocityCommand {
-    /// Articulation rate command β̇_cmd [rad/s], positive bends the front left.
+    /// Articulation rate command β̇_cmd (rad/s), positive bends the front left.
     pub beta_dot_cmd: f64,
-    /// Front speed command v_cmd [m/s], positive forward.
+    /// Front speed command v_cmd (m/s), positive forward.
     pub v_cmd: f64,
     /// What the machine should do.
     pub mode: DriveMode,
@@ -379,11 +379,11 @@ pub struct VelocityCommand {
 /// The machine state (message [`MACHINE_STATE`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct MachineState {
-    /// Articulation angle β [rad], positive = front bent left.
+    /// Articulation angle β (rad), positive = front bent left.
     pub beta: f64,
-    /// Articulation rate β̇ [rad/s].
+    /// Articulation rate β̇ (rad/s).
     pub beta_dot: f64,
-    /// Front speed v_f [m/s].
+    /// Front speed v_f (m/s).
     pub v_f: f64,
     /// Machine status.
     pub status: MachineStatus,
@@ -658,19 +658,16 @@ impl Unpacker {
     /// reported as out of range.
     fn small<T>(&self, index: usize, conv: impl FnOnce(u8) -> Option<T>) -> Result<T, DecodeError> {
         let raw = self.raw(index)?;
-        u8::try_from(raw)
-            .ok()
-            .and_then(conv)
-            .ok_or_else(|| {
-                let sig = self.spec.sig(index);
-                DecodeError::OutOfRange {
-                    message: self.spec.name,
-                    signal: sig.name,
-                    raw,
-                    min: sig.raw_min(),
-                    max: sig.raw_max(),
-                }
-            })
+        u8::try_from(raw).ok().and_then(conv).ok_or_else(|| {
+            let sig = self.spec.sig(index);
+            DecodeError::OutOfRange {
+                message: self.spec.name,
+                signal: sig.name,
+                raw,
+                min: sig.raw_min(),
+                max: sig.raw_max(),
+            }
+        })
     }
 }
 
@@ -795,8 +792,16 @@ mod tests {
                 };
                 assert!(s.raw_min() >= lo && s.raw_max() <= hi, "{}", s.name);
                 // min and max are exact multiples of the factor.
-                assert!((s.physical(s.raw_max()) - s.max).abs() < 1e-12, "{}", s.name);
-                assert!((s.physical(s.raw_min()) - s.min).abs() < 1e-12, "{}", s.name);
+                assert!(
+                    (s.physical(s.raw_max()) - s.max).abs() < 1e-12,
+                    "{}",
+                    s.name
+                );
+                assert!(
+                    (s.physical(s.raw_min()) - s.min).abs() < 1e-12,
+                    "{}",
+                    s.name
+                );
             }
         }
     }
@@ -808,7 +813,10 @@ mod tests {
             assert_eq!(c.get(), i % 16);
             c = c.next();
         }
-        assert_eq!(AliveCounter::new(15).map(AliveCounter::next), AliveCounter::new(0));
+        assert_eq!(
+            AliveCounter::new(15).map(AliveCounter::next),
+            AliveCounter::new(0)
+        );
         assert_eq!(AliveCounter::new(16), None);
         let (a, b) = (AliveCounter(14), AliveCounter(2));
         assert_eq!(b.steps_since(a), 4);

@@ -437,7 +437,10 @@ mod tests {
         let r = parse_line("(1700000000.000001) vcan0 07F#DEADbeef T").unwrap();
         assert_eq!(r.timestamp, Duration::new(1_700_000_000, 1_000));
         assert_eq!(r.iface, "vcan0");
-        assert_eq!(r.frame, CanFrame::new(0x7F, &[0xDE, 0xAD, 0xBE, 0xEF]).unwrap());
+        assert_eq!(
+            r.frame,
+            CanFrame::new(0x7F, &[0xDE, 0xAD, 0xBE, 0xEF]).unwrap()
+        );
         assert_eq!(parse_line("(1.000000) can0 100#").unwrap().frame.len(), 0);
     }
 
@@ -480,7 +483,10 @@ mod tests {
         assert_eq!(e.line(), Some(4));
         assert_eq!(e.problem(), Some(LineProblem::BadId));
         assert!(e.to_string().starts_with("mem.log line 4: "), "{e}");
-        assert_eq!(got[2].as_ref().unwrap_err().problem(), Some(LineProblem::NotUtf8));
+        assert_eq!(
+            got[2].as_ref().unwrap_err().problem(),
+            Some(LineProblem::NotUtf8)
+        );
         assert_eq!(got[3].as_ref().unwrap().frame.id(), 0x124);
     }
 }

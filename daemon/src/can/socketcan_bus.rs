@@ -43,7 +43,8 @@ impl SocketCanBus {
     pub fn open_filtered(iface: &str, ids: &[u16]) -> Result<Self, CanError> {
         let bus = Self::open(iface)?;
         // Match id bits, and require EFF and RTR flags clear: standard data frames only.
-        let mask = libc_consts::CAN_SFF_MASK | libc_consts::CAN_EFF_FLAG | libc_consts::CAN_RTR_FLAG;
+        let mask =
+            libc_consts::CAN_SFF_MASK | libc_consts::CAN_EFF_FLAG | libc_consts::CAN_RTR_FLAG;
         let filters: Vec<CanFilter> = ids
             .iter()
             .map(|&id| CanFilter::new(u32::from(id) & libc_consts::CAN_SFF_MASK, mask))
