@@ -40,7 +40,7 @@ fn close(a: f64, b: f64) -> bool {
 
 #[test]
 fn hand_written_log_decodes_to_expected_values() {
-    let records = read_all(&data_file("machine_session.log"));
+    let records = read_all(&data_file("machine_session.candump"));
     assert_eq!(records.len(), 11);
     for (i, r) in records.iter().enumerate() {
         assert_eq!(r.iface, "can0");
@@ -143,7 +143,7 @@ fn hand_written_log_decodes_to_expected_values() {
 /// hand-written log.
 #[test]
 fn reader_agrees_with_socketcan_dump_reader() {
-    let path = data_file("machine_session.log");
+    let path = data_file("machine_session.candump");
     let ours = read_all(&path);
     let theirs: Vec<_> = socketcan::dump::Reader::from_file(&path)
         .expect("open log")
