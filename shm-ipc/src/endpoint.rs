@@ -10,7 +10,8 @@ use std::os::fd::RawFd;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Instant;
 
-use iceoryx2::node::{Node, NodeBuilder, NodeName};
+use iceoryx2::node::node_name::NodeName;
+use iceoryx2::node::{Node, NodeBuilder};
 use iceoryx2::port::client::Client as IoxClient;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
@@ -84,6 +85,14 @@ fn boxed<E: std::error::Error + Send + Sync + 'static>(e: E) -> crate::error::Bo
     Box::new(e)
 }
 
+// The daemon moves endpoints between its tokio tasks and threads.
+const _: () = {
+    const fn assert_send_sync<T: Send + Sync>() {}
+    assert_send_sync::<DaemonEndpoint>();
+    assert_send_sync::<Client>();
+    assert_send_sync::<TelemetrySubscriber>();
+};
+
 /// What stale-node clean-up found at start-up.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct CleanupReport {
@@ -99,7 +108,8 @@ pub struct CleanupReport {
 /// The node and the three services, opened or created with the crate's QoS. Shared setup
 /// of both endpoints.
 struct Connection {
-    node: Node<IpcService>,
+    /// Owns the node's registration; ports keep it alive too, this makes it explicit.
+    _node: Node<IpcService>,
     names: ServiceNames,
     goal: GoalFactory,
     goal_event: event::PortFactory<IpcService>,
@@ -121,6 +131,11 @@ impl Connection {
     fn open(config: &IpcConfig, node_name: &str) -> Result<Self, IpcError> {
         let names = config.service_names()?;
         let node_name = NodeName::new(node_name).map_err(|e| IpcError::Node(boxed(e)))?;
+        let cleanup = if config.cleanup_stale_nodes {
+            cleanup_stale_nodes()?
+        } else {
+            CleanupReport::default()
+        };
         // Signal handling stays with the application (the daemon uses tokio's signals);
         // iceoryx2 must not install its own SIGINT/SIGTERM handlers.
         let node = NodeBuilder::new()
@@ -128,12 +143,6 @@ impl Connection {
             .signal_handling_mode(SignalHandlingMode::Disabled)
             .create::<IpcService>()
             .map_err(|e| IpcError::Node(boxed(e)))?;
-
-        let cleanup = if config.cleanup_stale_nodes {
-            cleanup_stale_nodes(&node)?
-        } else {
-            CleanupReport::default()
-        };
 
         let goal = node
             .service_builder(&service_name(&names.goal)?)
@@ -195,7 +204,7 @@ impl Connection {
         let pose_event = event(&names.pose)?;
         let telemetry_event = event(&names.telemetry)?;
         Ok(Self {
-            node,
+            _node: node,
             names,
             goal,
             goal_event,
@@ -238,30 +247,27 @@ impl Connection {
 
 /// Removes the resources of iceoryx2 nodes whose process died (crash, `kill -9`). Without
 /// this, a crashed daemon's goal server would keep its slot (max one server per prefix)
-/// and the restarted daemon could not serve goals. Idempotent and safe to run concurrently
-/// from several processes.
-fn cleanup_stale_nodes(node: &Node<IpcService>) -> Result<CleanupReport, IpcError> {
-    let mut dead = 0u64;
-    Node::<IpcService>::list(node.config(), |state| {
-        if matches!(state, iceoryx2::node::NodeState::Dead(_)) {
-            dead += 1;
+/// and the restarted daemon could not serve goals. Both endpoints call it before creating
+/// their own node (iceoryx2 may also clean on node creation, depending on its config file;
+/// doing it explicitly makes the behaviour independent of that and reportable).
+/// Idempotent and safe to run concurrently from several processes; it covers all dead
+/// nodes of this user on the host, not only wlnav's.
+pub fn cleanup_stale_nodes() -> Result<CleanupReport, IpcError> {
+    let mut report = CleanupReport::default();
+    Node::<IpcService>::list(iceoryx2::config::Config::global_config(), |state| {
+        if let iceoryx2::node::NodeState::Dead(view) = state {
+            report.dead_nodes_found += 1;
+            match view.try_remove_stale_resources() {
+                Ok(()) | Err(iceoryx2::node::NodeCleanupFailure::ResourcesAlreadyCleanedUp) => {
+                    report.cleaned += 1
+                }
+                Err(_) => report.failed += 1,
+            }
         }
         iceoryx2::prelude::CallbackProgression::Continue
     })
     .map_err(|e| IpcError::NodeList(boxed(e)))?;
-    let state = if dead > 0 {
-        node.try_cleanup_dead_nodes()
-    } else {
-        iceoryx2::node::CleanupState {
-            cleanups: 0,
-            failed_cleanups: 0,
-        }
-    };
-    Ok(CleanupReport {
-        dead_nodes_found: dead,
-        cleaned: state.cleanups,
-        failed: state.failed_cleanups,
-    })
+    Ok(report)
 }
 
 /// Which event sources woke [`DaemonEndpoint::wait`].
@@ -347,23 +353,23 @@ fn notify(notifier: &Notifier<IpcService>, id: usize, service: &str) -> Result<(
 /// [`DaemonEndpoint::pose_event_fd`] in `AsyncFd` instead of calling `wait`):
 ///
 /// ```no_run
-/// # use shm_ipc::*;
-/// # use std::time::Duration;
+/// use shm_ipc::{DaemonEndpoint, GoalValidator, IpcConfig};
+/// use std::time::Duration;
 /// # fn main() -> Result<(), Box<dyn std::error::Error>> {
 /// let ep = DaemonEndpoint::new(&IpcConfig::default())?;
 /// let validator = GoalValidator::default();
 /// loop {
-///     let woke = ep.wait(Some(Duration::from_millis(200)))?;
+///     ep.wait(Some(Duration::from_millis(200)))?;
 ///     while let Some(goal) = ep.receive_goal()? {
 ///         let (result, reply) = validator.validate_and_reply(goal.request());
 ///         goal.reply(reply)?;
-///         // hand `result` to the control thread ...
-///         # let _ = result;
+///         println!("hand to the control thread: {result:?}");
 ///     }
-///     if let Some(pose) = ep.latest_pose()? { /* ... */ # let _ = pose; }
-///     # let _ = woke; break;
+///     if let Some(pose) = ep.latest_pose()? {
+///         println!("pose: {pose:?}");
+///     }
 /// }
-/// # Ok(()) }
+/// # }
 /// ```
 pub struct DaemonEndpoint {
     conn: Connection,
@@ -459,7 +465,7 @@ impl DaemonEndpoint {
         })?;
         Ok(active.map(|active| IncomingGoal {
             request: *active.payload(),
-            active,
+            active: Some(active),
             endpoint: self,
         }))
     }
@@ -518,7 +524,10 @@ impl DaemonEndpoint {
     /// daemon's own reply notifications); a signal returns an empty [`Wakeup`].
     pub fn wait(&self, timeout: Option<Duration>) -> Result<Wakeup, IpcError> {
         let ready = poll_fds(
-            &[listener_fd(&self.goal_listener), listener_fd(&self.pose_listener)],
+            &[
+                listener_fd(&self.goal_listener),
+                listener_fd(&self.pose_listener),
+            ],
             timeout,
         )
         .map_err(|e| IpcError::Event {
@@ -550,10 +559,11 @@ impl DaemonEndpoint {
     }
 }
 
-/// A goal request taken from the service, waiting for its answer.
+/// A goal request taken from the service, waiting for its answer. Dropping it unanswered
+/// tells the client at once ([`ClientError::Dropped`]) rather than after its timeout.
 pub struct IncomingGoal<'a> {
     request: GoalRequest,
-    active: GoalActive,
+    active: Option<GoalActive>,
     endpoint: &'a DaemonEndpoint,
 }
 
@@ -573,21 +583,33 @@ impl IncomingGoal<'_> {
 
     /// Sends `reply` (its `request_id` is overwritten with the request's) and wakes the
     /// client. A client that already gave up is not an error.
-    pub fn reply(self, mut reply: GoalReply) -> Result<(), IpcError> {
+    pub fn reply(mut self, mut reply: GoalReply) -> Result<(), IpcError> {
         let service = &self.endpoint.conn.names.goal;
         reply.request_id = self.request.request_id;
-        if self.active.is_connected() {
-            self.active.send_copy(reply).map_err(|e| IpcError::Send {
-                service: service.clone(),
-                source: boxed(e),
-            })?;
+        if let Some(active) = self.active.take() {
+            if active.is_connected() {
+                active.send_copy(reply).map_err(|e| IpcError::Send {
+                    service: service.clone(),
+                    source: boxed(e),
+                })?;
+            }
         }
-        drop(self.active);
-        notify(
-            &self.endpoint.goal_notifier,
-            event_ids::GOAL_REPLY,
-            service,
-        )
+        notify(&self.endpoint.goal_notifier, event_ids::GOAL_REPLY, service)
+    }
+}
+
+impl Drop for IncomingGoal<'_> {
+    fn drop(&mut self) {
+        if let Some(active) = self.active.take() {
+            // Disconnect first, then wake the client so it sees the disconnect. A failed
+            // notification only delays the client until its timeout: nothing to report.
+            drop(active);
+            let _ = notify(
+                &self.endpoint.goal_notifier,
+                event_ids::GOAL_REPLY,
+                &self.endpoint.conn.names.goal,
+            );
+        }
     }
 }
 
@@ -599,7 +621,12 @@ pub struct Client {
     goal_notifier: Notifier<IpcService>,
     goal_listener: Listener<IpcService>,
     /// Created on first [`Client::publish_pose`], so read-only clients take no publisher slot.
-    pose_pub: std::sync::Mutex<Option<(Publisher<IpcService, PoseEstimate, ()>, Notifier<IpcService>)>>,
+    pose_pub: std::sync::Mutex<
+        Option<(
+            Publisher<IpcService, PoseEstimate, ()>,
+            Notifier<IpcService>,
+        )>,
+    >,
     next_id: AtomicU64,
 }
 
@@ -724,16 +751,16 @@ impl Client {
             .lock()
             .unwrap_or_else(|poisoned| poisoned.into_inner());
         if guard.is_none() {
-            let publisher = self
-                .conn
-                .pose
-                .publisher_builder()
-                .create()
-                .map_err(|e| IpcError::Port {
-                    port: "publisher",
-                    service: service.clone(),
-                    source: boxed(e),
-                })?;
+            let publisher =
+                self.conn
+                    .pose
+                    .publisher_builder()
+                    .create()
+                    .map_err(|e| IpcError::Port {
+                        port: "publisher",
+                        service: service.clone(),
+                        source: boxed(e),
+                    })?;
             let notifier = Connection::notifier(&self.conn.pose_event, service)?;
             *guard = Some((publisher, notifier));
         }

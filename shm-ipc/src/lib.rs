@@ -158,12 +158,16 @@ mod error;
 mod msg;
 mod validate;
 
+/// The iceoryx2 version this crate is built against, for callers that need more of it (e.g.
+/// `iceoryx2::set_log_level` to silence its "no config file" warning in a CLI).
+pub use iceoryx2;
+
 pub use config::{
     validate_prefix, IpcConfig, ServiceNames, API_VERSION, DEFAULT_PREFIX, MAX_PREFIX_LEN,
 };
 pub use endpoint::{
-    event_ids, qos, CleanupReport, Client, DaemonEndpoint, IncomingGoal, IpcService,
-    PendingGoal, TelemetrySubscriber, Wakeup,
+    cleanup_stale_nodes, event_ids, qos, CleanupReport, Client, DaemonEndpoint, IncomingGoal,
+    IpcService, PendingGoal, TelemetrySubscriber, Wakeup,
 };
 pub use error::{BoxedSource, ClientError, IpcError};
 pub use msg::{

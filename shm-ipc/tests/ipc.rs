@@ -1,0 +1,334 @@
+//! Round trips through real iceoryx2 shared memory. Every test uses its own prefix (process
+//! id, test name, clock) so tests running in parallel, or other engineers' runs on the same
+//! host, never meet.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{mpsc, Arc};
+use std::thread;
+use std::time::{Duration, Instant};
+
+use shm_ipc::{
+    Client, ClientError, DaemonEndpoint, GoalRequest, GoalValidator, IpcConfig, IpcError,
+    MachineState, Mode, Obstacle, Pose2, PoseEstimate, RejectCode, Telemetry,
+};
+
+const TIMEOUT: Duration = Duration::from_secs(5);
+
+fn unique_config(test: &str) -> IpcConfig {
+    IpcConfig::new(format!(
+        "wlnav-test/{}/{}/{}",
+        std::process::id(),
+        test,
+        shm_ipc::monotonic_now_ns()
+    ))
+}
+
+/// A test daemon on its own thread: validates and answers goals until stopped, returns how
+/// many requests it answered.
+struct TestServer {
+    stop: Arc<AtomicBool>,
+    handle: Option<thread::JoinHandle<usize>>,
+}
+
+impl TestServer {
+    fn start(config: IpcConfig) -> Self {
+        Self::start_with_ticks(config, 0)
+    }
+
+    /// Also publishes one telemetry sample per answered request, ticks counting up from
+    /// `tick_base + 1`, so a subscriber can tell which daemon it hears.
+    fn start_with_ticks(config: IpcConfig, tick_base: u64) -> Self {
+        let stop = Arc::new(AtomicBool::new(false));
+        let (ready_tx, ready_rx) = mpsc::channel();
+        let stop_flag = stop.clone();
+        let handle = thread::spawn(move || {
+            let ep = DaemonEndpoint::new(&config).expect("daemon endpoint");
+            ready_tx.send(()).expect("ready");
+            let validator = GoalValidator::default();
+            let mut served = 0;
+            while !stop_flag.load(Ordering::Relaxed) {
+                ep.wait(Some(Duration::from_millis(50))).expect("wait");
+                let n = ep
+                    .serve_goals(|req| validator.validate_and_reply(req).1)
+                    .expect("serve");
+                for _ in 0..n {
+                    served += 1;
+                    ep.publish_telemetry(&telemetry(tick_base + served as u64))
+                        .expect("telemetry");
+                }
+            }
+            served
+        });
+        ready_rx.recv_timeout(TIMEOUT).expect("server ready");
+        Self {
+            stop,
+            handle: Some(handle),
+        }
+    }
+
+    fn finish(mut self) -> usize {
+        self.stop.store(true, Ordering::Relaxed);
+        self.handle
+            .take()
+            .expect("handle")
+            .join()
+            .expect("server thread")
+    }
+}
+
+#[test]
+fn goal_request_is_answered_by_server_thread() {
+    let config = unique_config("goal_answered");
+    let server = TestServer::start(config.clone());
+    let client = Client::new(&config).expect("client");
+
+    let obstacles = [Obstacle::new(2.0, 1.0, 0.5)];
+    let reply = client
+        .set_goal(Pose2::new(4.5, 0.0, 0.3), &obstacles, TIMEOUT)
+        .expect("reply");
+    assert!(reply.is_accepted(), "{}", reply.reason_text());
+    assert_eq!(reply.reject_code(), Ok(RejectCode::None));
+
+    // A request with an explicit id: the reply echoes it.
+    let req = GoalRequest::set_goal(4242, Pose2::new(f64::NAN, 0.0, 0.0), &[]).expect("req");
+    let reply = client.request(&req, TIMEOUT).expect("reply");
+    assert_eq!(reply.request_id, 4242);
+    assert!(!reply.is_accepted());
+    assert_eq!(reply.reject_code(), Ok(RejectCode::NonFinite));
+    assert!(
+        reply.reason_text().contains("not finite"),
+        "{}",
+        reply.reason_text()
+    );
+
+    // Each rejection reason survives the trip with its code and text.
+    let inside = client
+        .set_goal(
+            Pose2::new(2.0, 1.0, 0.0),
+            &[Obstacle::new(2.0, 1.0, 0.5)],
+            TIMEOUT,
+        )
+        .expect("reply");
+    assert_eq!(inside.reject_code(), Ok(RejectCode::GoalInsideObstacle));
+    let outside = client
+        .set_goal(Pose2::new(1e4, 0.0, 0.0), &[], TIMEOUT)
+        .expect("reply");
+    assert_eq!(outside.reject_code(), Ok(RejectCode::OutOfWorkspace));
+    assert!(outside.reason_text().contains("workspace"));
+    let mut too_many = GoalRequest::set_goal(7, Pose2::new(1.0, 1.0, 0.0), &[]).expect("req");
+    too_many.obstacle_count = 9;
+    let reply = client.request(&too_many, TIMEOUT).expect("reply");
+    assert_eq!(reply.reject_code(), Ok(RejectCode::TooManyObstacles));
+
+    assert!(client.cancel(TIMEOUT).expect("cancel").is_accepted());
+    assert!(client.stop(TIMEOUT).expect("stop").is_accepted());
+
+    // Several requests in flight at once, answered in any order.
+    let pending: Vec<_> = (0..8)
+        .map(|i| {
+            let req =
+                GoalRequest::set_goal(1000 + i, Pose2::new(i as f64, 0.0, 0.0), &[]).expect("req");
+            client.submit(&req).expect("submit")
+        })
+        .collect();
+    for (i, p) in pending.into_iter().enumerate() {
+        let reply = p.wait(TIMEOUT).expect("reply");
+        assert_eq!(reply.request_id, 1000 + i as u64);
+        assert!(reply.is_accepted());
+    }
+
+    assert!(client
+        .set_goal(Pose2::default(), &[Obstacle::default(); 9], TIMEOUT)
+        .is_err());
+    assert_eq!(server.finish(), 5 + 2 + 8);
+}
+
+#[test]
+fn no_daemon_is_reported_not_hung() {
+    let client = Client::new(&unique_config("no_daemon")).expect("client");
+    let start = Instant::now();
+    match client.set_goal(Pose2::new(1.0, 0.0, 0.0), &[], TIMEOUT) {
+        Err(ClientError::NoDaemon { service }) => assert!(service.ends_with("/v1/goal")),
+        other => panic!("expected NoDaemon, got {other:?}"),
+    }
+    assert!(start.elapsed() < Duration::from_secs(1));
+}
+
+#[test]
+fn second_daemon_on_same_prefix_is_refused() {
+    let config = unique_config("second_daemon");
+    let first = DaemonEndpoint::new(&config).expect("first daemon");
+    match DaemonEndpoint::new(&config) {
+        Err(IpcError::AlreadyServed { .. }) => {}
+        other => panic!("expected AlreadyServed, got {other:?}"),
+    }
+    drop(first);
+    // The slot is free again once the first daemon is gone.
+    DaemonEndpoint::new(&config).expect("daemon after the first left");
+}
+
+#[test]
+fn unanswered_requests_time_out_or_report_dropped() {
+    let config = unique_config("unanswered");
+    let ep = DaemonEndpoint::new(&config).expect("daemon");
+    let client = Client::new(&config).expect("client");
+
+    // Held but not answered: the client times out.
+    let pending = client.submit(&GoalRequest::cancel(1)).expect("submit");
+    let held = loop {
+        if let Some(g) = ep.receive_goal().expect("receive") {
+            break g;
+        }
+        ep.wait(Some(Duration::from_millis(100))).expect("wait");
+    };
+    assert_eq!(held.request().request_id, 1);
+    let start = Instant::now();
+    match pending.wait(Duration::from_millis(200)) {
+        Err(ClientError::Timeout { request_id: 1, .. }) => {}
+        other => panic!("expected timeout, got {other:?}"),
+    }
+    assert!(start.elapsed() >= Duration::from_millis(200));
+
+    // Dropped without an answer: the client learns it instead of waiting out its timeout.
+    drop(held);
+    let pending = client.submit(&GoalRequest::stop(2)).expect("submit");
+    let start = Instant::now();
+    let dropped = thread::scope(|s| {
+        s.spawn(|| {
+            let g = loop {
+                if let Some(g) = ep.receive_goal().expect("receive") {
+                    break g;
+                }
+                ep.wait(Some(Duration::from_millis(100))).expect("wait");
+            };
+            drop(g);
+        });
+        pending.wait(TIMEOUT)
+    });
+    match dropped {
+        Err(ClientError::Dropped { request_id: 2 }) => {}
+        other => panic!("expected dropped, got {other:?}"),
+    }
+    assert!(start.elapsed() < TIMEOUT);
+}
+
+fn telemetry(tick: u64) -> Telemetry {
+    let mut t = Telemetry::ZERO;
+    t.tick = tick;
+    t.timestamp_ns = shm_ipc::monotonic_now_ns();
+    t.mode = Mode::Tracking.code();
+    t.goal_active = 1;
+    t.goal = Pose2::new(4.5, 0.0, 0.0);
+    t.state = MachineState::from_array([tick as f64, 0.0, 0.0, 0.1, 0.0, 0.5]);
+    let plan: Vec<MachineState> = (0..11)
+        .map(|i| MachineState::from_array([tick as f64 + i as f64 * 0.1, 0.0, 0.0, 0.0, 0.0, 0.5]))
+        .collect();
+    t.set_trajectory(&plan);
+    t
+}
+
+#[test]
+fn telemetry_reaches_two_subscribers_at_once() {
+    let config = unique_config("telemetry_two_subs");
+    let ep = DaemonEndpoint::new(&config).expect("daemon");
+    // Two separate clients, as two processes would be.
+    let a = Client::new(&config).expect("client a");
+    let b = Client::new(&config).expect("client b");
+    let sub_a = a.subscribe_telemetry().expect("sub a");
+    let sub_b = b.subscribe_telemetry().expect("sub b");
+
+    let readers: Vec<_> = [sub_a, sub_b]
+        .into_iter()
+        .map(|sub| {
+            thread::spawn(move || {
+                let mut ticks = Vec::new();
+                while ticks.len() < 10 {
+                    match sub.recv_timeout(TIMEOUT).expect("recv") {
+                        Some(t) => {
+                            assert_eq!(t.trajectory().len(), 11);
+                            assert_eq!(t.mode(), Ok(Mode::Tracking));
+                            assert_eq!(t.trajectory()[0].x_f, t.tick as f64);
+                            ticks.push(t.tick);
+                        }
+                        None => break,
+                    }
+                }
+                ticks
+            })
+        })
+        .collect();
+
+    for tick in 1..=10 {
+        ep.publish_telemetry(&telemetry(tick)).expect("publish");
+        // Slower than the readers so the 16-sample buffer never overflows.
+        thread::sleep(Duration::from_millis(5));
+    }
+    for r in readers {
+        assert_eq!(r.join().expect("reader"), (1..=10).collect::<Vec<_>>());
+    }
+}
+
+#[test]
+fn pose_from_client_reaches_daemon_and_wakes_it() {
+    let config = unique_config("pose");
+    let ep = DaemonEndpoint::new(&config).expect("daemon");
+    let client = Client::new(&config).expect("client");
+    assert_eq!(ep.latest_pose().expect("pose"), None);
+
+    for seq in 0..3 {
+        let p = PoseEstimate::new(
+            shm_ipc::monotonic_now_ns(),
+            seq,
+            Pose2::new(seq as f64, 2.0, 0.1),
+        );
+        client.publish_pose(&p).expect("publish");
+    }
+    let woke = ep.wait(Some(TIMEOUT)).expect("wait");
+    assert!(woke.pose);
+    let latest = ep.latest_pose().expect("pose").expect("some pose");
+    assert_eq!(latest.sequence, 2);
+    assert_eq!(latest.pose(), Pose2::new(2.0, 2.0, 0.1));
+    assert!(latest.is_usable());
+    assert!(latest.timestamp_ns <= shm_ipc::monotonic_now_ns());
+
+    // Nothing pending: wait times out with an empty wake-up, promptly.
+    let start = Instant::now();
+    let woke = ep.wait(Some(Duration::from_millis(50))).expect("wait");
+    assert!(!woke.any());
+    assert!(start.elapsed() >= Duration::from_millis(45));
+}
+
+#[test]
+fn two_prefixes_in_parallel_do_not_interfere() {
+    let ca = unique_config("prefix_a");
+    let cb = unique_config("prefix_b");
+    let server_a = TestServer::start_with_ticks(ca.clone(), 1_000);
+    let server_b = TestServer::start_with_ticks(cb.clone(), 2_000);
+
+    let run = |config: IpcConfig, goals: usize| {
+        thread::spawn(move || {
+            let client = Client::new(&config).expect("client");
+            let sub = client.subscribe_telemetry().expect("sub");
+            for i in 0..goals {
+                let reply = client
+                    .set_goal(Pose2::new(i as f64 * 0.1, 0.0, 0.0), &[], TIMEOUT)
+                    .expect("reply");
+                assert!(reply.is_accepted());
+            }
+            let mut seen = Vec::new();
+            while let Some(t) = sub.recv_timeout(Duration::from_millis(300)).expect("recv") {
+                seen.push(t.tick);
+            }
+            seen
+        })
+    };
+    let ta = run(ca, 7);
+    let tb = run(cb, 4);
+    let seen_a = ta.join().expect("a");
+    let seen_b = tb.join().expect("b");
+    // Each daemon publishes one sample per goal it served, numbered from its own base.
+    assert_eq!(seen_a, (1_001..=1_007).collect::<Vec<_>>());
+    assert_eq!(seen_b, (2_001..=2_004).collect::<Vec<_>>());
+    assert_eq!(server_a.finish(), 7);
+    assert_eq!(server_b.finish(), 4);
+}

@@ -1,0 +1,199 @@
+//! The documented wire layout, checked the way a foreign peer would see it: as raw bytes at
+//! the documented offsets. (`msg.rs` also freezes sizes and offsets at compile time.)
+
+use core::mem::{align_of, offset_of, size_of};
+
+use iceoryx2::prelude::ZeroCopySend;
+use shm_ipc::{
+    pose_flags, Command, GoalKind, GoalReply, GoalRequest, MachineState, Mode, Obstacle, Pose2,
+    PoseEstimate, RejectCode, Telemetry, MAX_OBSTACLES, MAX_TRAJECTORY,
+};
+
+/// The bytes of a padding-free POD value.
+fn bytes<T>(v: &T) -> &[u8] {
+    // SAFETY: every payload type is repr(C) without implicit padding (checked by the size
+    // assertions below), so all bytes are initialised.
+    unsafe { core::slice::from_raw_parts((v as *const T).cast::<u8>(), size_of::<T>()) }
+}
+
+fn u32_at(b: &[u8], off: usize) -> u32 {
+    u32::from_le_bytes(b[off..off + 4].try_into().expect("4 bytes"))
+}
+fn u64_at(b: &[u8], off: usize) -> u64 {
+    u64::from_le_bytes(b[off..off + 8].try_into().expect("8 bytes"))
+}
+fn f64_at(b: &[u8], off: usize) -> f64 {
+    f64::from_le_bytes(b[off..off + 8].try_into().expect("8 bytes"))
+}
+
+#[test]
+fn sizes_alignments_and_offsets() {
+    assert_eq!((size_of::<Pose2>(), align_of::<Pose2>()), (24, 8));
+    assert_eq!((size_of::<Obstacle>(), align_of::<Obstacle>()), (24, 8));
+    assert_eq!(
+        (size_of::<MachineState>(), align_of::<MachineState>()),
+        (48, 8)
+    );
+    assert_eq!((size_of::<Command>(), align_of::<Command>()), (16, 8));
+    assert_eq!(
+        (size_of::<GoalRequest>(), align_of::<GoalRequest>()),
+        (232, 8)
+    );
+    assert_eq!((size_of::<GoalReply>(), align_of::<GoalReply>()), (152, 8));
+    assert_eq!(
+        (size_of::<PoseEstimate>(), align_of::<PoseEstimate>()),
+        (112, 8)
+    );
+    assert_eq!((size_of::<Telemetry>(), align_of::<Telemetry>()), (2136, 8));
+
+    // No implicit padding: the sizes are the sums of the fields.
+    assert_eq!(
+        size_of::<GoalRequest>(),
+        8 + 4 + 4 + 24 + MAX_OBSTACLES * 24
+    );
+    assert_eq!(size_of::<GoalReply>(), 8 + 4 * 4 + 128);
+    assert_eq!(size_of::<PoseEstimate>(), 8 + 4 + 4 + 3 * 8 + 9 * 8);
+    assert_eq!(
+        size_of::<Telemetry>(),
+        3 * 8 + 6 * 4 + 4 * 8 + 48 + 24 + 16 + MAX_TRAJECTORY * 48
+    );
+
+    assert_eq!(offset_of!(GoalRequest, obstacles), 40);
+    assert_eq!(offset_of!(GoalReply, reason), 24);
+    assert_eq!(offset_of!(PoseEstimate, covariance), 40);
+    assert_eq!(offset_of!(Telemetry, state), 80);
+    assert_eq!(offset_of!(Telemetry, trajectory), 168);
+}
+
+#[test]
+fn type_names_are_stable() {
+    // iceoryx2 compares these when a peer opens a service; C++ peers set IOX2_TYPE_NAME.
+    unsafe {
+        assert_eq!(GoalRequest::type_name(), "wlnav::v1::GoalRequest");
+        assert_eq!(GoalReply::type_name(), "wlnav::v1::GoalReply");
+        assert_eq!(PoseEstimate::type_name(), "wlnav::v1::PoseEstimate");
+        assert_eq!(Telemetry::type_name(), "wlnav::v1::Telemetry");
+    }
+}
+
+#[test]
+fn goal_request_bytes() {
+    let obstacles = [Obstacle::new(1.0, 2.0, 0.5), Obstacle::new(-3.0, 4.0, 1.5)];
+    let req = GoalRequest::set_goal(
+        0x0102_0304_0506_0708,
+        Pose2::new(4.5, -1.25, 0.75),
+        &obstacles,
+    )
+    .expect("request");
+    let b = bytes(&req);
+    assert_eq!(u64_at(b, 0), 0x0102_0304_0506_0708);
+    assert_eq!(u32_at(b, 8), GoalKind::SetGoal.code());
+    assert_eq!(u32_at(b, 8), 1);
+    assert_eq!(u32_at(b, 12), 2);
+    assert_eq!(
+        (f64_at(b, 16), f64_at(b, 24), f64_at(b, 32)),
+        (4.5, -1.25, 0.75)
+    );
+    assert_eq!(
+        (f64_at(b, 40), f64_at(b, 48), f64_at(b, 56)),
+        (1.0, 2.0, 0.5)
+    );
+    assert_eq!(
+        (f64_at(b, 64), f64_at(b, 72), f64_at(b, 80)),
+        (-3.0, 4.0, 1.5)
+    );
+    // Unused obstacle slots are zero.
+    assert!(b[88..].iter().all(|&x| x == 0));
+    assert_eq!(u32_at(bytes(&GoalRequest::cancel(1)), 8), 2);
+    assert_eq!(u32_at(bytes(&GoalRequest::stop(1)), 8), 3);
+}
+
+#[test]
+fn goal_reply_bytes() {
+    let r = GoalReply::reject(99, RejectCode::GoalInsideObstacle, "inside");
+    let b = bytes(&r);
+    assert_eq!(u64_at(b, 0), 99);
+    assert_eq!(u32_at(b, 8), 0);
+    assert_eq!(u32_at(b, 12), 5);
+    assert_eq!(u32_at(b, 16), 6);
+    assert_eq!(u32_at(b, 20), 0);
+    assert_eq!(&b[24..30], b"inside");
+    assert!(
+        b[30..].iter().all(|&x| x == 0),
+        "NUL-terminated, zero-filled"
+    );
+    let a = GoalReply::accept(7);
+    assert_eq!(u32_at(bytes(&a), 8), 1);
+    assert_eq!(u32_at(bytes(&a), 12), 0);
+}
+
+#[test]
+fn pose_estimate_bytes() {
+    let mut p = PoseEstimate::new(123_456_789, 42, Pose2::new(1.5, -2.5, 3.0));
+    p.covariance[4] = 0.25;
+    p.flags |= pose_flags::COVARIANCE_VALID;
+    let b = bytes(&p);
+    assert_eq!(u64_at(b, 0), 123_456_789);
+    assert_eq!(u32_at(b, 8), 42);
+    assert_eq!(u32_at(b, 12), 0b11);
+    assert_eq!(
+        (f64_at(b, 16), f64_at(b, 24), f64_at(b, 32)),
+        (1.5, -2.5, 3.0)
+    );
+    assert_eq!(f64_at(b, 40 + 4 * 8), 0.25);
+}
+
+#[test]
+fn telemetry_bytes() {
+    let mut t = Telemetry::ZERO;
+    t.tick = 11;
+    t.timestamp_ns = 22;
+    t.goal_request_id = 33;
+    t.mode = Mode::Reached.code();
+    t.fault_flags = shm_ipc::fault_flags::OVERRUN;
+    t.goal_active = 1;
+    t.qp_iterations = 9;
+    t.sqp_iterations = 1;
+    t.solve_time_us = 512.5;
+    t.cost = 0.125;
+    t.pose_error_xy = 0.05;
+    t.pose_error_heading = -0.01;
+    t.state = MachineState::from_array([1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);
+    t.goal = Pose2::new(7.0, 8.0, 9.0);
+    t.command = Command {
+        beta_dot: 0.1,
+        v: 0.2,
+    };
+    let plan: Vec<_> = (0..MAX_TRAJECTORY + 5)
+        .map(|i| MachineState::from_array([i as f64; 6]))
+        .collect();
+    assert_eq!(t.set_trajectory(&plan), MAX_TRAJECTORY);
+    let b = bytes(&t);
+    assert_eq!((u64_at(b, 0), u64_at(b, 8), u64_at(b, 16)), (11, 22, 33));
+    assert_eq!(u32_at(b, 24), 3);
+    assert_eq!(u32_at(b, 28), 1 << 6);
+    assert_eq!(u32_at(b, 32), 1);
+    assert_eq!(u32_at(b, 36), 41);
+    assert_eq!((u32_at(b, 40), u32_at(b, 44)), (9, 1));
+    assert_eq!(
+        (f64_at(b, 48), f64_at(b, 56), f64_at(b, 64), f64_at(b, 72)),
+        (512.5, 0.125, 0.05, -0.01)
+    );
+    for (i, v) in [1.0, 2.0, 3.0, 4.0, 5.0, 6.0].iter().enumerate() {
+        assert_eq!(f64_at(b, 80 + 8 * i), *v);
+    }
+    assert_eq!(
+        (f64_at(b, 128), f64_at(b, 136), f64_at(b, 144)),
+        (7.0, 8.0, 9.0)
+    );
+    assert_eq!((f64_at(b, 152), f64_at(b, 160)), (0.1, 0.2));
+    // trajectory[k].v_f at 168 + 48 k + 40
+    assert_eq!(f64_at(b, 168 + 48 * 40 + 40), 40.0);
+    assert_eq!(t.trajectory().len(), 41);
+
+    // A corrupt length from a foreign peer is clamped, not trusted.
+    t.trajectory_len = u32::MAX;
+    assert_eq!(t.trajectory().len(), MAX_TRAJECTORY);
+    t.mode = 77;
+    assert_eq!(t.mode(), Err(77));
+}
