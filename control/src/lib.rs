@@ -5,9 +5,11 @@
 pub mod actor;
 pub mod cost;
 pub mod critic;
+pub mod delay;
 pub mod encoder;
 pub mod mlp;
 pub mod model;
+pub mod mpc;
 pub mod plant;
 pub mod weights;
 

@@ -1,0 +1,271 @@
+//! Actuator-delay compensation (DESIGN §5, paper §V-A): before each solve the
+//! measured state is propagated over the delay d with the model and the
+//! commands already sent that act in that window, so the MPC plans from the
+//! state the machine will be in when the new command takes effect.
+//!
+//! # From velocity commands to accelerations
+//!
+//! The machine takes velocity commands (β̇_cmd, v_cmd), one per tick. As in
+//! [`crate::plant`] with zero time constants, a command issued at time tᵢ takes
+//! effect at tᵢ + d and from then ramps each velocity linearly to its value over
+//! `ramp` seconds (the command period Δt), at the acceleration
+//! a = clamp((v_cmd − v(tᵢ + d)) / ramp, ±a_max), and holds it when reached;
+//! a newer command replaces the ramp when it takes effect. The accelerations are
+//! therefore piecewise constant, and the window [t, t + d] is integrated with
+//! RK4 on sub-steps (at most `substep`, split at every activation and ramp end),
+//! applying the model's clamping rule after each, exactly as the plant does.
+//!
+//! The ramp in progress at the measurement time t is continued from the
+//! *measured* velocity: it reaches its command at its nominal end
+//! t_act + ramp, i.e. a = clamp((v_cmd − v_meas) / (t_act + ramp − t), ±a_max)
+//! (with an exact measurement this is the plant's own rate); a ramp whose
+//! nominal end has passed but which has not reached its command (one that was
+//! acceleration-limited) continues at ±a_max. Before the first command the
+//! machine holds its measured velocities.
+//!
+//! A first-order velocity lag (`tau > 0` in the plant) is not modelled: it is a
+//! model error the MPC's feedback absorbs.
+
+use std::collections::VecDeque;
+
+use crate::model::{clamp_state, f_continuous, ix, Control, MachineParams, State};
+use crate::plant::VelocityCommand;
+
+/// Default integration sub-step [s] (the plant's).
+pub const DEFAULT_SUBSTEP: f64 = 0.01;
+
+/// Errors in the compensator's settings.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum DelayError {
+    #[error("delay setting `{name}` {requirement} (got {value})")]
+    Setting {
+        name: &'static str,
+        requirement: &'static str,
+        value: f64,
+    },
+}
+
+/// Propagates measured states over the actuator delay with the commands
+/// committed in the window. Holds a short history of the commands sent.
+#[derive(Debug, Clone)]
+pub struct DelayCompensator {
+    params: MachineParams,
+    delay: f64,
+    ramp: f64,
+    substep: f64,
+    /// Commands as (issue time, command), oldest first; only the ones that can
+    /// still matter are kept.
+    history: VecDeque<(f64, VelocityCommand)>,
+}
+
+/// One velocity channel's ramp: constant `rate` until `until`, then hold `target`.
+#[derive(Debug, Clone, Copy, Default)]
+struct Ramp {
+    rate: f64,
+    until: f64,
+    target: f64,
+}
+
+impl Ramp {
+    /// Ramp from `now` (velocity `v`) towards `target`, nominally reached after `span`.
+    fn start(t: f64, v: f64, target: f64, span: f64, max: f64) -> Self {
+        if target == v {
+            return Self {
+                rate: 0.0,
+                until: t,
+                target,
+            };
+        }
+        let rate = if span > 0.0 {
+            ((target - v) / span).clamp(-max, max)
+        } else {
+            max.copysign(target - v)
+        };
+        Self {
+            rate,
+            until: t + (target - v) / rate,
+            target,
+        }
+    }
+
+    fn acceleration(&self, t: f64) -> f64 {
+        if self.until > t + 1e-12 {
+            self.rate
+        } else {
+            0.0
+        }
+    }
+}
+
+const CHANNELS: [usize; 2] = [ix::BETA_DOT, ix::V];
+
+impl DelayCompensator {
+    /// `delay` ≥ 0 [s]; `ramp` > 0 is the duration of the velocity ramp after
+    /// each command (the command period Δt).
+    pub fn new(params: MachineParams, delay: f64, ramp: f64) -> Result<Self, DelayError> {
+        if !(delay.is_finite() && delay >= 0.0) {
+            return Err(DelayError::Setting {
+                name: "delay",
+                requirement: "must be finite and >= 0",
+                value: delay,
+            });
+        }
+        if !(ramp.is_finite() && ramp > 0.0) {
+            return Err(DelayError::Setting {
+                name: "ramp",
+                requirement: "must be finite and > 0",
+                value: ramp,
+            });
+        }
+        // Commands issued one ramp apart: those in the window plus the active one.
+        let capacity = (delay / ramp).ceil() as usize + 4;
+        Ok(Self {
+            params,
+            delay,
+            ramp,
+            substep: DEFAULT_SUBSTEP,
+            history: VecDeque::with_capacity(capacity),
+        })
+    }
+
+    /// Sets the integration sub-step (0, 0.02] s.
+    pub fn with_substep(mut self, substep: f64) -> Result<Self, DelayError> {
+        if !(substep > 0.0 && substep <= 0.02) {
+            return Err(DelayError::Setting {
+                name: "substep",
+                requirement: "must be in (0, 0.02]",
+                value: substep,
+            });
+        }
+        self.substep = substep;
+        Ok(self)
+    }
+
+    pub fn delay(&self) -> f64 {
+        self.delay
+    }
+
+    /// Forgets every command.
+    pub fn reset(&mut self) {
+        self.history.clear();
+    }
+
+    /// Records the command sent at `time` (saturated at the machine's bounds, as
+    /// the low-level controller does). Times must not decrease; non-finite
+    /// commands are ignored (the plant rejects them too).
+    pub fn record(&mut self, time: f64, cmd: VelocityCommand) {
+        if !(cmd.beta_dot.is_finite() && cmd.v.is_finite() && time.is_finite()) {
+            return;
+        }
+        let p = &self.params;
+        let cmd = VelocityCommand {
+            beta_dot: cmd.beta_dot.clamp(-p.beta_dot_max, p.beta_dot_max),
+            v: cmd.v.clamp(-p.v_max, p.v_max),
+        };
+        // An entry is obsolete once the next one has taken effect by `time`.
+        while self.history.len() >= 2 && self.history[1].0 + self.delay <= time {
+            self.history.pop_front();
+        }
+        self.history.push_back((time, cmd));
+    }
+
+    /// The state at `time + delay`, from the state measured at `time`.
+    /// Returns the measurement itself when the delay is zero.
+    pub fn propagate(&self, time: f64, measured: &State) -> State {
+        let mut x = *measured;
+        if self.delay == 0.0 {
+            return x;
+        }
+        let p = self.params;
+        let max = [p.beta_ddot_max, p.a_max];
+        let act = |i: usize| self.history[i].0 + self.delay;
+        // The command in effect at `time`: the last one activated by then.
+        let mut next = self
+            .history
+            .iter()
+            .position(|(t, _)| t + self.delay > time + 1e-12)
+            .unwrap_or(self.history.len());
+        let mut ramps = [Ramp::default(); 2];
+        if next > 0 {
+            let (t0, cmd) = self.history[next - 1];
+            let remaining = (t0 + self.delay + self.ramp - time).max(0.0);
+            for (c, (&k, target)) in CHANNELS.iter().zip([cmd.beta_dot, cmd.v]).enumerate() {
+                ramps[c] = Ramp::start(time, x[k], target, remaining, max[c]);
+            }
+        }
+        let mut t = time;
+        let end = time + self.delay;
+        while end - t > 1e-12 {
+            while next < self.history.len() && act(next) <= t + 1e-12 {
+                let cmd = self.history[next].1;
+                for (c, (&k, target)) in CHANNELS.iter().zip([cmd.beta_dot, cmd.v]).enumerate() {
+                    ramps[c] = Ramp::start(t, x[k], target, self.ramp, max[c]);
+                }
+                next += 1;
+            }
+            let mut h = self.substep.min(end - t);
+            if next < self.history.len() {
+                h = h.min(act(next) - t);
+            }
+            for r in &ramps {
+                if r.until > t {
+                    h = h.min(r.until - t);
+                }
+            }
+            let h = h.max(1e-12);
+            let u = Control::new(ramps[0].acceleration(t), ramps[1].acceleration(t));
+            let k1 = f_continuous(&p, &x, &u);
+            let k2 = f_continuous(&p, &(x + k1 * (0.5 * h)), &u);
+            let k3 = f_continuous(&p, &(x + k2 * (0.5 * h)), &u);
+            let k4 = f_continuous(&p, &(x + k3 * h), &u);
+            let mut next_x = x + (k1 + 2.0 * k2 + 2.0 * k3 + k4) * (h / 6.0);
+            // A finished ramp lands on its command exactly.
+            for (r, &k) in ramps.iter().zip(&CHANNELS) {
+                if r.rate != 0.0 && (r.until - (t + h)).abs() < 1e-12 {
+                    next_x[k] = r.target;
+                }
+            }
+            clamp_state(&p, &mut next_x);
+            x = next_x;
+            t += h;
+        }
+        x
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn zero_delay_is_identity_and_settings_are_checked() {
+        let c = DelayCompensator::new(MachineParams::default(), 0.0, 0.2).unwrap();
+        let x = State::new(1.0, 2.0, 0.3, 0.1, 0.2, 0.5);
+        assert_eq!(c.propagate(0.0, &x), x);
+        let e = DelayCompensator::new(MachineParams::default(), -0.1, 0.2).unwrap_err();
+        assert!(e.to_string().contains("`delay`"));
+        assert!(DelayCompensator::new(MachineParams::default(), 0.2, 0.0)
+            .unwrap_err()
+            .to_string()
+            .contains("`ramp`"));
+    }
+
+    #[test]
+    fn no_command_holds_velocity_and_history_stays_short() {
+        let p = MachineParams::default();
+        let mut c = DelayCompensator::new(p, 0.3, 0.2).unwrap();
+        let x = State::new(0.0, 0.0, 0.0, 0.0, 0.0, 0.5);
+        let y = c.propagate(0.0, &x);
+        assert!((y[ix::X] - 0.15).abs() < 1e-12 && y[ix::V] == 0.5);
+        for k in 0..100 {
+            c.record(
+                0.2 * k as f64,
+                VelocityCommand {
+                    beta_dot: 0.0,
+                    v: 0.5,
+                },
+            );
+        }
+        assert!(c.history.len() <= 4, "{}", c.history.len());
+    }
+}

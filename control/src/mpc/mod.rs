@@ -1,0 +1,267 @@
+//! The goal-conditioned actor-critic MPC (DESIGN §5, paper §IV-E, eq. 17–22),
+//! solved by SQP with real-time iterations (SQP-RTI).
+//!
+//! Each tick: propagate the measured state over the actuator delay
+//! ([`crate::delay`]), shift the previous plan by one stage (new last control
+//! from the actor, or zero), build one QP at that point (second-order Taylor
+//! model of the critic cost, eq. 20–21, Hessian blocks made positive
+//! semidefinite; linearised RK4 dynamics; hard control bounds; soft state and
+//! obstacle constraints with exact L1 slacks, so the QP is always feasible),
+//! solve it with Clarabel, and send (β̇, v_f) of the planned x₁. Optionally a
+//! few more SQP iterations run within the time budget.
+//!
+//! The parts talk through small traits so tests can swap them:
+//! [`StageCost`] (the critic, or [`QuadraticCost`]), [`Dynamics`] ([`Rk4Model`],
+//! or [`LinearDynamics`]) and [`QpBackend`] ([`ClarabelBackend`]).
+//!
+//! Files: `settings` (settings and errors), `layout` (variables, rows, sparsity
+//! pattern), `cost`, `dynamics`, `constraints`, `qp` (solver backend), `sqp`
+//! (one tick), `solution` (what a tick returns).
+//!
+//! Allocation: nothing in a tick allocates except inside Clarabel's `solve`
+//! (its timers; counted in `tests/mpc_alloc.rs`).
+
+pub mod constraints;
+pub mod cost;
+pub mod dynamics;
+pub mod layout;
+pub mod qp;
+pub mod settings;
+pub mod solution;
+mod sqp;
+
+pub use constraints::{Obstacle, MAX_OBSTACLES};
+pub use cost::{QuadraticCost, StageCost};
+pub use dynamics::{Dynamics, LinearDynamics, Rk4Model};
+pub use layout::QpLayout;
+pub use qp::{ClarabelBackend, QpBackend, QpData, QpOutcome, QpStatus};
+pub use settings::{MpcError, MpcSettings, ObstacleConstraint};
+pub use solution::{FallbackReason, Solution, StepStatus};
+
+use crate::actor::{Actor, ActorWorkspace};
+use crate::delay::DelayCompensator;
+use crate::model::{Control, Goal, MachineParams, State};
+
+/// The MPC: built once, then `set_goal` and `step` every tick.
+pub struct Mpc<C: StageCost, D: Dynamics = Rk4Model, B: QpBackend = ClarabelBackend> {
+    params: MachineParams,
+    settings: MpcSettings,
+    cost: C,
+    cost_ws: C::Workspace,
+    dynamics: D,
+    actor: Option<(Actor, ActorWorkspace)>,
+    layout: QpLayout,
+    backend: B,
+    data: QpData,
+    delay: DelayCompensator,
+    goal: Option<Goal>,
+    obstacles: [Obstacle; MAX_OBSTACLES],
+    n_obstacles: usize,
+    /// The plan, which is also the next linearisation point once shifted.
+    xs: Vec<State>,
+    us: Vec<Control>,
+    /// The shifted plan, kept while a restart from a roll-out is tried.
+    backup_xs: Vec<State>,
+    backup_us: Vec<Control>,
+    /// False until a plan exists for the current goal.
+    has_plan: bool,
+    /// Ticks since the last reset; the delay compensator's clock is tick × Δt.
+    tick: u64,
+    solution: Solution,
+}
+
+impl<C: StageCost> Mpc<C> {
+    /// The MPC with the RK4 model and Clarabel.
+    pub fn new(
+        params: MachineParams,
+        cost: C,
+        actor: Option<Actor>,
+        settings: MpcSettings,
+    ) -> Result<Self, MpcError> {
+        Self::with_parts(
+            params,
+            cost,
+            Rk4Model { params },
+            actor,
+            settings,
+            ClarabelBackend::new,
+        )
+    }
+}
+
+impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
+    /// The MPC with any dynamics and QP backend; `make_backend` receives the
+    /// layout, nominal QP values (for the solver's scaling) and the settings.
+    pub fn with_parts(
+        params: MachineParams,
+        cost: C,
+        dynamics: D,
+        actor: Option<Actor>,
+        settings: MpcSettings,
+        make_backend: impl FnOnce(&QpLayout, &QpData, &MpcSettings) -> Result<B, MpcError>,
+    ) -> Result<Self, MpcError> {
+        params.validate()?;
+        settings.validate()?;
+        let n = settings.horizon;
+        let layout = QpLayout::new(n, settings.max_obstacles, settings.obstacle_constraint);
+        let data = nominal_data(&layout, &params, &settings, &dynamics);
+        let backend = make_backend(&layout, &data, &settings)?;
+        let delay = DelayCompensator::new(params, settings.delay, settings.dt).map_err(|_| {
+            MpcError::Setting {
+                name: "delay",
+                requirement: "must be finite and >= 0",
+                value: settings.delay.to_string(),
+            }
+        })?;
+        let cost_ws = cost.workspace();
+        let actor = actor.map(|a| {
+            let ws = ActorWorkspace::new(&a);
+            (a, ws)
+        });
+        Ok(Self {
+            params,
+            settings,
+            cost,
+            cost_ws,
+            dynamics,
+            actor,
+            layout,
+            backend,
+            data,
+            delay,
+            goal: None,
+            obstacles: [Obstacle::default(); MAX_OBSTACLES],
+            n_obstacles: 0,
+            xs: vec![State::zeros(); n + 1],
+            us: vec![Control::zeros(); n],
+            backup_xs: vec![State::zeros(); n + 1],
+            backup_us: vec![Control::zeros(); n],
+            has_plan: false,
+            tick: 0,
+            solution: Solution::new(n),
+        })
+    }
+
+    pub fn settings(&self) -> &MpcSettings {
+        &self.settings
+    }
+
+    pub fn params(&self) -> &MachineParams {
+        &self.params
+    }
+
+    pub fn layout(&self) -> &QpLayout {
+        &self.layout
+    }
+
+    pub fn goal(&self) -> Option<Goal> {
+        self.goal
+    }
+
+    pub fn obstacles(&self) -> &[Obstacle] {
+        &self.obstacles[..self.n_obstacles]
+    }
+
+    /// The last tick's result.
+    pub fn solution(&self) -> &Solution {
+        &self.solution
+    }
+
+    /// The values of the last QP built (for diagnostics and tests).
+    pub fn qp_data(&self) -> &QpData {
+        &self.data
+    }
+
+    /// The QP backend (e.g. to read multipliers in tests).
+    pub fn backend(&self) -> &B {
+        &self.backend
+    }
+
+    /// Forgets the goal, the plan and the command history (e.g. after a stop).
+    pub fn reset(&mut self) {
+        self.goal = None;
+        self.n_obstacles = 0;
+        self.has_plan = false;
+        self.tick = 0;
+        self.delay.reset();
+    }
+
+    /// Sets the goal and the obstacles (at most `max_obstacles`, radii already
+    /// inflated by the machine's). A goal different from the current one makes
+    /// the next tick start from an actor roll-out; the same goal with new
+    /// obstacles keeps the warm start.
+    pub fn set_goal(&mut self, goal: Goal, obstacles: &[Obstacle]) -> Result<(), MpcError> {
+        if !(goal.x.is_finite() && goal.y.is_finite() && goal.theta.is_finite()) {
+            return Err(MpcError::BadGoal {
+                x: goal.x,
+                y: goal.y,
+                theta: goal.theta,
+            });
+        }
+        if obstacles.len() > self.layout.n_obs {
+            return Err(MpcError::TooManyObstacles {
+                given: obstacles.len(),
+                max: self.layout.n_obs,
+            });
+        }
+        for (i, o) in obstacles.iter().enumerate() {
+            o.validate(i)?;
+        }
+        if self.goal != Some(goal) {
+            self.has_plan = false;
+        }
+        self.goal = Some(goal);
+        self.obstacles[..obstacles.len()].copy_from_slice(obstacles);
+        self.n_obstacles = obstacles.len();
+        Ok(())
+    }
+}
+
+/// QP values at a nominal point (identity cost blocks, the dynamics' Jacobians
+/// at half the top speed, unit obstacle gradients), from which the solver's
+/// equilibration is computed once. The pattern is complete: every entry that
+/// can change is present, zeros included.
+fn nominal_data<D: Dynamics>(
+    layout: &QpLayout,
+    params: &MachineParams,
+    settings: &MpcSettings,
+    dynamics: &D,
+) -> QpData {
+    let mut data = QpData {
+        p: vec![0.0; layout.p.nnz()],
+        q: vec![0.0; layout.n_var],
+        a: layout.a_constant.clone(),
+        b: vec![0.0; layout.n_eq + layout.n_ineq],
+    };
+    for block in &layout.p_stage {
+        for i in 0..layout::NZ {
+            data.p[block[i][i]] = 1.0;
+        }
+    }
+    for i in 0..layout::NX {
+        data.p[layout.p_terminal[i][i]] = 1.0;
+    }
+    sqp::fill_slack_costs(layout, settings, &mut data.q);
+    let mut x = State::zeros();
+    x[crate::model::ix::V] = 0.5 * params.v_max;
+    let (_, a, b) = dynamics.step_with_jacobians(&x, &Control::zeros(), settings.dt);
+    for n in 0..layout.horizon {
+        for i in 0..layout::NX {
+            for j in 0..layout::NX {
+                data.a[layout.a_dyn_x[n][i][j]] = -a[(i, j)];
+            }
+            for j in 0..layout::NU {
+                data.a[layout.a_dyn_u[n][i][j]] = -b[(i, j)];
+            }
+        }
+    }
+    let xs = vec![x; layout.horizon + 1];
+    let us = vec![Control::zeros(); layout.horizon];
+    constraints::fill_bounds(layout, params, &xs, &us, &mut data.b);
+    for k in 0..layout.horizon {
+        for j in 0..layout.n_obs {
+            data.b[layout.row_obstacle(k, j)] = 1.0;
+        }
+    }
+    data
+}

@@ -1,0 +1,366 @@
+//! One MPC tick: delay compensation, warm start (shift or roll-out), SQP
+//! iterations (build the QP at the linearisation point, solve, step), output
+//! and fallback.
+
+use std::time::{Duration, Instant};
+
+use crate::critic::{Derivatives, TerminalDerivatives};
+use crate::model::{ix, Control, Goal, State};
+use crate::plant::VelocityCommand;
+
+use super::constraints::{fill_bounds, fill_obstacles, MAX_OBSTACLES};
+use super::cost::{stage_block, terminal_block, StageCost};
+use super::dynamics::Dynamics;
+use super::layout::{QpLayout, NU, NX, NZ};
+use super::qp::{QpBackend, QpStatus};
+use super::settings::{MpcError, MpcSettings};
+use super::solution::{FallbackReason, StepStatus};
+use super::{Mpc, Solution};
+
+/// The linear slack penalties in q (constant).
+pub(super) fn fill_slack_costs(layout: &QpLayout, settings: &MpcSettings, q: &mut [f64]) {
+    for n in 1..=layout.horizon {
+        for c in 0..3 {
+            q[layout.state_slack(n, c)] = settings.state_slack_weight;
+        }
+    }
+    for k in 0..layout.horizon {
+        for j in 0..layout.n_obs {
+            q[layout.obstacle_slack(k, j)] = settings.obstacle_slack_weight;
+        }
+    }
+}
+
+fn finite(x: &State) -> bool {
+    x.iter().all(|v| v.is_finite())
+}
+
+impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
+    /// One tick from the state measured now. Returns `Err` only when no goal is
+    /// set; every numerical failure is reported in the [`Solution`] and
+    /// answered with the shifted previous plan, and the command is always
+    /// finite and within the machine's velocity bounds.
+    ///
+    /// The tick clock advances by Δt per call: call it once per command period
+    /// and send the command it returns (the delay compensation assumes so).
+    pub fn step(&mut self, measured: &State) -> Result<&Solution, MpcError> {
+        let start = Instant::now();
+        let goal = self.goal.ok_or(MpcError::NoGoal)?;
+        let now = self.tick as f64 * self.settings.dt;
+        let x_hat = if finite(measured) {
+            self.delay.propagate(now, measured)
+        } else {
+            *measured
+        };
+        self.solution.initial_state = x_hat;
+        self.solution.qp_iterations = 0;
+        self.solution.sqp_iterations = 0;
+        self.solution.step_norm = 0.0;
+        self.solution.restarted = false;
+        self.solution.qp_status = QpStatus::NotRun;
+        self.solution.cost = f64::NAN;
+
+        let status = if !finite(&x_hat) {
+            if self.has_plan {
+                self.shift(&goal);
+            }
+            StepStatus::Fallback(FallbackReason::NonFiniteState)
+        } else {
+            let shifted = self.has_plan;
+            if shifted {
+                self.shift(&goal);
+            } else {
+                self.roll_out(&x_hat, &goal);
+                self.has_plan = true;
+            }
+            self.xs[0] = x_hat;
+            self.iterate(&x_hat, &goal, start, shifted)
+        };
+        self.solution.status = status;
+
+        // Output: the plan and (β̇, v_f) of x₁, checked and clamped.
+        let p = self.params;
+        let mut command = if self.has_plan {
+            VelocityCommand {
+                beta_dot: self.xs[1][ix::BETA_DOT],
+                v: self.xs[1][ix::V],
+            }
+        } else {
+            VelocityCommand {
+                beta_dot: 0.0,
+                v: 0.0,
+            }
+        };
+        if !(command.beta_dot.is_finite() && command.v.is_finite()) {
+            command = VelocityCommand {
+                beta_dot: 0.0,
+                v: 0.0,
+            };
+            if self.solution.status == StepStatus::Solved {
+                self.solution.status = StepStatus::Fallback(FallbackReason::NonFiniteSolution);
+            }
+        }
+        command.beta_dot = command.beta_dot.clamp(-p.beta_dot_max, p.beta_dot_max);
+        command.v = command.v.clamp(-p.v_max, p.v_max);
+        self.solution.command = command;
+        self.solution.states.copy_from_slice(&self.xs);
+        self.solution.controls.copy_from_slice(&self.us);
+        self.delay.record(now, command);
+        self.tick += 1;
+        self.solution.solve_time = start.elapsed();
+        Ok(&self.solution)
+    }
+
+    /// Warm start: the plan moves one stage earlier, the new last control
+    /// comes from the actor (or is zero) and the new last state from the model.
+    fn shift(&mut self, goal: &Goal) {
+        let n = self.settings.horizon;
+        self.xs.copy_within(1.., 0);
+        self.us.copy_within(1.., 0);
+        let u = self.policy(&self.xs[n - 1].clone(), goal);
+        self.us[n - 1] = u;
+        self.xs[n] = self.dynamics.step(&self.xs[n - 1], &u, self.settings.dt);
+    }
+
+    /// Initial guess on a new goal: the actor rolled out over the horizon from
+    /// x̂ (without an actor: zero controls, i.e. holding the current velocities).
+    fn roll_out(&mut self, x_hat: &State, goal: &Goal) {
+        self.xs[0] = *x_hat;
+        for k in 0..self.settings.horizon {
+            let u = self.policy(&self.xs[k].clone(), goal);
+            self.us[k] = u;
+            self.xs[k + 1] = self.dynamics.step(&self.xs[k], &u, self.settings.dt);
+        }
+    }
+
+    fn policy(&mut self, x: &State, goal: &Goal) -> Control {
+        match &mut self.actor {
+            Some((actor, ws)) if finite(x) => {
+                let u = self.params.clamp_control(&actor.action(ws, x, goal));
+                if u.iter().all(|v| v.is_finite()) {
+                    u
+                } else {
+                    Control::zeros()
+                }
+            }
+            _ => Control::zeros(),
+        }
+    }
+
+    /// SQP iterations at the current plan; returns the tick's status.
+    ///
+    /// If the first QP fails at a shifted warm start (which can drift into a
+    /// bad region, e.g. towards the model's singularity at L_f cos β + L_r = 0
+    /// when state slacks are cheap), it is retried once from a fresh roll-out
+    /// within the time budget; if that fails too the shifted plan is kept.
+    fn iterate(&mut self, x_hat: &State, goal: &Goal, start: Instant, shifted: bool) -> StepStatus {
+        let budget = Duration::from_secs_f64(self.settings.time_budget);
+        let mut status = StepStatus::Fallback(FallbackReason::QpFailed);
+        let mut may_restart = shifted;
+        if shifted {
+            self.backup_xs.copy_from_slice(&self.xs);
+            self.backup_us.copy_from_slice(&self.us);
+        }
+        let mut attempts = 0;
+        while attempts < self.settings.sqp_iterations {
+            attempts += 1;
+            let it_start = Instant::now();
+            let failure = self.sqp_iteration(x_hat, goal);
+            if let Some(reason) = failure {
+                if self.solution.sqp_iterations > 0 {
+                    break;
+                }
+                status = StepStatus::Fallback(reason);
+                if may_restart && start.elapsed() + it_start.elapsed() <= budget {
+                    may_restart = false;
+                    self.roll_out(x_hat, goal);
+                    self.solution.restarted = true;
+                    attempts -= 1;
+                    continue;
+                }
+                if self.solution.restarted {
+                    self.xs.copy_from_slice(&self.backup_xs);
+                    self.us.copy_from_slice(&self.backup_us);
+                }
+                break;
+            }
+            status = StepStatus::Solved;
+            if self.solution.step_norm < self.settings.sqp_tolerance {
+                break;
+            }
+            if start.elapsed() + it_start.elapsed() > budget {
+                break;
+            }
+        }
+        status
+    }
+
+    /// Builds and solves one QP and takes its step; on failure nothing changes
+    /// and the reason is returned.
+    fn sqp_iteration(&mut self, x_hat: &State, goal: &Goal) -> Option<FallbackReason> {
+        if !self.build_qp(x_hat, goal) {
+            return Some(FallbackReason::NonFiniteData);
+        }
+        if self.backend.update(&self.data).is_err() {
+            self.solution.qp_status = QpStatus::UpdateFailed;
+            return Some(FallbackReason::QpFailed);
+        }
+        let outcome = self.backend.solve();
+        self.solution.qp_status = outcome.status;
+        self.solution.qp_iterations += outcome.iterations;
+        if !outcome.status.is_usable() {
+            return Some(FallbackReason::QpFailed);
+        }
+        let w = self.backend.primal();
+        if !(w.len() == self.layout.n_var && w.iter().all(|v| v.is_finite())) {
+            return Some(FallbackReason::NonFiniteSolution);
+        }
+        self.take_step();
+        self.solution.sqp_iterations += 1;
+        None
+    }
+
+    /// Fills P, q, A, b at the current plan (the linearisation point) with x̂
+    /// as x₀. Returns false if any value is not finite.
+    fn build_qp(&mut self, x_hat: &State, goal: &Goal) -> bool {
+        let s = self.settings;
+        let l = &self.layout;
+        let d = &mut self.data;
+        let mut cost = 0.0;
+        // Cost blocks (paper eq. 19–21).
+        let mut der = Derivatives::default();
+        let (mut h, mut g) = ([[0.0; NZ]; NZ], [0.0; NZ]);
+        for k in 0..s.horizon {
+            self.cost.stage(
+                &mut self.cost_ws,
+                &self.xs[k],
+                &self.us[k],
+                goal,
+                s.hessian,
+                &mut der,
+            );
+            cost += s.dt * der.value;
+            stage_block(
+                &der,
+                s.dt,
+                s.hessian,
+                s.min_eigenvalue,
+                s.levenberg_marquardt,
+                &mut h,
+                &mut g,
+            );
+            let block = &l.p_stage[k];
+            let c0 = l.x(k);
+            for i in 0..NZ {
+                d.q[c0 + i] = g[i];
+                for j in i..NZ {
+                    d.p[block[i][j]] = h[i][j];
+                }
+            }
+        }
+        let mut term = TerminalDerivatives::default();
+        let (mut ht, mut gt) = ([[0.0; NX]; NX], [0.0; NX]);
+        self.cost.terminal(
+            &mut self.cost_ws,
+            &self.xs[s.horizon],
+            goal,
+            s.hessian,
+            &mut term,
+        );
+        cost += term.value;
+        terminal_block(
+            &term,
+            s.hessian,
+            s.min_eigenvalue,
+            s.levenberg_marquardt,
+            &mut ht,
+            &mut gt,
+        );
+        let c0 = l.x(s.horizon);
+        for i in 0..NX {
+            d.q[c0 + i] = gt[i];
+            for j in i..NX {
+                d.p[l.p_terminal[i][j]] = ht[i][j];
+            }
+        }
+        self.solution.cost = cost;
+        // Initial state and linearised dynamics.
+        for i in 0..NX {
+            d.b[i] = x_hat[i] - self.xs[0][i];
+        }
+        for k in 0..s.horizon {
+            let (next, a, b) = self
+                .dynamics
+                .step_with_jacobians(&self.xs[k], &self.us[k], s.dt);
+            let r = l.row_dynamics(k);
+            for i in 0..NX {
+                for j in 0..NX {
+                    d.a[l.a_dyn_x[k][i][j]] = -a[(i, j)];
+                }
+                for j in 0..NU {
+                    d.a[l.a_dyn_u[k][i][j]] = -b[(i, j)];
+                }
+                d.b[r + i] = next[i] - self.xs[k + 1][i];
+            }
+        }
+        // Bounds and obstacles.
+        fill_bounds(l, &self.params, &self.xs, &self.us, &mut d.b);
+        let obstacles = &self.obstacles[..self.n_obstacles];
+        fill_obstacles(
+            l,
+            s.obstacle_constraint,
+            s.cbf_gamma,
+            obstacles,
+            &self.xs,
+            &mut d.a,
+            &mut d.b,
+        );
+        d.is_finite()
+    }
+
+    /// Applies α·Δ from the QP solution, projects the controls onto their box
+    /// (removing interior-point round-off) and records the slacks.
+    fn take_step(&mut self) {
+        let s = self.settings;
+        let l = &self.layout;
+        let w = self.backend.primal();
+        let alpha = s.step_length;
+        let mut norm: f64 = 0.0;
+        for k in 0..=s.horizon {
+            let c = l.x(k);
+            for i in 0..NX {
+                norm = norm.max(w[c + i].abs());
+                self.xs[k][i] += alpha * w[c + i];
+            }
+            if k < s.horizon {
+                let c = l.u(k);
+                for i in 0..NU {
+                    norm = norm.max(w[c + i].abs());
+                    self.us[k][i] += alpha * w[c + i];
+                }
+                self.us[k] = self.params.clamp_control(&self.us[k]);
+            }
+        }
+        self.solution.step_norm = norm;
+        let mut slack_cost = 0.0;
+        for n in 1..=s.horizon {
+            for c in 0..3 {
+                let v = w[l.state_slack(n, c)].max(0.0);
+                self.solution.state_slacks[n - 1][c] = v;
+                slack_cost += s.state_slack_weight * v;
+            }
+        }
+        for k in 0..s.horizon {
+            for j in 0..MAX_OBSTACLES {
+                let v = if j < l.n_obs {
+                    w[l.obstacle_slack(k, j)].max(0.0)
+                } else {
+                    0.0
+                };
+                self.solution.obstacle_slacks[k][j] = v;
+                slack_cost += s.obstacle_slack_weight * v;
+            }
+        }
+        self.solution.slack_cost = slack_cost;
+    }
+}
