@@ -25,9 +25,15 @@ pub struct CostWeights {
 impl Default for CostWeights {
     /// Position and heading dominate, the rates and speed only have to vanish
     /// at rest. A heading error of 0.1 rad weighs like 0.1 m (the success test
-    /// of DESIGN §7 treats them alike); β, β̇, v_f get a smaller weight.
+    /// of DESIGN §7 treats them alike); β, β̇, v_f get a smaller weight. The
+    /// overall scale 1/100 keeps c of order 1 far from the goal (p = 1/4 sums
+    /// fourth roots, so five moderate errors add up to a few hundred times one),
+    /// and so the critic's values of order 10–100.
     fn default() -> Self {
-        Self { w: [1.0, 1.0, 0.3, 0.3, 0.5], p: 0.25 }
+        Self {
+            w: [0.01, 0.01, 0.003, 0.003, 0.005],
+            p: 0.25,
+        }
     }
 }
 
@@ -47,7 +53,11 @@ impl CostWeights {
     /// c(s, g) = (Σ |wᵢ eᵢ|^p)^(1/p).
     pub fn stage_cost(&self, x: &State, g: &Goal) -> f64 {
         let e = pose_error(x, g);
-        let s: f64 = e.iter().zip(self.w).map(|(e, w)| (w * e).abs().powf(self.p)).sum();
+        let s: f64 = e
+            .iter()
+            .zip(self.w)
+            .map(|(e, w)| (w * e).abs().powf(self.p))
+            .sum();
         s.powf(1.0 / self.p)
     }
 }
@@ -60,13 +70,22 @@ mod tests {
     fn p_one_is_weighted_l1_and_p_quarter_is_sparse() {
         let g = Goal::new(0.0, 0.0, 0.0);
         let x = State::new(3.0, 4.0, 0.5, 0.1, -0.2, 0.3);
-        let c1 = CostWeights { w: [1.0, 2.0, 1.0, 1.0, 1.0], p: 1.0 };
+        let c1 = CostWeights {
+            w: [1.0, 2.0, 1.0, 1.0, 1.0],
+            p: 1.0,
+        };
         assert!((c1.stage_cost(&x, &g) - (5.0 + 1.0 + 0.1 + 0.2 + 0.3)).abs() < 1e-12);
-        let cq = CostWeights { w: [1.0, 0.0, 0.0, 0.0, 0.0], p: 0.25 };
+        let cq = CostWeights {
+            w: [1.0, 0.0, 0.0, 0.0, 0.0],
+            p: 0.25,
+        };
         assert!((cq.stage_cost(&x, &g) - 5.0).abs() < 1e-12);
         // Two equal terms: (2 a^p)^(1/p) = 16 a for p = 1/4.
         let x2 = State::new(1.0, 0.0, 1.0, 0.0, 0.0, 0.0);
-        let c2 = CostWeights { w: [1.0, 1.0, 0.0, 0.0, 0.0], p: 0.25 };
+        let c2 = CostWeights {
+            w: [1.0, 1.0, 0.0, 0.0, 0.0],
+            p: 0.25,
+        };
         assert!((c2.stage_cost(&x2, &g) - 16.0).abs() < 1e-12);
         assert_eq!(c2.stage_cost(&State::zeros(), &g), 0.0);
     }
@@ -77,7 +96,10 @@ mod tests {
         assert!(c.validate().is_ok());
         c.w[3] = -1.0;
         assert!(c.validate().unwrap_err().to_string().contains("w[3]"));
-        let c = CostWeights { p: 0.0, ..Default::default() };
+        let c = CostWeights {
+            p: 0.0,
+            ..Default::default()
+        };
         assert!(c.validate().unwrap_err().to_string().contains("`p`"));
     }
 }

@@ -1,0 +1,285 @@
+//! Scenario files (DESIGN §7): CSV with a required header, angles in radians,
+//! one scenario a row, obstacles as `x:y:r` items separated by `;`. Parsed from
+//! text (callers read the file); errors name the source, line and column.
+
+use crate::model::{Goal, State};
+
+/// The header every scenario file starts with.
+pub const HEADER: &str = "name,x0,y0,theta0,beta0,beta_dot0,v0,x_goal,y_goal,theta_goal,obstacles";
+
+/// A circular obstacle, radius already inflated by the machine's.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Obstacle {
+    pub x: f64,
+    pub y: f64,
+    pub r: f64,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct Scenario {
+    pub name: String,
+    pub start: State,
+    pub goal: Goal,
+    pub obstacles: Vec<Obstacle>,
+}
+
+/// A malformed scenario file, with the position of the problem (1-based).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{source_name}:{line}:{column}: {message}")]
+pub struct ScenarioError {
+    pub source_name: String,
+    pub line: usize,
+    pub column: usize,
+    pub message: String,
+}
+
+/// Parses a scenario file's text; `source` names it in errors.
+pub fn parse(text: &str, source: &str) -> Result<Vec<Scenario>, ScenarioError> {
+    let fail = |line: usize, column: usize, message: String| ScenarioError {
+        source_name: source.to_string(),
+        line,
+        column,
+        message,
+    };
+    let mut lines = text
+        .lines()
+        .enumerate()
+        .filter(|(_, l)| !l.trim().is_empty());
+    let Some((_, header)) = lines.next() else {
+        return Err(fail(
+            1,
+            1,
+            format!("empty file: expected the header `{HEADER}`"),
+        ));
+    };
+    let header = header.trim().trim_start_matches('\u{feff}');
+    if header != HEADER {
+        return Err(fail(
+            1,
+            1,
+            format!("bad header `{header}`: expected `{HEADER}`"),
+        ));
+    }
+    let mut out = Vec::new();
+    for (index, raw) in lines {
+        let line_no = index + 1;
+        let line = raw.trim_end_matches('\r');
+        let fields: Vec<&str> = line.split(',').collect();
+        if fields.len() != 11 {
+            return Err(fail(
+                line_no,
+                1,
+                format!("expected 11 fields, found {}", fields.len()),
+            ));
+        }
+        let mut column = 1;
+        let mut columns = Vec::with_capacity(11);
+        for f in &fields {
+            columns.push(column);
+            column += f.chars().count() + 1;
+        }
+        let name = fields[0].trim();
+        if name.is_empty() {
+            return Err(fail(line_no, 1, "empty scenario name".into()));
+        }
+        let mut v = [0.0; 9];
+        for (k, slot) in v.iter_mut().enumerate() {
+            let text = fields[k + 1].trim();
+            let key = HEADER.split(',').nth(k + 1).unwrap_or("?");
+            *slot = text
+                .parse::<f64>()
+                .ok()
+                .filter(|x| x.is_finite())
+                .ok_or_else(|| {
+                    fail(
+                        line_no,
+                        columns[k + 1],
+                        format!("`{key}`: `{text}` is not a finite number"),
+                    )
+                })?;
+        }
+        let mut obstacles = Vec::new();
+        let obs_text = fields[10];
+        let mut col = columns[10];
+        if !obs_text.trim().is_empty() {
+            for item in obs_text.split(';') {
+                let parts: Vec<&str> = item.split(':').collect();
+                let parsed: Option<Vec<f64>> = (parts.len() == 3)
+                    .then(|| {
+                        parts
+                            .iter()
+                            .map(|p| p.trim().parse::<f64>().ok().filter(|x| x.is_finite()))
+                            .collect()
+                    })
+                    .flatten();
+                match parsed.as_deref() {
+                    Some(&[x, y, r]) if r > 0.0 => obstacles.push(Obstacle { x, y, r }),
+                    Some(&[_, _, r]) => {
+                        return Err(fail(
+                            line_no,
+                            col,
+                            format!("obstacle radius must be > 0 (got {r})"),
+                        ))
+                    }
+                    _ => {
+                        return Err(fail(
+                            line_no,
+                            col,
+                            format!("obstacle `{item}` is not `x:y:r` with finite numbers"),
+                        ))
+                    }
+                }
+                col += item.chars().count() + 1;
+            }
+        }
+        out.push(Scenario {
+            name: name.to_string(),
+            start: State::new(v[0], v[1], v[2], v[3], v[4], v[5]),
+            goal: Goal::new(v[6], v[7], v[8]),
+            obstacles,
+        });
+    }
+    Ok(out)
+}
+
+/// Writes scenarios in the file format (round-trips through [`parse`]).
+pub fn to_csv(scenarios: &[Scenario]) -> String {
+    let mut s = String::from(HEADER);
+    s.push('\n');
+    for sc in scenarios {
+        let x = &sc.start;
+        let obs: Vec<String> = sc
+            .obstacles
+            .iter()
+            .map(|o| format!("{}:{}:{}", o.x, o.y, o.r))
+            .collect();
+        s.push_str(&format!(
+            "{},{},{},{},{},{},{},{},{},{},{}\n",
+            sc.name,
+            x[0],
+            x[1],
+            x[2],
+            x[3],
+            x[4],
+            x[5],
+            sc.goal.x,
+            sc.goal.y,
+            sc.goal.theta,
+            obs.join(";")
+        ));
+    }
+    s
+}
+
+/// The paper's 128 scenarios (DESIGN §7): start at rest at the origin, heading
+/// 0; goals at 4.5 m and 9 m × 8 bearings × 8 headings, 45° apart.
+pub fn paper_scenarios() -> Vec<Scenario> {
+    let mut out = Vec::with_capacity(128);
+    for r in [4.5, 9.0] {
+        for b in 0..8 {
+            for h in 0..8 {
+                let bearing = (b as f64 * 45.0).to_radians();
+                let heading = crate::model::wrap_angle((h as f64 * 45.0).to_radians());
+                out.push(Scenario {
+                    name: format!("r{r}_b{}_h{}", b * 45, h * 45),
+                    start: State::zeros(),
+                    goal: Goal::new(r * bearing.cos(), r * bearing.sin(), heading),
+                    obstacles: Vec::new(),
+                });
+            }
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn paper_set_round_trips() {
+        let set = paper_scenarios();
+        assert_eq!(set.len(), 128);
+        let back = parse(&to_csv(&set), "paper.csv").unwrap();
+        assert_eq!(back, set);
+        assert!(set
+            .iter()
+            .all(|s| (s.goal.x.hypot(s.goal.y) - 4.5).abs() < 1e-12
+                || (s.goal.x.hypot(s.goal.y) - 9.0).abs() < 1e-12));
+    }
+
+    #[test]
+    fn obstacles_parse() {
+        let text = format!("{HEADER}\nc,0,0,0,0,0,0,9,0,0,3:0.2:1;6:-1:0.8\n");
+        let s = parse(&text, "f.csv").unwrap();
+        assert_eq!(
+            s[0].obstacles,
+            vec![
+                Obstacle {
+                    x: 3.0,
+                    y: 0.2,
+                    r: 1.0
+                },
+                Obstacle {
+                    x: 6.0,
+                    y: -1.0,
+                    r: 0.8
+                }
+            ]
+        );
+    }
+
+    #[test]
+    fn malformed_cases_name_their_position() {
+        let cases = [
+            ("", 1, 1, "empty file"),
+            ("name,x0\n", 1, 1, "bad header"),
+            (
+                &format!("{HEADER}\na,0,0,0,0,0,0,1,1\n"),
+                2,
+                1,
+                "expected 11 fields",
+            ),
+            (
+                &format!("{HEADER}\na,0,zero,0,0,0,0,1,1,0,\n"),
+                2,
+                5,
+                "`y0`: `zero`",
+            ),
+            (
+                &format!("{HEADER}\na,0,0,0,0,0,0,1,NaN,0,\n"),
+                2,
+                17,
+                "`y_goal`",
+            ),
+            (
+                &format!("{HEADER}\na,0,0,0,0,0,0,1,1,0,1:2:3;4:5\n"),
+                2,
+                27,
+                "obstacle `4:5`",
+            ),
+            (
+                &format!("{HEADER}\na,0,0,0,0,0,0,1,1,0,1:2:-3\n"),
+                2,
+                21,
+                "radius must be > 0",
+            ),
+            (
+                &format!("{HEADER}\n,0,0,0,0,0,0,1,1,0,\n"),
+                2,
+                1,
+                "empty scenario name",
+            ),
+        ];
+        for (text, line, column, needle) in cases {
+            let e = parse(text, "bad.csv").unwrap_err();
+            assert_eq!((e.line, e.column), (line, column), "{e}");
+            assert!(
+                e.to_string()
+                    .starts_with(&format!("bad.csv:{line}:{column}: ")),
+                "{e}"
+            );
+            assert!(e.message.contains(needle), "{e}");
+        }
+    }
+}

@@ -1,0 +1,429 @@
+//! ALAC (paper §IV-D, eq. 13–16; DESIGN §4): critic, Polyak target, tanh-Gaussian
+//! actor, entropy and Lyapunov multipliers, and their Adam states.
+
+use std::collections::HashMap;
+
+use candle_core::{backprop::GradStore, DType, Device, Result, Tensor, Var};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, StandardNormal};
+
+use control::encoder::{ACTOR_INPUTS, CRITIC_INPUTS};
+use control::mlp::{Layer, Mlp as ControlMlp};
+use control::weights::{NetworkMetadata, NetworkRole, ACTOR_OUTPUTS};
+
+use crate::buffer::Batch;
+use crate::config::TrainConfig;
+use crate::nets::{
+    actor_mean_action, actor_sample, critic_value, f32_tensor, gradient_penalty, Mlp,
+};
+
+/// Adam on a set of variables, with its moments kept as tensors so they can be
+/// checkpointed (candle's own optimiser hides them).
+pub struct Adam {
+    pub vars: Vec<Var>,
+    pub m: Vec<Var>,
+    pub v: Vec<Var>,
+    pub t: u64,
+    pub lr: f64,
+}
+
+const BETA1: f64 = 0.9;
+const BETA2: f64 = 0.999;
+const ADAM_EPS: f64 = 1e-8;
+
+impl Adam {
+    pub fn new(vars: Vec<Var>, lr: f64) -> Result<Self> {
+        let zeros = |v: &Var| Var::zeros(v.shape(), DType::F32, v.device());
+        let m = vars.iter().map(zeros).collect::<Result<_>>()?;
+        let v = vars.iter().map(zeros).collect::<Result<_>>()?;
+        Ok(Self {
+            vars,
+            m,
+            v,
+            t: 0,
+            lr,
+        })
+    }
+
+    pub fn step(&mut self, grads: &GradStore) -> Result<()> {
+        self.t += 1;
+        let c1 = 1.0 - BETA1.powi(self.t as i32);
+        let c2 = 1.0 - BETA2.powi(self.t as i32);
+        for ((var, m), v) in self.vars.iter().zip(&self.m).zip(&self.v) {
+            let Some(g) = grads.get(var.as_tensor()) else {
+                continue;
+            };
+            let m_new = ((m.as_tensor() * BETA1)? + (g * (1.0 - BETA1))?)?;
+            let v_new = ((v.as_tensor() * BETA2)? + (g.sqr()? * (1.0 - BETA2))?)?;
+            let denom = ((&v_new / c2)?.sqrt()? + ADAM_EPS)?;
+            let update = ((&m_new / c1)?.div(&denom)? * self.lr)?;
+            var.set(&(var.as_tensor() - update)?)?;
+            m.set(&m_new)?;
+            v.set(&v_new)?;
+        }
+        Ok(())
+    }
+}
+
+/// Adam for one scalar (the log-multipliers), by gradient ascent.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct ScalarAdam {
+    pub m: f64,
+    pub v: f64,
+    pub t: u64,
+}
+
+impl ScalarAdam {
+    fn ascend(&mut self, value: &mut f64, grad: f64, lr: f64) {
+        self.t += 1;
+        self.m = BETA1 * self.m + (1.0 - BETA1) * grad;
+        self.v = BETA2 * self.v + (1.0 - BETA2) * grad * grad;
+        let mh = self.m / (1.0 - BETA1.powi(self.t as i32));
+        let vh = self.v / (1.0 - BETA2.powi(self.t as i32));
+        *value += lr * mh / (vh.sqrt() + ADAM_EPS);
+    }
+}
+
+/// Figures from one update, for logs.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct UpdateStats {
+    pub critic_loss: f64,
+    pub penalty: f64,
+    pub actor_loss: f64,
+    pub lambda_l: f64,
+    pub lambda_e: f64,
+    pub entropy: f64,
+    pub delta_l: f64,
+    pub mean_l: f64,
+}
+
+pub struct Agent {
+    pub cfg: TrainConfig,
+    pub device: Device,
+    pub critic: Mlp,
+    pub critic_target: Mlp,
+    pub actor: Mlp,
+    pub critic_opt: Adam,
+    pub actor_opt: Adam,
+    pub log_lambda_e: f64,
+    pub log_lambda_l: f64,
+    pub lambda_e_opt: ScalarAdam,
+    pub lambda_l_opt: ScalarAdam,
+    pub updates: u64,
+    pub env_steps: u64,
+    pub rng: ChaCha8Rng,
+}
+
+/// Smallest log λ_l: λ_l lives in (0, 1].
+const LOG_LAMBDA_MIN: f64 = -9.2;
+
+impl Agent {
+    pub fn new(cfg: &TrainConfig) -> Result<Self> {
+        let device = Device::Cpu;
+        let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
+        let sizes = |input: usize, output: usize| {
+            let mut s = vec![input];
+            s.extend(&cfg.hidden);
+            s.push(output);
+            s
+        };
+        let critic = Mlp::new(&sizes(CRITIC_INPUTS, cfg.critic_outputs), &mut rng, &device)?;
+        let critic_target = Mlp::new(&sizes(CRITIC_INPUTS, cfg.critic_outputs), &mut rng, &device)?;
+        critic_target.copy_from(&critic)?;
+        let actor = Mlp::new(&sizes(ACTOR_INPUTS, ACTOR_OUTPUTS), &mut rng, &device)?;
+        Ok(Self {
+            critic_opt: Adam::new(critic.vars(), cfg.critic_lr)?,
+            actor_opt: Adam::new(actor.vars(), cfg.actor_lr)?,
+            cfg: cfg.clone(),
+            device,
+            critic,
+            critic_target,
+            actor,
+            log_lambda_e: cfg.init_lambda_e.ln(),
+            log_lambda_l: cfg.init_lambda_l.ln(),
+            lambda_e_opt: ScalarAdam::default(),
+            lambda_l_opt: ScalarAdam::default(),
+            updates: 0,
+            env_steps: 0,
+            rng,
+        })
+    }
+
+    pub fn lambda_e(&self) -> f64 {
+        self.log_lambda_e.exp()
+    }
+
+    pub fn lambda_l(&self) -> f64 {
+        self.log_lambda_l.exp()
+    }
+
+    fn normal(&mut self, rows: usize) -> Result<Tensor> {
+        let v: Vec<f32> = (0..rows * 2)
+            .map(|_| StandardNormal.sample(&mut self.rng))
+            .collect();
+        f32_tensor(&v, rows, 2, &self.device)
+    }
+
+    /// Sampled (exploring) actions for a set of states' actor features.
+    pub fn act(&mut self, features: &[f32], rows: usize) -> Result<Vec<[f64; 2]>> {
+        let eps = self.normal(rows)?;
+        let s = f32_tensor(features, rows, ACTOR_INPUTS, &self.device)?;
+        let a = actor_sample(&self.actor, &s, &eps)?
+            .action
+            .to_vec2::<f32>()?;
+        Ok(a.into_iter().map(|r| [r[0] as f64, r[1] as f64]).collect())
+    }
+
+    /// Deterministic actions tanh(μ).
+    pub fn act_mean(&self, features: &[f32], rows: usize) -> Result<Vec<[f64; 2]>> {
+        let s = f32_tensor(features, rows, ACTOR_INPUTS, &self.device)?;
+        let a = actor_mean_action(&self.actor, &s)?.to_vec2::<f32>()?;
+        Ok(a.into_iter().map(|r| [r[0] as f64, r[1] as f64]).collect())
+    }
+
+    /// The critic loss of paper eq. 13–16 on a batch: ½(L − target)² + ρ·GP.
+    /// Returns the loss, the penalty, and L(s, a) (detached, reused by the actor step).
+    pub fn critic_loss(&mut self, batch: &Batch) -> Result<(Tensor, f64, Tensor)> {
+        let n = batch.len;
+        let s = f32_tensor(&batch.state, n, ACTOR_INPUTS, &self.device)?;
+        let a = f32_tensor(&batch.action, n, 2, &self.device)?;
+        let s2 = f32_tensor(&batch.next_state, n, ACTOR_INPUTS, &self.device)?;
+        let c = Tensor::from_slice(&batch.cost, n, &self.device)?;
+        let eps = self.normal(n)?;
+        // Target: c + γ L̄(s′, a′ ∼ π(s′)); the time limit is a truncation, never terminal.
+        let a2 = actor_sample(&self.actor, &s2, &eps)?.action.detach();
+        let (l_next, _) = critic_value(&self.critic_target, &Tensor::cat(&[&s2, &a2], 1)?)?;
+        let target = (c + (l_next * self.cfg.gamma)?)?.detach();
+        let (l, fwd) = critic_value(&self.critic, &Tensor::cat(&[&s, &a], 1)?)?;
+        let mse = ((&l - &target)?.sqr()?.mean_all()? * 0.5)?;
+        if self.cfg.gradient_penalty > 0.0 {
+            let gp = gradient_penalty(&self.critic, &fwd)?;
+            let gp_value = gp.to_scalar::<f32>()? as f64;
+            Ok((
+                (mse + (gp * self.cfg.gradient_penalty)?)?,
+                gp_value,
+                l.detach(),
+            ))
+        } else {
+            Ok((mse, 0.0, l.detach()))
+        }
+    }
+
+    /// One ALAC update: critic, actor, multipliers, Polyak target.
+    pub fn update(&mut self, batch: &Batch) -> Result<UpdateStats> {
+        let n = batch.len;
+        let (critic_loss, penalty, l_sa) = self.critic_loss(batch)?;
+        let grads = critic_loss.backward()?;
+        self.critic_opt.step(&grads)?;
+
+        // Actor: λ_e (log π(s) + H) + λ_l ΔL with
+        // ΔL = L(s′, π(s′)) − L(s, a) + k (L(s, a) − λ L(s′, π(s′))), k = 1 − λ_l, λ = min(λ_l, γ).
+        // L(s, a) is the value from the critic step (it does not depend on the actor);
+        // s and s′ go through the actor as one batch.
+        let (lambda_e, lambda_l) = (self.lambda_e(), self.lambda_l());
+        let k = 1.0 - lambda_l;
+        let lam = lambda_l.min(self.cfg.gamma);
+        let both: Vec<f32> = batch
+            .state
+            .iter()
+            .chain(&batch.next_state)
+            .copied()
+            .collect();
+        let both = f32_tensor(&both, 2 * n, ACTOR_INPUTS, &self.device)?;
+        let eps = self.normal(2 * n)?;
+        let pi = actor_sample(&self.actor, &both, &eps)?;
+        let log_prob_s = pi.log_prob.narrow(0, 0, n)?;
+        let a_s2 = pi.action.narrow(0, n, n)?;
+        let s2 = both.narrow(0, n, n)?;
+        let (l_s2, _) = critic_value(&self.critic, &Tensor::cat(&[&s2, &a_s2], 1)?)?;
+        let delta_l = ((&l_s2 - &l_sa)? + ((&l_sa - (&l_s2 * lam)?)? * k)?)?;
+        let entropy_term = log_prob_s.affine(1.0, self.cfg.target_entropy)?;
+        let actor_loss =
+            ((entropy_term.mean_all()? * lambda_e)? + (delta_l.mean_all()? * lambda_l)?)?;
+        let grads = actor_loss.backward()?;
+        self.actor_opt.step(&grads)?;
+
+        // Multipliers by gradient ascent on J(λ) in log space.
+        let mean_entropy_term = entropy_term.mean_all()?.to_scalar::<f32>()? as f64;
+        let mean_delta = delta_l.mean_all()?.to_scalar::<f32>()? as f64;
+        let lr = self.cfg.multiplier_lr;
+        self.lambda_e_opt
+            .ascend(&mut self.log_lambda_e, mean_entropy_term, lr);
+        self.lambda_l_opt
+            .ascend(&mut self.log_lambda_l, mean_delta, lr);
+        self.log_lambda_l = self.log_lambda_l.clamp(LOG_LAMBDA_MIN, 0.0);
+        self.log_lambda_e = self.log_lambda_e.clamp(-20.0, 5.0);
+
+        self.critic_target.polyak_from(&self.critic, self.cfg.tau)?;
+        self.updates += 1;
+        Ok(UpdateStats {
+            critic_loss: critic_loss.to_scalar::<f32>()? as f64,
+            penalty,
+            actor_loss: actor_loss.to_scalar::<f32>()? as f64,
+            lambda_l: self.lambda_l(),
+            lambda_e: self.lambda_e(),
+            entropy: -(mean_entropy_term - self.cfg.target_entropy),
+            delta_l: mean_delta,
+            mean_l: l_sa.mean_all()?.to_scalar::<f32>()? as f64,
+        })
+    }
+
+    /// Converts a candle network to the deployed f64 form.
+    pub fn to_control_mlp(net: &Mlp) -> Result<ControlMlp> {
+        let layers = net
+            .layers
+            .iter()
+            .map(|(w, b)| {
+                let (n_out, n_in) = w.as_tensor().dims2()?;
+                let weight = w
+                    .as_tensor()
+                    .flatten_all()?
+                    .to_dtype(DType::F64)?
+                    .to_vec1::<f64>()?;
+                let bias = b.as_tensor().to_dtype(DType::F64)?.to_vec1::<f64>()?;
+                Ok(Layer {
+                    n_in,
+                    n_out,
+                    weight,
+                    bias,
+                })
+            })
+            .collect::<Result<Vec<_>>>()?;
+        ControlMlp::new(layers).map_err(|e| candle_core::Error::Msg(e.to_string()))
+    }
+
+    /// Metadata for an exported network (DESIGN §4).
+    pub fn metadata(&self, role: NetworkRole, git_commit: &str) -> NetworkMetadata {
+        let output = match role {
+            NetworkRole::Critic => self.cfg.critic_outputs,
+            NetworkRole::Actor => ACTOR_OUTPUTS,
+        };
+        let mut meta = NetworkMetadata::new(role, output);
+        meta.pos_scale = self.cfg.pos_scale;
+        meta.machine = self.cfg.machine;
+        meta.dt = self.cfg.dt;
+        meta.cost = self.cfg.cost;
+        meta.gamma = self.cfg.gamma;
+        meta.steps = self.updates;
+        meta.lambda_l = self.lambda_l();
+        meta.git_commit = git_commit.to_string();
+        meta
+    }
+
+    /// All state worth resuming from: networks, Adam moments, multipliers,
+    /// counters (not the replay buffer).
+    pub fn checkpoint_tensors(&self) -> (Vec<(String, Tensor)>, HashMap<String, String>) {
+        let mut tensors = Vec::new();
+        for (prefix, net) in [
+            ("critic", &self.critic),
+            ("critic_target", &self.critic_target),
+            ("actor", &self.actor),
+        ] {
+            for (name, t) in net.named() {
+                tensors.push((format!("{prefix}.{name}"), t));
+            }
+        }
+        for (prefix, opt) in [
+            ("critic_adam", &self.critic_opt),
+            ("actor_adam", &self.actor_opt),
+        ] {
+            for (i, (m, v)) in opt.m.iter().zip(&opt.v).enumerate() {
+                tensors.push((format!("{prefix}.m.{i}"), m.as_tensor().clone()));
+                tensors.push((format!("{prefix}.v.{i}"), v.as_tensor().clone()));
+            }
+        }
+        let mut meta = HashMap::new();
+        meta.insert("updates".into(), self.updates.to_string());
+        meta.insert("env_steps".into(), self.env_steps.to_string());
+        meta.insert("critic_adam.t".into(), self.critic_opt.t.to_string());
+        meta.insert("actor_adam.t".into(), self.actor_opt.t.to_string());
+        meta.insert("log_lambda_e".into(), self.log_lambda_e.to_string());
+        meta.insert("log_lambda_l".into(), self.log_lambda_l.to_string());
+        for (name, s) in [
+            ("lambda_e_adam", self.lambda_e_opt),
+            ("lambda_l_adam", self.lambda_l_opt),
+        ] {
+            meta.insert(format!("{name}"), format!("{},{},{}", s.m, s.v, s.t));
+        }
+        (tensors, meta)
+    }
+
+    /// Restores what [`Agent::checkpoint_tensors`] saved.
+    pub fn restore(
+        &mut self,
+        tensors: &HashMap<String, Tensor>,
+        meta: &HashMap<String, String>,
+    ) -> anyhow::Result<()> {
+        use anyhow::Context;
+        let get = |name: &str| {
+            tensors
+                .get(name)
+                .with_context(|| format!("checkpoint has no tensor `{name}`"))
+        };
+        for (prefix, net) in [
+            ("critic", &self.critic),
+            ("critic_target", &self.critic_target),
+            ("actor", &self.actor),
+        ] {
+            for (i, (w, b)) in net.layers.iter().enumerate() {
+                for (var, kind) in [(w, "weight"), (b, "bias")] {
+                    let name = format!("{prefix}.layers.{i}.{kind}");
+                    let t = get(&name)?;
+                    anyhow::ensure!(
+                        t.shape() == var.shape(),
+                        "checkpoint tensor `{name}` has shape {:?}, expected {:?}",
+                        t.shape(),
+                        var.shape()
+                    );
+                    var.set(t)?;
+                }
+            }
+        }
+        for (prefix, opt) in [
+            ("critic_adam", &mut self.critic_opt),
+            ("actor_adam", &mut self.actor_opt),
+        ] {
+            for (i, (m, v)) in opt.m.iter().zip(&opt.v).enumerate() {
+                m.set(get(&format!("{prefix}.m.{i}"))?)?;
+                v.set(get(&format!("{prefix}.v.{i}"))?)?;
+            }
+            opt.t = parse_key(meta, &format!("{prefix}.t"))?;
+        }
+        self.updates = parse_key(meta, "updates")?;
+        self.env_steps = parse_key(meta, "env_steps")?;
+        self.log_lambda_e = parse_key(meta, "log_lambda_e")?;
+        self.log_lambda_l = parse_key(meta, "log_lambda_l")?;
+        for (name, dst) in [
+            ("lambda_e_adam", &mut self.lambda_e_opt),
+            ("lambda_l_adam", &mut self.lambda_l_opt),
+        ] {
+            let text = meta
+                .get(name)
+                .with_context(|| format!("checkpoint metadata has no `{name}`"))?;
+            let parts: Vec<&str> = text.split(',').collect();
+            anyhow::ensure!(
+                parts.len() == 3,
+                "checkpoint metadata `{name}` = `{text}` is not m,v,t"
+            );
+            *dst = ScalarAdam {
+                m: parts[0].parse().with_context(|| format!("`{name}`"))?,
+                v: parts[1].parse().with_context(|| format!("`{name}`"))?,
+                t: parts[2].parse().with_context(|| format!("`{name}`"))?,
+            };
+        }
+        // A resumed run draws new random numbers from its step count.
+        self.rng = ChaCha8Rng::seed_from_u64(
+            self.cfg.seed ^ self.updates.wrapping_mul(0x9E37_79B9_7F4A_7C15),
+        );
+        Ok(())
+    }
+}
+
+fn parse_key<T: std::str::FromStr>(meta: &HashMap<String, String>, key: &str) -> anyhow::Result<T> {
+    let text = meta
+        .get(key)
+        .ok_or_else(|| anyhow::anyhow!("checkpoint metadata has no `{key}`"))?;
+    text.parse()
+        .map_err(|_| anyhow::anyhow!("checkpoint metadata `{key}` = `{text}` is not valid"))
+}

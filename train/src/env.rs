@@ -1,0 +1,155 @@
+//! The goal-conditioned training environment (DESIGN §4), vectorised: many
+//! machines stepped together with `control`'s own transition and cost.
+
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
+
+use control::model::{env_step, ix, Control, Goal, State};
+
+use crate::config::TrainConfig;
+
+/// One stored transition: s, a (scaled to [−1, 1]), s′, g, and where it lies in
+/// its episode (for hindsight relabelling).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Transition {
+    pub x: State,
+    /// Action divided by its bounds, in [−1, 1]².
+    pub a: [f64; 2],
+    pub next: State,
+    pub goal: Goal,
+}
+
+/// Cost of reaching `next` with scaled action `a` (the cost is charged on the
+/// state the action leads to, so L(s, a) sees the action's effect at once).
+pub fn transition_cost(cfg: &TrainConfig, next: &State, a: &[f64; 2], g: &Goal) -> f64 {
+    cfg.cost.stage_cost(next, g) + cfg.action_cost * (a[0] * a[0] + a[1] * a[1])
+}
+
+/// A goal at distance r ∈ [r_min, r_max] (or the near band), uniform bearing and heading.
+pub fn sample_goal(cfg: &TrainConfig, rng: &mut ChaCha8Rng) -> Goal {
+    let g = &cfg.goal;
+    let (lo, hi) = if rng.gen::<f64>() < g.near_fraction {
+        (g.near_r_min, g.r_min)
+    } else {
+        (g.r_min, g.r_max)
+    };
+    let r = rng.gen_range(lo..=hi);
+    let bearing = rng.gen_range(-std::f64::consts::PI..std::f64::consts::PI);
+    let heading = rng.gen_range(-std::f64::consts::PI..std::f64::consts::PI);
+    Goal::new(r * bearing.cos(), r * bearing.sin(), heading)
+}
+
+/// Start at rest at the origin, heading 0, with a little β and v_f jitter.
+pub fn sample_start(cfg: &TrainConfig, rng: &mut ChaCha8Rng) -> State {
+    let j = cfg.goal.start_jitter;
+    let m = &cfg.machine;
+    let mut x = State::zeros();
+    if j > 0.0 {
+        x[ix::BETA] = rng.gen_range(-j..=j) * m.beta_max;
+        x[ix::V] = rng.gen_range(-j..=j) * m.v_max;
+    }
+    x
+}
+
+/// Parallel environments. Each keeps its running episode until it ends, then
+/// hands it over whole, so relabelling can look at the episode's future.
+pub struct VecEnv {
+    pub states: Vec<State>,
+    pub goals: Vec<Goal>,
+    steps: Vec<usize>,
+    episodes: Vec<Vec<Transition>>,
+}
+
+impl VecEnv {
+    pub fn new(cfg: &TrainConfig, rng: &mut ChaCha8Rng) -> Self {
+        let n = cfg.n_envs;
+        let mut env = Self {
+            states: vec![State::zeros(); n],
+            goals: vec![Goal::default(); n],
+            steps: vec![0; n],
+            episodes: (0..n)
+                .map(|_| Vec::with_capacity(cfg.episode_steps()))
+                .collect(),
+        };
+        for i in 0..n {
+            env.reset(cfg, i, rng);
+        }
+        env
+    }
+
+    fn reset(&mut self, cfg: &TrainConfig, i: usize, rng: &mut ChaCha8Rng) {
+        self.states[i] = sample_start(cfg, rng);
+        self.goals[i] = sample_goal(cfg, rng);
+        self.steps[i] = 0;
+        self.episodes[i].clear();
+    }
+
+    /// Steps every environment with its scaled action; calls `finished` with
+    /// each episode that ended (30 s time limit: a truncation, not a terminal).
+    pub fn step(
+        &mut self,
+        cfg: &TrainConfig,
+        actions: &[[f64; 2]],
+        rng: &mut ChaCha8Rng,
+        mut finished: impl FnMut(&[Transition]),
+    ) {
+        let m = &cfg.machine;
+        for i in 0..self.states.len() {
+            let a = [
+                actions[i][0].clamp(-1.0, 1.0),
+                actions[i][1].clamp(-1.0, 1.0),
+            ];
+            let u = Control::new(a[0] * m.beta_ddot_max, a[1] * m.a_max);
+            let next = env_step(m, &self.states[i], &u, cfg.dt);
+            self.episodes[i].push(Transition {
+                x: self.states[i],
+                a,
+                next,
+                goal: self.goals[i],
+            });
+            self.states[i] = next;
+            self.steps[i] += 1;
+            if self.steps[i] >= cfg.episode_steps() {
+                finished(&self.episodes[i]);
+                self.reset(cfg, i, rng);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+
+    #[test]
+    fn goals_lie_in_their_band_and_episodes_have_full_length() {
+        let cfg = TrainConfig {
+            n_envs: 3,
+            episode_seconds: 2.0,
+            ..Default::default()
+        };
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        for _ in 0..1000 {
+            let g = sample_goal(&cfg, &mut rng);
+            let r = g.x.hypot(g.y);
+            assert!(r >= cfg.goal.near_r_min - 1e-12 && r <= cfg.goal.r_max + 1e-12);
+        }
+        let mut env = VecEnv::new(&cfg, &mut rng);
+        let mut ended = Vec::new();
+        for _ in 0..25 {
+            env.step(&cfg, &[[1.0, 1.0]; 3], &mut rng, |ep| {
+                ended.push(ep.to_vec())
+            });
+        }
+        assert_eq!(ended.len(), 6);
+        for ep in &ended {
+            assert_eq!(ep.len(), 10);
+            for w in ep.windows(2) {
+                assert_eq!(w[0].next, w[1].x, "episode is contiguous");
+                assert_eq!(w[0].goal, w[1].goal);
+            }
+            assert!(ep.iter().all(|t| t.next[ix::V] <= cfg.machine.v_max));
+        }
+    }
+}

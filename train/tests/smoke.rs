@@ -1,0 +1,82 @@
+//! A short training run lowers the critic loss, writes a checkpoint and
+//! weights that load, and `--resume` continues from the same step count.
+
+use train::config::TrainConfig;
+use train::run::{train, RunOptions, CHECKPOINT};
+
+fn small() -> TrainConfig {
+    TrainConfig {
+        n_envs: 16,
+        batch_size: 64,
+        buffer_size: 50_000,
+        warmup_transitions: 2_000,
+        total_updates: 400,
+        hidden: vec![32, 32],
+        critic_outputs: 4,
+        eval_every: 200,
+        eval_goals: 4,
+        log_every: 50,
+        ..Default::default()
+    }
+}
+
+#[test]
+fn smoke_run_learns_checkpoints_and_resumes() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("run");
+    let cfg = small();
+    let opts = RunOptions {
+        out_dir: out.clone(),
+        resume: false,
+        max_updates: Some(300),
+        git_commit: "test".into(),
+        quiet: true,
+    };
+    let first = train(&cfg, &opts).unwrap();
+    assert_eq!(first.updates, 300);
+    assert!(
+        first.last_critic_loss < 0.5 * first.first_critic_loss,
+        "critic loss did not fall: {} -> {}",
+        first.first_critic_loss,
+        first.last_critic_loss
+    );
+    assert!(out.join(CHECKPOINT).exists());
+    for name in ["critic.safetensors", "actor.safetensors"] {
+        let bytes = std::fs::read(out.join(name)).unwrap();
+        let w = control::weights::decode(&bytes, name).unwrap();
+        assert_eq!(w.meta.steps, 300);
+        assert_eq!(w.meta.git_commit, "test");
+    }
+    let log = std::fs::read_to_string(out.join("log.csv")).unwrap();
+    assert_eq!(log.lines().count(), 1 + 300 / 50);
+    assert!(out.join("learning_curves.svg").exists());
+
+    // A second start without --resume refuses to overwrite the run.
+    assert!(train(&cfg, &opts)
+        .unwrap_err()
+        .to_string()
+        .contains("--resume"));
+
+    // Resume: same step count, then on to the end.
+    let resumed = train(
+        &cfg,
+        &RunOptions {
+            resume: true,
+            max_updates: None,
+            ..opts.clone()
+        },
+    )
+    .unwrap();
+    assert_eq!(resumed.updates, 400);
+    let log = std::fs::read_to_string(out.join("log.csv")).unwrap();
+    let steps: Vec<u64> = log
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').next().unwrap().parse().unwrap())
+        .collect();
+    assert_eq!(
+        steps,
+        (1..=8).map(|k| k * 50).collect::<Vec<_>>(),
+        "resume continued from update 300"
+    );
+}
