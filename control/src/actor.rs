@@ -22,7 +22,10 @@ pub struct ActorWorkspace {
 
 impl ActorWorkspace {
     pub fn new(actor: &Actor) -> Self {
-        Self { mlp: MlpWorkspace::new(&actor.mlp), features: [0.0; ACTOR_INPUTS] }
+        Self {
+            mlp: MlpWorkspace::new(&actor.mlp),
+            features: [0.0; ACTOR_INPUTS],
+        }
     }
 }
 
@@ -31,11 +34,18 @@ impl Actor {
         if w.meta.role != NetworkRole::Actor {
             return Err(WeightsError::new(
                 &w.source,
-                WeightsProblem::WrongRole { expected: NetworkRole::Actor, found: w.meta.role },
+                WeightsProblem::WrongRole {
+                    expected: NetworkRole::Actor,
+                    found: w.meta.role,
+                },
             ));
         }
         let encoder = w.meta.encoder();
-        Ok(Self { mlp: w.mlp, encoder, meta: w.meta })
+        Ok(Self {
+            mlp: w.mlp,
+            encoder,
+            meta: w.meta,
+        })
     }
 
     pub fn metadata(&self) -> &NetworkMetadata {

@@ -39,7 +39,11 @@ pub struct Derivatives {
 
 impl Default for Derivatives {
     fn default() -> Self {
-        Self { value: 0.0, grad: [0.0; NZ], hess: [[0.0; NZ]; NZ] }
+        Self {
+            value: 0.0,
+            grad: [0.0; NZ],
+            hess: [[0.0; NZ]; NZ],
+        }
     }
 }
 
@@ -108,11 +112,18 @@ impl Critic {
         if w.meta.role != NetworkRole::Critic {
             return Err(WeightsError::new(
                 &w.source,
-                WeightsProblem::WrongRole { expected: NetworkRole::Critic, found: w.meta.role },
+                WeightsProblem::WrongRole {
+                    expected: NetworkRole::Critic,
+                    found: w.meta.role,
+                },
             ));
         }
         let encoder = w.meta.encoder();
-        Ok(Self { mlp: w.mlp, encoder, meta: w.meta })
+        Ok(Self {
+            mlp: w.mlp,
+            encoder,
+            meta: w.meta,
+        })
     }
 
     pub fn metadata(&self) -> &NetworkMetadata {
@@ -145,8 +156,11 @@ impl Critic {
         let n_hidden = hidden.len();
         // Adjoint of the last hidden layer (or of the features with no hidden layer).
         {
-            let target: &mut [f64] =
-                if n_hidden == 0 { &mut ws.feature_grad } else { &mut ws.adjoint[n_hidden - 1] };
+            let target: &mut [f64] = if n_hidden == 0 {
+                &mut ws.feature_grad
+            } else {
+                &mut ws.adjoint[n_hidden - 1]
+            };
             target.fill(0.0);
             for i in 0..out.n_out {
                 axpy(2.0 * ws.mlp.out[i], out.row(i), target);
@@ -156,7 +170,11 @@ impl Critic {
             let layer = &hidden[l];
             let (below, here) = ws.adjoint.split_at_mut(l);
             let adj = &here[0];
-            let target: &mut [f64] = if l == 0 { &mut ws.feature_grad } else { &mut below[l - 1] };
+            let target: &mut [f64] = if l == 0 {
+                &mut ws.feature_grad
+            } else {
+                &mut below[l - 1]
+            };
             target.fill(0.0);
             let d1 = &ws.mlp.d1[l];
             for i in 0..layer.n_out {
@@ -258,7 +276,8 @@ impl Critic {
                 add_outer(&mut out.hess, adj[j] * d2[j], row);
             }
         }
-        self.encoder.add_curvature(&ws.feature_grad, &ws.features, &mut out.hess);
+        self.encoder
+            .add_curvature(&ws.feature_grad, &ws.features, &mut out.hess);
     }
 
     /// The terminal cost L(x, 0, g) (paper eq. 19) with gradient and Hessian in x.

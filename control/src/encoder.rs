@@ -81,7 +81,12 @@ impl Encoder {
     }
 
     /// Adds Σₖ (∂L/∂fₖ) ∂²fₖ/∂z² to `hess`, given the feature gradient and features.
-    pub fn add_curvature(&self, feature_grad: &[f64], features: &[f64], hess: &mut [[f64; NZ]; NZ]) {
+    pub fn add_curvature(
+        &self,
+        feature_grad: &[f64],
+        features: &[f64],
+        hess: &mut [[f64; NZ]; NZ],
+    ) {
         hess[ix::THETA][ix::THETA] -= feature_grad[2] * features[2] + feature_grad[3] * features[3];
     }
 }
@@ -120,7 +125,11 @@ mod tests {
             enc.encode(&xm, &um, &g, &mut fm);
             for k in 0..CRITIC_INPUTS {
                 let fd = (fp[k] - fm[k]) / (2.0 * h);
-                assert!((fd - jac[k][j]).abs() < 1e-8, "∂f{k}/∂z{j}: {fd} vs {}", jac[k][j]);
+                assert!(
+                    (fd - jac[k][j]).abs() < 1e-8,
+                    "∂f{k}/∂z{j}: {fd} vs {}",
+                    jac[k][j]
+                );
             }
         }
     }

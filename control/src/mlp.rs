@@ -75,11 +75,25 @@ pub enum MlpError {
     #[error("network has no layers")]
     Empty,
     #[error("layer {layer}: weight has {got} values, expected {n_out}×{n_in}")]
-    WeightSize { layer: usize, n_out: usize, n_in: usize, got: usize },
+    WeightSize {
+        layer: usize,
+        n_out: usize,
+        n_in: usize,
+        got: usize,
+    },
     #[error("layer {layer}: bias has {got} values, expected {expected}")]
-    BiasSize { layer: usize, expected: usize, got: usize },
+    BiasSize {
+        layer: usize,
+        expected: usize,
+        got: usize,
+    },
     #[error("layer {layer} takes {n_in} inputs but layer {prev} gives {prev_out}")]
-    Chain { layer: usize, n_in: usize, prev: usize, prev_out: usize },
+    Chain {
+        layer: usize,
+        n_in: usize,
+        prev: usize,
+        prev_out: usize,
+    },
 }
 
 /// The network: hidden Softplus layers then one linear output layer.
@@ -95,13 +109,27 @@ impl Mlp {
         }
         for (i, l) in layers.iter().enumerate() {
             if l.weight.len() != l.n_out * l.n_in {
-                return Err(MlpError::WeightSize { layer: i, n_out: l.n_out, n_in: l.n_in, got: l.weight.len() });
+                return Err(MlpError::WeightSize {
+                    layer: i,
+                    n_out: l.n_out,
+                    n_in: l.n_in,
+                    got: l.weight.len(),
+                });
             }
             if l.bias.len() != l.n_out {
-                return Err(MlpError::BiasSize { layer: i, expected: l.n_out, got: l.bias.len() });
+                return Err(MlpError::BiasSize {
+                    layer: i,
+                    expected: l.n_out,
+                    got: l.bias.len(),
+                });
             }
             if i > 0 && layers[i - 1].n_out != l.n_in {
-                return Err(MlpError::Chain { layer: i, n_in: l.n_in, prev: i - 1, prev_out: layers[i - 1].n_out });
+                return Err(MlpError::Chain {
+                    layer: i,
+                    n_in: l.n_in,
+                    prev: i - 1,
+                    prev_out: layers[i - 1].n_out,
+                });
             }
         }
         Ok(Self { layers })
@@ -129,7 +157,11 @@ impl Mlp {
     }
 
     pub fn widest(&self) -> usize {
-        self.layers.iter().map(|l| l.n_out.max(l.n_in)).max().unwrap_or(0)
+        self.layers
+            .iter()
+            .map(|l| l.n_out.max(l.n_in))
+            .max()
+            .unwrap_or(0)
     }
 }
 
@@ -215,13 +247,29 @@ mod tests {
 
     #[test]
     fn chain_errors_name_the_layer() {
-        let l = |n_in, n_out| Layer { n_in, n_out, weight: vec![0.0; n_in * n_out], bias: vec![0.0; n_out] };
+        let l = |n_in, n_out| Layer {
+            n_in,
+            n_out,
+            weight: vec![0.0; n_in * n_out],
+            bias: vec![0.0; n_out],
+        };
         assert!(Mlp::new(vec![l(3, 4), l(4, 2)]).is_ok());
         let e = Mlp::new(vec![l(3, 4), l(5, 2)]).unwrap_err();
-        assert_eq!(e, MlpError::Chain { layer: 1, n_in: 5, prev: 0, prev_out: 4 });
+        assert_eq!(
+            e,
+            MlpError::Chain {
+                layer: 1,
+                n_in: 5,
+                prev: 0,
+                prev_out: 4
+            }
+        );
         let mut bad = l(3, 4);
         bad.bias.pop();
-        assert!(matches!(Mlp::new(vec![bad]), Err(MlpError::BiasSize { layer: 0, .. })));
+        assert!(matches!(
+            Mlp::new(vec![bad]),
+            Err(MlpError::BiasSize { layer: 0, .. })
+        ));
         assert_eq!(Mlp::new(vec![]), Err(MlpError::Empty));
     }
 }

@@ -309,10 +309,22 @@ mod tests {
     fn rk4_jacobians_match_central_differences() {
         let p = MachineParams::default();
         let cases = [
-            (State::new(0.0, 0.0, 0.0, 0.0, 0.0, 0.0), Control::new(0.0, 0.0)),
-            (State::new(1.0, -2.0, 0.7, 0.3, -0.2, 0.8), Control::new(0.4, -0.6)),
-            (State::new(-3.0, 4.0, -2.9, -0.6, 0.5, -0.9), Control::new(-0.5, 1.0)),
-            (State::new(5.0, 1.0, 3.1, 0.69, 0.57, 1.0), Control::new(0.57, 0.3)),
+            (
+                State::new(0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
+                Control::new(0.0, 0.0),
+            ),
+            (
+                State::new(1.0, -2.0, 0.7, 0.3, -0.2, 0.8),
+                Control::new(0.4, -0.6),
+            ),
+            (
+                State::new(-3.0, 4.0, -2.9, -0.6, 0.5, -0.9),
+                Control::new(-0.5, 1.0),
+            ),
+            (
+                State::new(5.0, 1.0, 3.1, 0.69, 0.57, 1.0),
+                Control::new(0.57, 0.3),
+            ),
         ];
         for (x, u) in cases {
             for dt in [0.05, 0.2] {
@@ -363,7 +375,10 @@ mod tests {
             let (ox, oy) = (0.0, r);
             for (px, py) in &pts {
                 let d = (px - ox).hypot(py - oy);
-                assert!((d - r.abs()).abs() < 1e-8, "β={beta}: distance {d} vs R {r}");
+                assert!(
+                    (d - r.abs()).abs() < 1e-8,
+                    "β={beta}: distance {d} vs R {r}"
+                );
             }
             // Heading rate sign: CCW for β > 0.
             let omega = x[ix::THETA] / (steps as f64 * dt);

@@ -83,7 +83,12 @@ impl PlantConfig {
     /// The ideal machine: no delay, no lag, no noise; with commands reachable
     /// within one tick it reproduces the MPC's model.
     pub fn ideal() -> Self {
-        Self { delay: 0.0, tau_beta_dot: 0.0, tau_v: 0.0, ..Self::default() }
+        Self {
+            delay: 0.0,
+            tau_beta_dot: 0.0,
+            tau_v: 0.0,
+            ..Self::default()
+        }
     }
 
     pub fn validate(&self) -> Result<(), PlantError> {
@@ -103,7 +108,10 @@ impl PlantConfig {
             }
         }
         if !(self.ramp.is_finite() && self.ramp > 0.0) {
-            return Err(PlantError::Negative { name: "ramp", value: self.ramp });
+            return Err(PlantError::Negative {
+                name: "ramp",
+                value: self.ramp,
+            });
         }
         if !(self.substep > 0.0 && self.substep <= 0.02) {
             return Err(PlantError::BadSubstep(self.substep));
@@ -145,7 +153,11 @@ struct Ramp {
 }
 
 impl Plant {
-    pub fn new(params: MachineParams, config: PlantConfig, initial: State) -> Result<Self, PlantError> {
+    pub fn new(
+        params: MachineParams,
+        config: PlantConfig,
+        initial: State,
+    ) -> Result<Self, PlantError> {
         config.validate()?;
         let mut state = initial;
         clamp_state(&params, &mut state);
@@ -155,7 +167,10 @@ impl Plant {
             state,
             time: 0.0,
             pending: VecDeque::new(),
-            active: VelocityCommand { beta_dot: state[ix::BETA_DOT], v: state[ix::V] },
+            active: VelocityCommand {
+                beta_dot: state[ix::BETA_DOT],
+                v: state[ix::V],
+            },
             ramps: [Ramp::default(); 2],
             rng: ChaCha8Rng::seed_from_u64(config.seed),
         })
@@ -183,7 +198,10 @@ impl Plant {
     /// are saturated at the machine's bounds, as the low-level controller does.
     pub fn command(&mut self, cmd: VelocityCommand) -> Result<(), PlantError> {
         if !(cmd.beta_dot.is_finite() && cmd.v.is_finite()) {
-            return Err(PlantError::NonFiniteCommand { beta_dot: cmd.beta_dot, v: cmd.v });
+            return Err(PlantError::NonFiniteCommand {
+                beta_dot: cmd.beta_dot,
+                v: cmd.v,
+            });
         }
         let p = &self.params;
         let cmd = VelocityCommand {
@@ -233,8 +251,15 @@ impl Plant {
         ];
         for (ramp, (target, now, max)) in self.ramps.iter_mut().zip(channels) {
             let rate = ((target - now) / self.config.ramp).clamp(-max, max);
-            let duration = if rate == 0.0 { 0.0 } else { (target - now) / rate };
-            *ramp = Ramp { rate, until: self.time + duration };
+            let duration = if rate == 0.0 {
+                0.0
+            } else {
+                (target - now) / rate
+            };
+            *ramp = Ramp {
+                rate,
+                until: self.time + duration,
+            };
         }
     }
 
@@ -251,7 +276,13 @@ impl Plant {
             }
         };
         Control::new(
-            track(0, self.active.beta_dot, x[ix::BETA_DOT], self.config.tau_beta_dot, p.beta_ddot_max),
+            track(
+                0,
+                self.active.beta_dot,
+                x[ix::BETA_DOT],
+                self.config.tau_beta_dot,
+                p.beta_ddot_max,
+            ),
             track(1, self.active.v, x[ix::V], self.config.tau_v, p.a_max),
         )
     }
@@ -313,7 +344,13 @@ mod tests {
     fn step_command_respects_delay_then_first_order_curve() {
         let p = MachineParams::default();
         let tau = 0.1;
-        let cfg = PlantConfig { delay: 0.23, tau_beta_dot: tau, tau_v: tau, substep: 0.005, ..Default::default() };
+        let cfg = PlantConfig {
+            delay: 0.23,
+            tau_beta_dot: tau,
+            tau_v: tau,
+            substep: 0.005,
+            ..Default::default()
+        };
         let mut plant = Plant::new(p, cfg, State::zeros()).unwrap();
         // Small steps so that the initial acceleration 0.05/0.1 = 0.5 stays under the limits.
         let (bd, v) = (0.05, 0.05);
@@ -329,7 +366,12 @@ mod tests {
                 assert_eq!(x[ix::BETA_DOT], 0.0);
             } else {
                 let expected = 1.0 - (-(t - cfg.delay) / tau).exp();
-                assert!((x[ix::V] - v * expected).abs() < 1e-3, "t={t}: v {} vs {}", x[ix::V], v * expected);
+                assert!(
+                    (x[ix::V] - v * expected).abs() < 1e-3,
+                    "t={t}: v {} vs {}",
+                    x[ix::V],
+                    v * expected
+                );
                 assert!((x[ix::BETA_DOT] - bd * expected).abs() < 1e-3);
             }
         }
@@ -338,9 +380,18 @@ mod tests {
     #[test]
     fn acceleration_limit_bounds_the_response() {
         let p = MachineParams::default();
-        let cfg = PlantConfig { delay: 0.0, tau_v: 0.01, ..Default::default() };
+        let cfg = PlantConfig {
+            delay: 0.0,
+            tau_v: 0.01,
+            ..Default::default()
+        };
         let mut plant = Plant::new(p, cfg, State::zeros()).unwrap();
-        plant.command(VelocityCommand { beta_dot: 0.0, v: 1.0 }).unwrap();
+        plant
+            .command(VelocityCommand {
+                beta_dot: 0.0,
+                v: 1.0,
+            })
+            .unwrap();
         plant.advance(0.5);
         assert!((plant.state()[ix::V] - 0.5 * p.a_max).abs() < 1e-9);
     }
@@ -352,7 +403,10 @@ mod tests {
         let mut plant = Plant::new(p, PlantConfig::ideal(), x0).unwrap();
         // Model: constant acceleration a over 0.2 s reaches v + 0.2 a.
         let u = Control::new(0.2, 0.5);
-        let target = VelocityCommand { beta_dot: 0.2 * u[0], v: 0.2 + 0.2 * u[1] };
+        let target = VelocityCommand {
+            beta_dot: 0.2 * u[0],
+            v: 0.2 + 0.2 * u[1],
+        };
         plant.command(target).unwrap();
         plant.advance(0.2);
         let model = rk4_step(&p, &x0, &u, 0.2);
@@ -372,14 +426,26 @@ mod tests {
     fn noise_is_seeded_and_bounds_hold() {
         let p = MachineParams::default();
         let cfg = PlantConfig {
-            noise: MeasurementNoise { position: 0.05, heading: 0.01, ..Default::default() },
+            noise: MeasurementNoise {
+                position: 0.05,
+                heading: 0.01,
+                ..Default::default()
+            },
             seed: 7,
             ..Default::default()
         };
         let mut a = Plant::new(p, cfg, State::zeros()).unwrap();
         let mut b = Plant::new(p, cfg, State::zeros()).unwrap();
-        a.command(VelocityCommand { beta_dot: 10.0, v: -10.0 }).unwrap();
-        b.command(VelocityCommand { beta_dot: 10.0, v: -10.0 }).unwrap();
+        a.command(VelocityCommand {
+            beta_dot: 10.0,
+            v: -10.0,
+        })
+        .unwrap();
+        b.command(VelocityCommand {
+            beta_dot: 10.0,
+            v: -10.0,
+        })
+        .unwrap();
         for _ in 0..50 {
             a.advance(0.2);
             b.advance(0.2);
@@ -388,10 +454,27 @@ mod tests {
             assert!(x[ix::BETA].abs() <= p.beta_max && x[ix::V].abs() <= p.v_max);
         }
         assert_ne!(a.measure(), a.state());
-        assert!(a.command(VelocityCommand { beta_dot: f64::NAN, v: 0.0 }).is_err());
-        let bad = PlantConfig { substep: 0.05, ..Default::default() };
-        assert!(matches!(Plant::new(p, bad, State::zeros()), Err(PlantError::BadSubstep(_))));
-        let bad = PlantConfig { delay: -1.0, ..Default::default() };
-        assert!(Plant::new(p, bad, State::zeros()).unwrap_err().to_string().contains("delay"));
+        assert!(a
+            .command(VelocityCommand {
+                beta_dot: f64::NAN,
+                v: 0.0
+            })
+            .is_err());
+        let bad = PlantConfig {
+            substep: 0.05,
+            ..Default::default()
+        };
+        assert!(matches!(
+            Plant::new(p, bad, State::zeros()),
+            Err(PlantError::BadSubstep(_))
+        ));
+        let bad = PlantConfig {
+            delay: -1.0,
+            ..Default::default()
+        };
+        assert!(Plant::new(p, bad, State::zeros())
+            .unwrap_err()
+            .to_string()
+            .contains("delay"));
     }
 }

@@ -125,7 +125,10 @@ impl NetworkMetadata {
     fn from_map(m: &HashMap<String, String>) -> Result<Self, WeightsProblem> {
         let get = |key: &'static str| m.get(key).ok_or(WeightsProblem::MissingKey(key));
         fn num<T: std::str::FromStr>(key: &'static str, s: &str) -> Result<T, WeightsProblem> {
-            s.trim().parse().map_err(|_| WeightsProblem::BadValue { key: key.to_string(), value: s.to_string() })
+            s.trim().parse().map_err(|_| WeightsProblem::BadValue {
+                key: key.to_string(),
+                value: s.to_string(),
+            })
         }
         let version: u32 = num("format_version", get("format_version")?)?;
         if version != FORMAT_VERSION {
@@ -138,7 +141,12 @@ impl NetworkMetadata {
         let role = match get("role")?.as_str() {
             "critic" => NetworkRole::Critic,
             "actor" => NetworkRole::Actor,
-            other => return Err(WeightsProblem::BadValue { key: "role".into(), value: other.into() }),
+            other => {
+                return Err(WeightsProblem::BadValue {
+                    key: "role".into(),
+                    value: other.into(),
+                })
+            }
         };
         let encoder_id = get("encoder")?.clone();
         if encoder_id != ENCODER_ID {
@@ -170,20 +178,25 @@ impl NetworkMetadata {
             field("machine.beta_ddot_max", &mut machine.beta_ddot_max)?;
             field("machine.a_max", &mut machine.a_max)?;
         }
-        machine
-            .validate()
-            .map_err(|e| WeightsProblem::BadValue { key: "machine".into(), value: e.to_string() })?;
+        machine.validate().map_err(|e| WeightsProblem::BadValue {
+            key: "machine".into(),
+            value: e.to_string(),
+        })?;
         let w_text = get("cost.w")?;
         let w: Vec<f64> = w_text
             .split(',')
             .map(|s| num::<f64>("cost.w", s))
             .collect::<Result<_, _>>()?;
-        let w: [f64; 5] = w
-            .try_into()
-            .map_err(|_| WeightsProblem::BadValue { key: "cost.w".into(), value: w_text.clone() })?;
+        let w: [f64; 5] = w.try_into().map_err(|_| WeightsProblem::BadValue {
+            key: "cost.w".into(),
+            value: w_text.clone(),
+        })?;
         let pos_scale: f64 = num("encoder.pos_scale", get("encoder.pos_scale")?)?;
         if !(pos_scale.is_finite() && pos_scale > 0.0) {
-            return Err(WeightsProblem::BadValue { key: "encoder.pos_scale".into(), value: pos_scale.to_string() });
+            return Err(WeightsProblem::BadValue {
+                key: "encoder.pos_scale".into(),
+                value: pos_scale.to_string(),
+            });
         }
         Ok(Self {
             role,
@@ -193,7 +206,10 @@ impl NetworkMetadata {
             output_size: num("output_size", get("output_size")?)?,
             machine,
             dt: num("dt", get("dt")?)?,
-            cost: CostWeights { w, p: num("cost.p", get("cost.p")?)? },
+            cost: CostWeights {
+                w,
+                p: num("cost.p", get("cost.p")?)?,
+            },
             gamma: num("gamma", get("gamma")?)?,
             steps: num("steps", get("steps")?)?,
             lambda_l: num("lambda_l", get("lambda_l")?)?,
@@ -203,9 +219,14 @@ impl NetworkMetadata {
 
     /// Checks the network was trained for the configured machine and time step:
     /// the encoder scales by the bounds, so other bounds mean other inputs.
-    pub fn check_compatible(&self, configured: &MachineParams, dt: f64) -> Result<(), WeightsProblem> {
+    pub fn check_compatible(
+        &self,
+        configured: &MachineParams,
+        dt: f64,
+    ) -> Result<(), WeightsProblem> {
         let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * a.abs().max(b.abs()).max(1.0);
-        for ((name, file), (_, conf)) in self.machine.fields().into_iter().zip(configured.fields()) {
+        for ((name, file), (_, conf)) in self.machine.fields().into_iter().zip(configured.fields())
+        {
             if !close(file, conf) {
                 return Err(WeightsProblem::Incompatible {
                     key: format!("machine.{name}"),
@@ -215,7 +236,11 @@ impl NetworkMetadata {
             }
         }
         if !close(self.dt, dt) {
-            return Err(WeightsProblem::Incompatible { key: "dt".into(), file: self.dt.to_string(), expected: dt.to_string() });
+            return Err(WeightsProblem::Incompatible {
+                key: "dt".into(),
+                file: self.dt.to_string(),
+                expected: dt.to_string(),
+            });
         }
         Ok(())
     }
@@ -233,7 +258,11 @@ pub enum WeightsProblem {
     #[error("metadata key `{key}` has an invalid value `{value}`")]
     BadValue { key: String, value: String },
     #[error("metadata `{key}` = {file} is incompatible (expected {expected})")]
-    Incompatible { key: String, file: String, expected: String },
+    Incompatible {
+        key: String,
+        file: String,
+        expected: String,
+    },
     #[error("tensor `{0}` is missing")]
     MissingTensor(String),
     #[error("unexpected tensor `{0}`")]
@@ -241,13 +270,20 @@ pub enum WeightsProblem {
     #[error("tensor `{name}` has dtype {dtype}, expected F32 or F64")]
     Dtype { name: String, dtype: String },
     #[error("tensor `{name}` has shape {shape:?}, expected {expected}")]
-    Shape { name: String, shape: Vec<usize>, expected: String },
+    Shape {
+        name: String,
+        shape: Vec<usize>,
+        expected: String,
+    },
     #[error("tensor `{name}` has a non-finite value at index {index}")]
     NonFinite { name: String, index: usize },
     #[error("layer chain: {0}")]
     Chain(#[from] MlpError),
     #[error("network role is `{found}`, expected `{expected}`")]
-    WrongRole { expected: NetworkRole, found: NetworkRole },
+    WrongRole {
+        expected: NetworkRole,
+        found: NetworkRole,
+    },
 }
 
 /// A weight-file error, naming the file.
@@ -260,7 +296,10 @@ pub struct WeightsError {
 
 impl WeightsError {
     pub fn new(source: &str, problem: WeightsProblem) -> Self {
-        Self { source_name: source.to_string(), problem }
+        Self {
+            source_name: source.to_string(),
+            problem,
+        }
     }
 }
 
@@ -283,22 +322,37 @@ pub enum FileDtype {
 fn tensor_values(name: &str, view: &TensorView<'_>) -> Result<Vec<f64>, WeightsProblem> {
     let data = view.data();
     let values: Vec<f64> = match view.dtype() {
-        Dtype::F32 => data.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]) as f64).collect(),
+        Dtype::F32 => data
+            .chunks_exact(4)
+            .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]) as f64)
+            .collect(),
         Dtype::F64 => data
             .chunks_exact(8)
             .map(|b| f64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]))
             .collect(),
-        other => return Err(WeightsProblem::Dtype { name: name.into(), dtype: format!("{other:?}") }),
+        other => {
+            return Err(WeightsProblem::Dtype {
+                name: name.into(),
+                dtype: format!("{other:?}"),
+            })
+        }
     };
     if let Some(index) = values.iter().position(|v| !v.is_finite()) {
-        return Err(WeightsProblem::NonFinite { name: name.into(), index });
+        return Err(WeightsProblem::NonFinite {
+            name: name.into(),
+            index,
+        });
     }
     Ok(values)
 }
 
 fn decode_inner(bytes: &[u8]) -> Result<(NetworkMetadata, Mlp), WeightsProblem> {
-    let (_, header) = SafeTensors::read_metadata(bytes).map_err(|e| WeightsProblem::Format(e.to_string()))?;
-    let meta_map = header.metadata().as_ref().ok_or(WeightsProblem::NoMetadata)?;
+    let (_, header) =
+        SafeTensors::read_metadata(bytes).map_err(|e| WeightsProblem::Format(e.to_string()))?;
+    let meta_map = header
+        .metadata()
+        .as_ref()
+        .ok_or(WeightsProblem::NoMetadata)?;
     let meta = NetworkMetadata::from_map(meta_map)?;
     let st = SafeTensors::deserialize(bytes).map_err(|e| WeightsProblem::Format(e.to_string()))?;
 
@@ -306,24 +360,44 @@ fn decode_inner(bytes: &[u8]) -> Result<(NetworkMetadata, Mlp), WeightsProblem> 
     names.sort();
     let mut layers = Vec::new();
     loop {
-        let (wn, bn) = (format!("layers.{}.weight", layers.len()), format!("layers.{}.bias", layers.len()));
+        let (wn, bn) = (
+            format!("layers.{}.weight", layers.len()),
+            format!("layers.{}.bias", layers.len()),
+        );
         let w = match st.tensor(&wn) {
             Ok(w) => w,
             Err(_) if st.tensor(&bn).is_ok() => return Err(WeightsProblem::MissingTensor(wn)),
             Err(_) => break,
         };
-        let b = st.tensor(&bn).map_err(|_| WeightsProblem::MissingTensor(bn.clone()))?;
+        let b = st
+            .tensor(&bn)
+            .map_err(|_| WeightsProblem::MissingTensor(bn.clone()))?;
         let (n_out, n_in) = match w.shape() {
             [o, i] => (*o, *i),
-            s => return Err(WeightsProblem::Shape { name: wn, shape: s.to_vec(), expected: "[out, in]".into() }),
+            s => {
+                return Err(WeightsProblem::Shape {
+                    name: wn,
+                    shape: s.to_vec(),
+                    expected: "[out, in]".into(),
+                })
+            }
         };
         if b.shape() != [n_out] {
-            return Err(WeightsProblem::Shape { name: bn, shape: b.shape().to_vec(), expected: format!("[{n_out}]") });
+            return Err(WeightsProblem::Shape {
+                name: bn,
+                shape: b.shape().to_vec(),
+                expected: format!("[{n_out}]"),
+            });
         }
         let weight = tensor_values(&wn, &w)?;
         let bias = tensor_values(&bn, &b)?;
         names.retain(|n| n != &wn && n != &bn);
-        layers.push(Layer { n_in, n_out, weight, bias });
+        layers.push(Layer {
+            n_in,
+            n_out,
+            weight,
+            bias,
+        });
     }
     if let Some(extra) = names.into_iter().next() {
         return Err(WeightsProblem::UnexpectedTensor(extra));
@@ -349,7 +423,10 @@ fn decode_inner(bytes: &[u8]) -> Result<(NetworkMetadata, Mlp), WeightsProblem> 
         });
     }
     if meta.role == NetworkRole::Actor && meta.output_size != ACTOR_OUTPUTS {
-        return Err(WeightsProblem::BadValue { key: "output_size".into(), value: meta.output_size.to_string() });
+        return Err(WeightsProblem::BadValue {
+            key: "output_size".into(),
+            value: meta.output_size.to_string(),
+        });
     }
     Ok((meta, mlp))
 }
@@ -357,11 +434,19 @@ fn decode_inner(bytes: &[u8]) -> Result<(NetworkMetadata, Mlp), WeightsProblem> 
 /// Parses and validates a weight file's bytes; `source` names it in errors.
 pub fn decode(bytes: &[u8], source: &str) -> Result<NetworkWeights, WeightsError> {
     let (meta, mlp) = decode_inner(bytes).map_err(|p| WeightsError::new(source, p))?;
-    Ok(NetworkWeights { source: source.to_string(), meta, mlp })
+    Ok(NetworkWeights {
+        source: source.to_string(),
+        meta,
+        mlp,
+    })
 }
 
 /// Serialises a network to safetensors bytes.
-pub fn encode(meta: &NetworkMetadata, mlp: &Mlp, dtype: FileDtype) -> Result<Vec<u8>, WeightsError> {
+pub fn encode(
+    meta: &NetworkMetadata,
+    mlp: &Mlp,
+    dtype: FileDtype,
+) -> Result<Vec<u8>, WeightsError> {
     let mut buffers: Vec<(String, Vec<usize>, Vec<u8>)> = Vec::new();
     let bytes_of = |v: &[f64]| -> Vec<u8> {
         match dtype {
@@ -370,7 +455,11 @@ pub fn encode(meta: &NetworkMetadata, mlp: &Mlp, dtype: FileDtype) -> Result<Vec
         }
     };
     for (i, l) in mlp.layers().iter().enumerate() {
-        buffers.push((format!("layers.{i}.weight"), vec![l.n_out, l.n_in], bytes_of(&l.weight)));
+        buffers.push((
+            format!("layers.{i}.weight"),
+            vec![l.n_out, l.n_in],
+            bytes_of(&l.weight),
+        ));
         buffers.push((format!("layers.{i}.bias"), vec![l.n_out], bytes_of(&l.bias)));
     }
     let st_dtype = match dtype {
@@ -404,9 +493,18 @@ pub fn random_network(meta: NetworkMetadata, hidden: &[usize], seed: u64) -> Net
             let mut draw = || rng.gen_range(-bound..bound);
             let weight = (0..n_in * n_out).map(|_| draw()).collect();
             let bias = (0..n_out).map(|_| draw()).collect();
-            Layer { n_in, n_out, weight, bias }
+            Layer {
+                n_in,
+                n_out,
+                weight,
+                bias,
+            }
         })
         .collect();
     let mlp = Mlp::new(layers).expect("sizes chain by construction");
-    NetworkWeights { source: format!("random(seed={seed})"), meta, mlp }
+    NetworkWeights {
+        source: format!("random(seed={seed})"),
+        meta,
+        mlp,
+    }
 }

@@ -15,10 +15,22 @@ fn split(z: &[f64; NZ]) -> (State, Control) {
 
 fn points() -> Vec<([f64; NZ], Goal)> {
     vec![
-        ([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], Goal::new(4.5, 0.0, 0.0)),
-        ([1.0, -2.0, 0.7, 0.3, -0.2, 0.8, 0.4, -0.6], Goal::new(-3.0, 6.0, 2.2)),
-        ([6.0, 2.0, -2.9, -0.6, 0.5, -0.9, -0.5, 1.0], Goal::new(6.2, 2.1, 3.0)),
-        ([-4.0, 5.0, 1.5, 0.65, 0.55, 0.2, 0.1, 0.0], Goal::new(0.0, 0.0, -1.0)),
+        (
+            [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+            Goal::new(4.5, 0.0, 0.0),
+        ),
+        (
+            [1.0, -2.0, 0.7, 0.3, -0.2, 0.8, 0.4, -0.6],
+            Goal::new(-3.0, 6.0, 2.2),
+        ),
+        (
+            [6.0, 2.0, -2.9, -0.6, 0.5, -0.9, -0.5, 1.0],
+            Goal::new(6.2, 2.1, 3.0),
+        ),
+        (
+            [-4.0, 5.0, 1.5, 0.65, 0.55, 0.2, 0.1, 0.0],
+            Goal::new(0.0, 0.0, -1.0),
+        ),
     ]
 }
 
@@ -50,8 +62,14 @@ fn gradient_and_hessian_match_central_differences() {
                 let (xp, up) = split(&zp);
                 let (xm, um) = split(&zm);
                 // Gradient vs differences of the value.
-                let fd = (critic.value(&mut ws, &xp, &up, &g) - critic.value(&mut ws, &xm, &um, &g)) / (2.0 * h);
-                assert!(rel_err(grad[j], fd, grad_scale) <= 1e-5, "m={m} ∂L/∂z{j}: {} vs {fd}", grad[j]);
+                let fd = (critic.value(&mut ws, &xp, &up, &g)
+                    - critic.value(&mut ws, &xm, &um, &g))
+                    / (2.0 * h);
+                assert!(
+                    rel_err(grad[j], fd, grad_scale) <= 1e-5,
+                    "m={m} ∂L/∂z{j}: {} vs {fd}",
+                    grad[j]
+                );
                 assert!((grad[j] - d.grad[j]).abs() <= 1e-12 * grad_scale.max(1.0));
                 // Hessian column vs differences of the gradient.
                 let (mut gp, mut gm) = ([0.0; NZ], [0.0; NZ]);
@@ -83,7 +101,14 @@ fn terminal_variant_is_the_state_block_at_zero_control() {
     for (z, g) in points() {
         let (x, _) = split(&z);
         let mut full = Derivatives::default();
-        critic.hessian(&mut ws, &x, &Control::zeros(), &g, HessianMode::Exact, &mut full);
+        critic.hessian(
+            &mut ws,
+            &x,
+            &Control::zeros(),
+            &g,
+            HessianMode::Exact,
+            &mut full,
+        );
         let mut t = TerminalDerivatives::default();
         critic.terminal_hessian(&mut ws, &x, &g, HessianMode::Exact, &mut t);
         assert_eq!(t.value, full.value);
@@ -125,7 +150,11 @@ fn gauss_newton_equals_exact_hessian_where_q_vanishes() {
         critic.hessian(&mut ws, &x, &u, &g, HessianMode::Exact, &mut exact);
         critic.hessian(&mut ws, &x, &u, &g, HessianMode::GaussNewton, &mut gn);
         assert!(exact.value < 1e-20, "Q was not zeroed: L = {}", exact.value);
-        let scale = exact.hess.iter().flatten().fold(0.0_f64, |a, b| a.max(b.abs()));
+        let scale = exact
+            .hess
+            .iter()
+            .flatten()
+            .fold(0.0_f64, |a, b| a.max(b.abs()));
         assert!(scale > 1e-6, "degenerate test point");
         for i in 0..NZ {
             for j in 0..NZ {
@@ -136,7 +165,13 @@ fn gauss_newton_equals_exact_hessian_where_q_vanishes() {
         let x2 = x + State::from_element(0.3);
         critic.hessian(&mut ws, &x2, &u, &g, HessianMode::Exact, &mut exact);
         critic.hessian(&mut ws, &x2, &u, &g, HessianMode::GaussNewton, &mut gn);
-        let diff = exact.hess.iter().flatten().zip(gn.hess.iter().flatten()).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+        let diff = exact
+            .hess
+            .iter()
+            .flatten()
+            .zip(gn.hess.iter().flatten())
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
         assert!(diff > 1e-8);
     }
 }

@@ -59,5 +59,10 @@ fn kernels_do_not_allocate() {
     }
     let after = ALLOCATIONS.load(Ordering::SeqCst);
     assert!(sink.is_finite());
-    assert_eq!(after - before, 0, "{} heap allocations in 1,000 kernel calls", after - before);
+    assert_eq!(
+        after - before,
+        0,
+        "{} heap allocations in 1,000 kernel calls",
+        after - before
+    );
 }

@@ -31,8 +31,10 @@ fn rebuild(
         .map(|(n, v)| (n, v.dtype(), v.shape().to_vec(), v.data().to_vec()))
         .collect();
     edit(&mut tensors, &mut meta);
-    let views: Vec<_> =
-        tensors.iter().map(|(n, d, s, b)| (n.clone(), TensorView::new(*d, s.clone(), b).unwrap())).collect();
+    let views: Vec<_> = tensors
+        .iter()
+        .map(|(n, d, s, b)| (n.clone(), TensorView::new(*d, s.clone(), b).unwrap()))
+        .collect();
     safetensors::serialize(views, &Some(meta)).unwrap()
 }
 
@@ -40,7 +42,10 @@ fn expect_error(bytes: &[u8], needle: &str) -> WeightsProblem {
     let err = decode(bytes, FILE).expect_err("malformed file accepted");
     let msg = err.to_string();
     assert!(msg.contains(FILE), "message does not name the file: {msg}");
-    assert!(msg.contains(needle), "message `{msg}` does not mention `{needle}`");
+    assert!(
+        msg.contains(needle),
+        "message `{msg}` does not mention `{needle}`"
+    );
     err.problem
 }
 
@@ -53,17 +58,31 @@ fn round_trip_preserves_values_and_metadata() {
         assert_eq!(back.meta, w.meta);
         for (a, b) in back.mlp.layers().iter().zip(w.mlp.layers()) {
             for (x, y) in a.weight.iter().zip(&b.weight) {
-                let tol = if dtype == FileDtype::F64 { 0.0 } else { 1e-7 * y.abs().max(1e-3) };
+                let tol = if dtype == FileDtype::F64 {
+                    0.0
+                } else {
+                    1e-7 * y.abs().max(1e-3)
+                };
                 assert!((x - y).abs() <= tol);
             }
         }
     }
     // Same value from the f64 file as from the in-memory network.
     let critic = Critic::from_weights(w.clone()).unwrap();
-    let loaded = Critic::from_weights(decode(&encode(&w.meta, &w.mlp, FileDtype::F64).unwrap(), FILE).unwrap()).unwrap();
+    let loaded = Critic::from_weights(
+        decode(&encode(&w.meta, &w.mlp, FileDtype::F64).unwrap(), FILE).unwrap(),
+    )
+    .unwrap();
     let (mut a, mut b) = (CriticWorkspace::new(&critic), CriticWorkspace::new(&loaded));
-    let (x, u, g) = (State::new(1.0, 2.0, 0.3, 0.1, 0.0, 0.5), Control::new(0.1, -0.2), Goal::new(4.0, 0.0, 1.0));
-    assert_eq!(critic.value(&mut a, &x, &u, &g), loaded.value(&mut b, &x, &u, &g));
+    let (x, u, g) = (
+        State::new(1.0, 2.0, 0.3, 0.1, 0.0, 0.5),
+        Control::new(0.1, -0.2),
+        Goal::new(4.0, 0.0, 1.0),
+    );
+    assert_eq!(
+        critic.value(&mut a, &x, &u, &g),
+        loaded.value(&mut b, &x, &u, &g)
+    );
 }
 
 #[test]
@@ -112,7 +131,9 @@ fn missing_and_unexpected_tensors() {
     expect_error(&bytes, "layers.4.bias");
     let bytes = rebuild(&good_bytes(), |t, _| t.retain(|t| t.0 != "layers.0.weight"));
     expect_error(&bytes, "layers.0.weight");
-    let bytes = rebuild(&good_bytes(), |t, _| t.push(("extra.scale".into(), Dtype::F32, vec![1], vec![0; 4])));
+    let bytes = rebuild(&good_bytes(), |t, _| {
+        t.push(("extra.scale".into(), Dtype::F32, vec![1], vec![0; 4]))
+    });
     expect_error(&bytes, "extra.scale");
 }
 
@@ -138,7 +159,15 @@ fn wrong_dtype() {
 
 #[test]
 fn missing_or_bad_metadata() {
-    for key in ["format_version", "encoder", "machine.beta_max", "dt", "cost.w", "output_size", "git_commit"] {
+    for key in [
+        "format_version",
+        "encoder",
+        "machine.beta_max",
+        "dt",
+        "cost.w",
+        "output_size",
+        "git_commit",
+    ] {
         let bytes = rebuild(&good_bytes(), |_, m| {
             m.remove(key);
         });
@@ -180,7 +209,10 @@ fn incompatible_metadata() {
     configured.v_max = 2.0;
     let e = w.meta.check_compatible(&configured, 0.2).unwrap_err();
     assert!(e.to_string().contains("machine.v_max"), "{e}");
-    let e = w.meta.check_compatible(&MachineParams::default(), 0.1).unwrap_err();
+    let e = w
+        .meta
+        .check_compatible(&MachineParams::default(), 0.1)
+        .unwrap_err();
     assert!(e.to_string().contains("`dt`"), "{e}");
 }
 
@@ -188,7 +220,10 @@ fn incompatible_metadata() {
 fn roles_are_checked() {
     let w = decode(&good_bytes(), FILE).unwrap();
     let e = Actor::from_weights(w).unwrap_err();
-    assert!(e.to_string().contains("role is `critic`, expected `actor`"), "{e}");
+    assert!(
+        e.to_string().contains("role is `critic`, expected `actor`"),
+        "{e}"
+    );
     // A critic file whose first layer takes the actor's 7 inputs.
     let actor = common::random_actor(2);
     let mut meta = actor.metadata().clone();

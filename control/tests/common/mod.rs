@@ -7,7 +7,11 @@ use control::{Actor, Critic};
 
 /// A random critic of the paper's sizes with `m` outputs.
 pub fn random_critic_weights(m: usize, seed: u64) -> NetworkWeights {
-    random_network(NetworkMetadata::new(NetworkRole::Critic, m), &PAPER_HIDDEN, seed)
+    random_network(
+        NetworkMetadata::new(NetworkRole::Critic, m),
+        &PAPER_HIDDEN,
+        seed,
+    )
 }
 
 pub fn random_critic(m: usize, seed: u64) -> Critic {
@@ -15,6 +19,10 @@ pub fn random_critic(m: usize, seed: u64) -> Critic {
 }
 
 pub fn random_actor(seed: u64) -> Actor {
-    let w = random_network(NetworkMetadata::new(NetworkRole::Actor, 4), &PAPER_HIDDEN, seed);
+    let w = random_network(
+        NetworkMetadata::new(NetworkRole::Actor, 4),
+        &PAPER_HIDDEN,
+        seed,
+    );
     Actor::from_weights(w).expect("random actor is valid")
 }
