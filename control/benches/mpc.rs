@@ -1,2 +1,181 @@
-//! MPC tick benchmark (placeholder, replaced below).
-fn main() {}
+//! One full MPC tick (delay compensation, critic derivatives, QP update and
+//! solve, output) at N = 10, 20, 40 with a random critic and actor of the
+//! paper's sizes (hidden layers 48-96-144-96-48, 8 critic outputs), for both
+//! Hessian modes, in closed loop on the simulated machine (0.2 s delay) with
+//! two obstacles. Besides criterion's estimates it prints the median and p99
+//! of 400 ticks per configuration.
+
+use std::time::{Duration, Instant};
+
+use control::mlp::PAPER_HIDDEN;
+use control::model::{Goal, MachineParams, State};
+use control::mpc::{Mpc, MpcSettings, Obstacle};
+use control::weights::{random_network, NetworkMetadata, NetworkRole};
+use control::{Actor, Critic, HessianMode, Plant, PlantConfig};
+use criterion::{criterion_group, criterion_main, Criterion};
+
+const GOAL: Goal = Goal::new(6.0, 4.0, 1.2);
+const OBSTACLES: [Obstacle; 2] = [Obstacle::new(3.0, 1.0, 0.8), Obstacle::new(1.0, 4.0, 0.6)];
+
+/// An MPC and the machine it drives; restarts from the origin every 150 ticks.
+struct Loop {
+    mpc: Mpc<Critic>,
+    plant: Plant,
+    ticks: usize,
+}
+
+impl Loop {
+    fn new(horizon: usize, hessian: HessianMode) -> Self {
+        Self::with(MpcSettings {
+            horizon,
+            hessian,
+            ..MpcSettings::default()
+        })
+    }
+
+    fn with(settings: MpcSettings) -> Self {
+        let p = MachineParams::default();
+        let critic = Critic::from_weights(random_network(
+            NetworkMetadata::new(NetworkRole::Critic, 8),
+            &PAPER_HIDDEN,
+            1,
+        ))
+        .expect("valid critic");
+        let actor = Actor::from_weights(random_network(
+            NetworkMetadata::new(NetworkRole::Actor, 4),
+            &PAPER_HIDDEN,
+            2,
+        ))
+        .expect("valid actor");
+        let mpc = Mpc::new(p, critic, Some(actor), settings).expect("valid settings");
+        let plant = Plant::new(p, PlantConfig::default(), State::zeros()).expect("valid plant");
+        let mut l = Self {
+            mpc,
+            plant,
+            ticks: 0,
+        };
+        l.restart();
+        l
+    }
+
+    fn restart(&mut self) {
+        self.mpc.reset();
+        self.mpc.set_goal(GOAL, &OBSTACLES).expect("valid goal");
+        self.plant = Plant::new(*self.mpc.params(), PlantConfig::default(), State::zeros())
+            .expect("valid plant");
+        self.ticks = 0;
+    }
+
+    /// One tick; returns the time spent in `Mpc::step` only.
+    fn tick(&mut self) -> Duration {
+        if self.ticks == 150 {
+            self.restart();
+        }
+        let x = self.plant.state();
+        let start = Instant::now();
+        let sol = self.mpc.step(&x).expect("goal set");
+        let elapsed = start.elapsed();
+        let cmd = sol.command;
+        self.plant.command(cmd).expect("finite command");
+        self.plant.advance(0.2);
+        self.ticks += 1;
+        elapsed
+    }
+}
+
+fn percentiles(horizon: usize, hessian: HessianMode) {
+    let mut l = Loop::new(horizon, hessian);
+    for _ in 0..20 {
+        l.tick();
+    }
+    let mut t: Vec<f64> = (0..400).map(|_| l.tick().as_secs_f64() * 1e3).collect();
+    t.sort_by(f64::total_cmp);
+    println!(
+        "mpc tick N={horizon:2} {hessian:?}: median {:.3} ms, p99 {:.3} ms, max {:.3} ms (400 ticks)",
+        t[t.len() / 2],
+        t[(t.len() * 99) / 100],
+        t[t.len() - 1]
+    );
+}
+
+/// `MPC_BENCH_PROBE=1`: time split and QP iterations for a few QP settings.
+fn probe() {
+    for horizon in [10, 20, 40] {
+        for (name, s) in [
+            (
+                "default",
+                MpcSettings {
+                    horizon,
+                    ..MpcSettings::default()
+                },
+            ),
+            (
+                "2 slots",
+                MpcSettings {
+                    horizon,
+                    max_obstacles: 2,
+                    ..MpcSettings::default()
+                },
+            ),
+            (
+                "tol 1e-6 no refine",
+                MpcSettings {
+                    horizon,
+                    qp_tolerance: 1e-6,
+                    qp_iterative_refinement: false,
+                    ..MpcSettings::default()
+                },
+            ),
+            (
+                "no equil",
+                MpcSettings {
+                    horizon,
+                    qp_equilibrate: false,
+                    ..MpcSettings::default()
+                },
+            ),
+        ] {
+            let mut l = Loop::with(s);
+            let (mut tot, mut qp, mut it) = (vec![], vec![], 0);
+            for _ in 0..200 {
+                let t = l.tick();
+                let sol = l.mpc.solution();
+                tot.push(t.as_secs_f64() * 1e3);
+                qp.push(sol.qp_time.as_secs_f64() * 1e3);
+                it += sol.qp_iterations;
+            }
+            tot.sort_by(f64::total_cmp);
+            qp.sort_by(f64::total_cmp);
+            println!("N={horizon} {name}: tick median {:.3} ms, qp median {:.3} ms, mean QP iterations {:.1}", tot[100], qp[100], it as f64 / 200.0);
+        }
+    }
+}
+
+fn bench(c: &mut Criterion) {
+    if std::env::var_os("MPC_BENCH_PROBE").is_some() {
+        probe();
+        return;
+    }
+    for hessian in [HessianMode::Exact, HessianMode::GaussNewton] {
+        for horizon in [10, 20, 40] {
+            percentiles(horizon, hessian);
+        }
+    }
+    let mut group = c.benchmark_group("mpc_tick");
+    group
+        .sample_size(30)
+        .measurement_time(Duration::from_secs(4))
+        .warm_up_time(Duration::from_secs(1));
+    for hessian in [HessianMode::Exact, HessianMode::GaussNewton] {
+        for horizon in [10, 20, 40] {
+            let mut l = Loop::new(horizon, hessian);
+            group.bench_function(format!("N{horizon}_{hessian:?}"), |b| {
+                b.iter_custom(|iters| (0..iters).map(|_| l.tick()).sum())
+            });
+        }
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);

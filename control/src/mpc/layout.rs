@@ -6,7 +6,7 @@
 //!
 //! ```text
 //! w = [Δx_0 Δu_0 | Δx_1 Δu_1 | … | Δx_{N−1} Δu_{N−1} | Δx_N | s_state | s_obs]
-//!      └ z_0 (8) ┘                                      (6)   3 per n=1..N   n_obs per row k
+//!      └ z_0 (8) ┘                                      (6)   3 per n=1..N   1 per row k
 //! ```
 //!
 //! so each stage's z_n = (x_n, u_n) is contiguous and P is block diagonal with
@@ -22,8 +22,13 @@
 //! | controls | 4N | ≥ 0 | ±(ū_n + Δu_n) ≤ u_max (hard) |
 //! | states | 6N | ≥ 0 | ±(x̄_{n,c} + Δx_{n,c}) − s_{n,c} ≤ max_c, c ∈ {β, β̇, v_f}, n = 1..N |
 //! | state slacks | 3N | ≥ 0 | s_{n,c} ≥ 0 |
-//! | obstacles | n_obs·N | ≥ 0 | linearised h ≥ 0 (or CBF) + s ≥ 0 per row k = 0..N−1 |
-//! | obstacle slacks | n_obs·N | ≥ 0 | s_{k,j} ≥ 0 |
+//! | obstacles | n_obs·N | ≥ 0 | linearised h_j + s_k ≥ 0 (or its CBF form), row k = 0..N−1 |
+//! | obstacle slacks | N (if n_obs > 0) | ≥ 0 | s_k ≥ 0 |
+//!
+//! All obstacles of one row share its slack, so the penalty is w·Σ_k max_j
+//! (violation): still an exact penalty, with 7N fewer variables and rows than
+//! one slack per obstacle at 8 slots (the interior-point cost grows with the
+//! KKT size).
 
 use super::settings::ObstacleConstraint;
 
@@ -145,9 +150,10 @@ pub struct QpLayout {
 impl QpLayout {
     pub fn new(horizon: usize, n_obs: usize, obstacle_constraint: ObstacleConstraint) -> Self {
         let n = horizon;
-        let n_var = NZ * n + NX + 3 * n + n_obs * n;
+        let n_obs_slack = if n_obs > 0 { n } else { 0 };
+        let n_var = NZ * n + NX + 3 * n + n_obs_slack;
         let n_eq = NX * (n + 1);
-        let n_ineq = 13 * n + 2 * n_obs * n;
+        let n_ineq = 13 * n + n_obs * n + n_obs_slack;
         let mut layout = Self {
             horizon,
             n_obs,
@@ -194,9 +200,9 @@ impl QpLayout {
         NZ * self.horizon + NX + 3 * (n - 1) + c
     }
 
-    /// Column of the slack of obstacle row (k, j), k = 0..N.
-    pub fn obstacle_slack(&self, k: usize, j: usize) -> usize {
-        NZ * self.horizon + NX + 3 * self.horizon + k * self.n_obs + j
+    /// Column of the slack shared by the obstacle rows k (k = 0..N; only with n_obs > 0).
+    pub fn obstacle_slack(&self, k: usize) -> usize {
+        NZ * self.horizon + NX + 3 * self.horizon + k
     }
 
     /// Row of the dynamics block of stage n (6 rows).
@@ -224,9 +230,9 @@ impl QpLayout {
         self.n_eq + 13 * self.horizon + k * self.n_obs + j
     }
 
-    /// Row of obstacle slack (k, j) ≥ 0.
-    pub fn row_obstacle_slack(&self, k: usize, j: usize) -> usize {
-        self.n_eq + 13 * self.horizon + self.horizon * self.n_obs + k * self.n_obs + j
+    /// Row of obstacle slack k ≥ 0.
+    pub fn row_obstacle_slack(&self, k: usize) -> usize {
+        self.n_eq + 13 * self.horizon + self.horizon * self.n_obs + k
     }
 
     fn build_p(&mut self) {
@@ -328,6 +334,10 @@ impl QpLayout {
         let cbf = self.obstacle_constraint == ObstacleConstraint::Cbf;
         let mut obs = vec![[0; 4]; self.horizon * self.n_obs];
         for k in 0..self.horizon {
+            if self.n_obs == 0 {
+                break;
+            }
+            let s = self.obstacle_slack(k);
             for j in 0..self.n_obs {
                 let r = self.row_obstacle(k, j);
                 let e = &mut obs[k * self.n_obs + j];
@@ -337,10 +347,9 @@ impl QpLayout {
                     e[2] = put(&mut b, r, self.x(k), -g);
                     e[3] = put(&mut b, r, self.x(k) + 1, -g);
                 }
-                let s = self.obstacle_slack(k, j);
                 put(&mut b, r, s, -1.0);
-                put(&mut b, self.row_obstacle_slack(k, j), s, -1.0);
             }
+            put(&mut b, self.row_obstacle_slack(k), s, -1.0);
         }
         let (pattern, pos) = b.finish();
         let mut values = vec![0.0; pattern.nnz()];
@@ -402,15 +411,17 @@ mod tests {
             }
             // Row blocks tile the rows exactly.
             if n_obs > 0 {
-                assert_eq!(
-                    l.row_obstacle_slack(n - 1, n_obs - 1) + 1,
-                    l.n_eq + l.n_ineq
-                );
+                assert_eq!(l.row_obstacle_slack(n - 1) + 1, l.n_eq + l.n_ineq);
             } else {
                 assert_eq!(l.row_state_slack(n, 2) + 1, l.n_eq + l.n_ineq);
             }
             assert_eq!(l.row_state_slack(n, 2) + 1, l.n_eq + 13 * n);
-            assert_eq!(l.obstacle_slack(n - 1, n_obs), l.n_var);
+            let used = if n_obs > 0 {
+                l.obstacle_slack(n - 1) + 1
+            } else {
+                l.state_slack(n, 2) + 1
+            };
+            assert_eq!(used, l.n_var);
             // Every index map points at the right (row, col).
             let at = |pat: &CscPattern, pos: usize| {
                 let col = (0..pat.cols)

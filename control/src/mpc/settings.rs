@@ -46,7 +46,8 @@ pub struct MpcSettings {
     /// L1 penalty per unit of state-bound violation (β [rad], β̇ [rad/s],
     /// v_f [m/s]). Default 1000. > 0.
     pub state_slack_weight: f64,
-    /// L1 penalty per metre of obstacle penetration. Default 100. > 0.
+    /// L1 penalty per metre of obstacle penetration (per stage, of the
+    /// deepest obstacle; see [`super::layout`]). Default 100. > 0.
     pub obstacle_slack_weight: f64,
     /// Obstacle constraint form. Default distance.
     pub obstacle_constraint: ObstacleConstraint,

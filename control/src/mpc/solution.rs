@@ -5,7 +5,6 @@ use std::time::Duration;
 use crate::model::{Control, State};
 use crate::plant::VelocityCommand;
 
-use super::constraints::MAX_OBSTACLES;
 use super::qp::QpStatus;
 
 /// Why a tick fell back to the shifted previous plan.
@@ -61,12 +60,15 @@ pub struct Solution {
     pub step_norm: f64,
     /// Slacks of the soft state bounds [β, β̇, v_f] of x₁..x_N from the last QP.
     pub state_slacks: Vec<[f64; 3]>,
-    /// Obstacle slacks from the last QP, row k = 0..N−1 (x_{k+1}), slot j.
-    pub obstacle_slacks: Vec<[f64; MAX_OBSTACLES]>,
+    /// Obstacle slacks from the last QP, row k = 0..N−1 (x_{k+1}); shared by
+    /// all obstacles of the row (the largest violation).
+    pub obstacle_slacks: Vec<f64>,
     /// Σ weight × slack of the last QP.
     pub slack_cost: f64,
     /// Wall time of the whole tick.
     pub solve_time: Duration,
+    /// Part of it spent in the QP solver (data update and solve).
+    pub qp_time: Duration,
 }
 
 impl Solution {
@@ -84,9 +86,10 @@ impl Solution {
             restarted: false,
             step_norm: 0.0,
             state_slacks: vec![[0.0; 3]; horizon],
-            obstacle_slacks: vec![[0.0; MAX_OBSTACLES]; horizon],
+            obstacle_slacks: vec![0.0; horizon],
             slack_cost: 0.0,
             solve_time: Duration::ZERO,
+            qp_time: Duration::ZERO,
         }
     }
 
@@ -100,9 +103,6 @@ impl Solution {
 
     /// Largest obstacle slack.
     pub fn max_obstacle_slack(&self) -> f64 {
-        self.obstacle_slacks
-            .iter()
-            .flatten()
-            .fold(0.0, |m, &s| m.max(s))
+        self.obstacle_slacks.iter().fold(0.0, |m, &s| m.max(s))
     }
 }

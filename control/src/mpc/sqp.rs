@@ -8,7 +8,7 @@ use crate::critic::{Derivatives, TerminalDerivatives};
 use crate::model::{ix, Control, Goal, State};
 use crate::plant::VelocityCommand;
 
-use super::constraints::{fill_bounds, fill_obstacles, MAX_OBSTACLES};
+use super::constraints::{fill_bounds, fill_obstacles};
 use super::cost::{stage_block, terminal_block, StageCost};
 use super::dynamics::Dynamics;
 use super::layout::{QpLayout, NU, NX, NZ};
@@ -25,10 +25,14 @@ pub(super) fn fill_slack_costs(layout: &QpLayout, settings: &MpcSettings, q: &mu
         }
     }
     for k in 0..layout.horizon {
-        for j in 0..layout.n_obs {
-            q[layout.obstacle_slack(k, j)] = settings.obstacle_slack_weight;
+        if layout.n_obs > 0 {
+            q[layout.obstacle_slack(k)] = settings.obstacle_slack_weight;
         }
     }
+}
+
+fn derivatives_finite(value: f64, grad: &[f64], hess: &[f64]) -> bool {
+    value.is_finite() && grad.iter().chain(hess).all(|v| v.is_finite())
 }
 
 fn finite(x: &State) -> bool {
@@ -57,6 +61,7 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
         self.solution.sqp_iterations = 0;
         self.solution.step_norm = 0.0;
         self.solution.restarted = false;
+        self.solution.qp_time = Duration::ZERO;
         self.solution.qp_status = QpStatus::NotRun;
         self.solution.cost = f64::NAN;
 
@@ -201,11 +206,13 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
         if !self.build_qp(x_hat, goal) {
             return Some(FallbackReason::NonFiniteData);
         }
+        let qp_start = Instant::now();
         if self.backend.update(&self.data).is_err() {
             self.solution.qp_status = QpStatus::UpdateFailed;
             return Some(FallbackReason::QpFailed);
         }
         let outcome = self.backend.solve();
+        self.solution.qp_time += qp_start.elapsed();
         self.solution.qp_status = outcome.status;
         self.solution.qp_iterations += outcome.iterations;
         if !outcome.status.is_usable() {
@@ -239,6 +246,10 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
                 s.hessian,
                 &mut der,
             );
+            // Checked before the projection, which could hide a NaN.
+            if !derivatives_finite(der.value, &der.grad, der.hess.as_flattened()) {
+                return false;
+            }
             cost += s.dt * der.value;
             stage_block(
                 &der,
@@ -267,6 +278,9 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
             s.hessian,
             &mut term,
         );
+        if !derivatives_finite(term.value, &term.grad, term.hess.as_flattened()) {
+            return false;
+        }
         cost += term.value;
         terminal_block(
             &term,
@@ -330,7 +344,10 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
             let c = l.x(k);
             for i in 0..NX {
                 norm = norm.max(w[c + i].abs());
-                self.xs[k][i] += alpha * w[c + i];
+                // x₀ is x̂ itself (Δx₀ = 0 up to round-off).
+                if k > 0 {
+                    self.xs[k][i] += alpha * w[c + i];
+                }
             }
             if k < s.horizon {
                 let c = l.u(k);
@@ -351,15 +368,13 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
             }
         }
         for k in 0..s.horizon {
-            for j in 0..MAX_OBSTACLES {
-                let v = if j < l.n_obs {
-                    w[l.obstacle_slack(k, j)].max(0.0)
-                } else {
-                    0.0
-                };
-                self.solution.obstacle_slacks[k][j] = v;
-                slack_cost += s.obstacle_slack_weight * v;
-            }
+            let v = if l.n_obs > 0 {
+                w[l.obstacle_slack(k)].max(0.0)
+            } else {
+                0.0
+            };
+            self.solution.obstacle_slacks[k] = v;
+            slack_cost += s.obstacle_slack_weight * v;
         }
         self.solution.slack_cost = slack_cost;
     }

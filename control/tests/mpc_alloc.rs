@@ -1,0 +1,125 @@
+//! Acceptance (6): a tick allocates nothing on the heap outside the QP solver.
+//! A counting global allocator counts every allocation during `Mpc::step` and,
+//! separately, those inside the Clarabel backend's update and solve (through a
+//! wrapping `QpBackend`). One test in this binary, so no other test thread
+//! allocates while we count.
+
+mod common;
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use control::model::{Goal, MachineParams, State};
+use control::mpc::{
+    ClarabelBackend, Mpc, MpcSettings, Obstacle, QpBackend, QpData, QpOutcome, Rk4Model, StepStatus,
+};
+use control::{HessianMode, Plant, PlantConfig};
+
+struct Counting;
+static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+fn count() -> usize {
+    ALLOCATIONS.load(Ordering::SeqCst)
+}
+
+/// Clarabel, with the allocations made inside it counted.
+struct CountedClarabel {
+    inner: ClarabelBackend,
+    allocations: usize,
+}
+
+impl QpBackend for CountedClarabel {
+    fn update(&mut self, data: &QpData) -> Result<(), String> {
+        let before = count();
+        let r = self.inner.update(data);
+        self.allocations += count() - before;
+        r
+    }
+    fn solve(&mut self) -> QpOutcome {
+        let before = count();
+        let r = self.inner.solve();
+        self.allocations += count() - before;
+        r
+    }
+    fn primal(&self) -> &[f64] {
+        self.inner.primal()
+    }
+    fn dual(&self) -> &[f64] {
+        self.inner.dual()
+    }
+}
+
+#[test]
+fn tick_allocates_only_inside_clarabel() {
+    let p = MachineParams::default();
+    let obstacles = [Obstacle::new(3.0, 1.0, 0.8), Obstacle::new(2.0, 4.0, 0.5)];
+    for horizon in [10, 20, 40] {
+        for hessian in [HessianMode::Exact, HessianMode::GaussNewton] {
+            let settings = MpcSettings {
+                horizon,
+                hessian,
+                sqp_iterations: 2,
+                ..MpcSettings::default()
+            };
+            let mut mpc = Mpc::with_parts(
+                p,
+                common::random_critic(8, 11),
+                Rk4Model { params: p },
+                Some(common::random_actor(12)),
+                settings,
+                |l, d, s| {
+                    Ok(CountedClarabel {
+                        inner: ClarabelBackend::new(l, d, s)?,
+                        allocations: 0,
+                    })
+                },
+            )
+            .unwrap();
+            mpc.set_goal(Goal::new(4.5, 4.5, 1.0), &obstacles).unwrap();
+            let mut plant = Plant::new(p, PlantConfig::default(), State::zeros()).unwrap();
+            let ticks = 30;
+            let (mut total, mut solves) = (0, 0);
+            let backend_before = mpc.backend().allocations;
+            for _ in 0..ticks {
+                let x = plant.state();
+                let before = count();
+                let sol = mpc.step(&x).unwrap();
+                total += count() - before;
+                assert_eq!(sol.status, StepStatus::Solved);
+                solves += sol.sqp_iterations as usize;
+                let cmd = sol.command;
+                plant.command(cmd).unwrap();
+                plant.advance(settings.dt);
+            }
+            let clarabel = mpc.backend().allocations - backend_before;
+            eprintln!(
+                "N={horizon} {hessian:?}: {ticks} ticks, {solves} QP solves, {clarabel} allocations inside Clarabel \
+                 ({:.1} per solve), {} elsewhere",
+                clarabel as f64 / solves as f64,
+                total - clarabel
+            );
+            assert_eq!(
+                total - clarabel,
+                0,
+                "N={horizon} {hessian:?}: heap allocations outside the QP solver"
+            );
+        }
+    }
+}
