@@ -1,0 +1,358 @@
+//! `goal`, `cancel`, `stop` and `watch`, plus the telemetry-following loop that `goal --wait`
+//! and `demo` share.
+
+use std::io::Write;
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+
+use crate::endpoint::{Client, TelemetrySubscriber};
+use crate::error::{ClientError, IpcError};
+use crate::msg::{GoalReply, GoalRequest, Pose2, RejectCode, Telemetry};
+
+use super::follow::{GoalStatus, GoalTracker};
+use super::view::{self, mode_name};
+use super::{exit, signal, Cli, GoalArgs, RequestArgs, WatchArgs};
+
+/// Writes one line to stdout; false if stdout is gone (`wlnav watch | head`), so callers
+/// stop quietly instead of panicking on a broken pipe.
+pub fn emit(line: &str) -> bool {
+    let mut out = std::io::stdout().lock();
+    writeln!(out, "{line}").and_then(|_| out.flush()).is_ok()
+}
+
+/// Connects a client, with a message that names the prefix on failure.
+pub fn connect(cli: &Cli) -> anyhow::Result<Client> {
+    let config = cli.ipc_config();
+    Client::new(&config).with_context(|| {
+        format!(
+            "cannot open the shared-memory services of prefix {:?}",
+            config.prefix
+        )
+    })
+}
+
+/// A reject code's short name.
+pub fn reject_code_name(code: u32) -> String {
+    match RejectCode::try_from(code) {
+        Ok(RejectCode::None) => "none".into(),
+        Ok(RejectCode::NonFinite) => "non-finite".into(),
+        Ok(RejectCode::OutOfWorkspace) => "out-of-workspace".into(),
+        Ok(RejectCode::TooManyObstacles) => "too-many-obstacles".into(),
+        Ok(RejectCode::BadObstacle) => "bad-obstacle".into(),
+        Ok(RejectCode::GoalInsideObstacle) => "goal-inside-obstacle".into(),
+        Ok(RejectCode::UnknownKind) => "unknown-kind".into(),
+        Ok(RejectCode::NotReady) => "not-ready".into(),
+        Ok(RejectCode::Other) => "other".into(),
+        Err(c) => format!("code-{c}"),
+    }
+}
+
+/// `rejected (out-of-workspace): goal (60.000, 0.000) m is outside …`.
+pub fn describe_reply(reply: &GoalReply) -> String {
+    if reply.is_accepted() {
+        format!("accepted (request {})", reply.request_id)
+    } else {
+        format!(
+            "rejected ({}): {}",
+            reject_code_name(reply.reason_code),
+            reply.reason_text()
+        )
+    }
+}
+
+/// Explains a failed request and picks the exit code.
+fn request_error(cli: &Cli, e: ClientError) -> u8 {
+    match &e {
+        ClientError::NoDaemon { .. } => eprintln!(
+            "wlnav: {e} (is wlnavd running{}?)",
+            cli.prefix
+                .as_deref()
+                .map(|p| format!(" with --prefix {p}"))
+                .unwrap_or_default()
+        ),
+        _ => eprintln!("wlnav: {e}"),
+    }
+    exit::ERROR
+}
+
+/// `wlnav goal X Y HEADING [--obstacle x,y,r]... [--wait]`.
+pub fn goal(cli: &Cli, a: &GoalArgs) -> anyhow::Result<u8> {
+    let heading = if a.deg {
+        a.heading.to_radians()
+    } else {
+        a.heading
+    };
+    let goal = Pose2::new(a.x, a.y, heading);
+    if a.obstacles.len() > crate::MAX_OBSTACLES {
+        eprintln!(
+            "wlnav: {} obstacles given, at most {} fit in a request",
+            a.obstacles.len(),
+            crate::MAX_OBSTACLES
+        );
+        return Ok(exit::USAGE);
+    }
+    let client = connect(cli)?;
+    // Subscribe before sending so no tick after the acceptance is missed.
+    let sub = if a.wait {
+        Some(client.subscribe_telemetry()?)
+    } else {
+        None
+    };
+    let id = client.next_request_id();
+    let req = GoalRequest::set_goal(id, goal, &a.obstacles)
+        .context("too many obstacles for one request")?;
+    let reply = match client.request(&req, Duration::from_secs_f64(a.reply_timeout)) {
+        Ok(r) => r,
+        Err(e) => return Ok(request_error(cli, e)),
+    };
+    emit(&format!(
+        "goal ({:.3}, {:.3}) m heading {:.1}°, {} obstacle{}: {}",
+        goal.x,
+        goal.y,
+        goal.heading.to_degrees(),
+        a.obstacles.len(),
+        if a.obstacles.len() == 1 { "" } else { "s" },
+        describe_reply(&reply)
+    ));
+    if !reply.is_accepted() {
+        return Ok(exit::REJECTED);
+    }
+    let Some(sub) = sub else {
+        return Ok(exit::OK);
+    };
+    let mut tracker = GoalTracker::new(id, goal);
+    let opts = FollowOptions {
+        timeout: Duration::from_secs_f64(a.timeout),
+        ..FollowOptions::default()
+    };
+    let every = ticks_per_second(cli.tick_s());
+    let end = follow(&sub, &mut tracker, &opts, |t, tr| {
+        if tr.status().is_final() || t.tick % every == 0 {
+            emit(&progress_line(t, tr, cli.tick_s()));
+        }
+    })?;
+    if end == FollowEnd::Interrupted {
+        emit("interrupted: the goal stays active (`wlnav cancel` drops it)");
+        return Ok(exit::INTERRUPTED);
+    }
+    emit(&outcome_line(&tracker, cli.tick_s()));
+    Ok(match tracker.status() {
+        GoalStatus::Reached => exit::OK,
+        _ => exit::FAILED,
+    })
+}
+
+/// Ticks in one second (at least 1).
+pub fn ticks_per_second(tick_s: f64) -> u64 {
+    ((1.0 / tick_s).round() as u64).max(1)
+}
+
+/// `reached: converged after 9.8 s, reported reached after 10.2 s (51 ticks)` or
+/// `failed: …`.
+pub fn outcome_line(tracker: &GoalTracker, tick_s: f64) -> String {
+    let secs = |tick: Option<u64>| {
+        tick.and_then(|t| tracker.ticks_since_start(t))
+            .map(|n| n as f64 * tick_s)
+    };
+    match tracker.status() {
+        GoalStatus::Reached => format!(
+            "reached: converged (DESIGN §7, < 0.1) after {}, reported reached after {} ({} ticks)",
+            secs(tracker.converged_tick)
+                .map(|s| format!("{s:.1} s"))
+                .unwrap_or_else(|| "? s".into()),
+            secs(tracker.reached_tick)
+                .map(|s| format!("{s:.1} s"))
+                .unwrap_or_else(|| "? s".into()),
+            tracker
+                .reached_tick
+                .and_then(|t| tracker.ticks_since_start(t))
+                .unwrap_or(0)
+        ),
+        GoalStatus::Failed(why) => format!("failed: {why}"),
+        GoalStatus::Pending => "no telemetry for this goal".into(),
+        GoalStatus::Active => "still driving".into(),
+    }
+}
+
+/// One progress line: time since the goal started, mode, pose, remaining error, speed.
+pub fn progress_line(t: &Telemetry, tracker: &GoalTracker, tick_s: f64) -> String {
+    let since = tracker.ticks_since_start(t.tick).unwrap_or(0) as f64 * tick_s;
+    let s = &t.state;
+    format!(
+        "  t {:5.1} s  {:<8} at ({:6.2}, {:6.2}) θ {:6.1}°  to go {:5.2} m {:6.1}°  v {:5.2} m/s  solve {:5.1} ms",
+        since,
+        mode_name(t.mode),
+        s.x_f,
+        s.y_f,
+        s.theta_f.to_degrees(),
+        t.pose_error_xy,
+        t.pose_error_heading.to_degrees(),
+        s.v_f,
+        t.solve_time_us / 1000.0
+    )
+}
+
+/// Limits of [`follow`].
+#[derive(Debug, Clone)]
+pub struct FollowOptions {
+    /// Wall-clock limit for the whole follow.
+    pub timeout: Duration,
+    /// Fail if no telemetry arrives for this long.
+    pub silence: Duration,
+    /// Fail if the goal is not reached within this many ticks of its first tick (the
+    /// paper's 30 s test is 150 ticks at 5 Hz).
+    pub max_ticks: Option<u64>,
+    /// Fail if the daemon has not taken the goal up within this many samples.
+    pub max_pending_samples: u64,
+}
+
+impl Default for FollowOptions {
+    fn default() -> Self {
+        Self {
+            timeout: Duration::from_secs(120),
+            silence: Duration::from_secs(3),
+            max_ticks: None,
+            max_pending_samples: 50,
+        }
+    }
+}
+
+/// How [`follow`] ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FollowEnd {
+    /// The tracker reached a final status (reached or failed).
+    Final,
+    /// Ctrl-C / SIGTERM.
+    Interrupted,
+}
+
+/// Feeds telemetry to `tracker` until its status is final (reached, failed, timed out),
+/// calling `on_sample` after each sample.
+pub fn follow(
+    sub: &TelemetrySubscriber,
+    tracker: &mut GoalTracker,
+    opts: &FollowOptions,
+    mut on_sample: impl FnMut(&Telemetry, &GoalTracker),
+) -> Result<FollowEnd, IpcError> {
+    let start = Instant::now();
+    let mut last_sample = Instant::now();
+    let mut pending_samples = 0u64;
+    loop {
+        if signal::requested() {
+            return Ok(FollowEnd::Interrupted);
+        }
+        if let Some(t) = sub.recv_timeout(Duration::from_millis(100))? {
+            last_sample = Instant::now();
+            tracker.update(&t);
+            if *tracker.status() == GoalStatus::Pending {
+                pending_samples += 1;
+                if pending_samples > opts.max_pending_samples {
+                    tracker.fail(format!(
+                        "the daemon did not take the goal up within {} ticks",
+                        opts.max_pending_samples
+                    ));
+                }
+            }
+            if let (Some(max), Some(n)) = (opts.max_ticks, tracker.ticks_since_start(t.tick)) {
+                if n >= max && !tracker.status().is_final() {
+                    tracker.fail(format!("not reached within {max} ticks"));
+                }
+            }
+            on_sample(&t, tracker);
+        } else if last_sample.elapsed() >= opts.silence {
+            tracker.fail(format!(
+                "no telemetry for {:.1} s: is the daemon still running?",
+                opts.silence.as_secs_f64()
+            ));
+        }
+        if !tracker.status().is_final() && start.elapsed() >= opts.timeout {
+            tracker.fail(format!(
+                "no result within {:.0} s",
+                opts.timeout.as_secs_f64()
+            ));
+        }
+        if tracker.status().is_final() {
+            return Ok(FollowEnd::Final);
+        }
+    }
+}
+
+/// `wlnav cancel` / `wlnav stop`.
+pub fn cancel_or_stop(cli: &Cli, a: &RequestArgs, stop: bool) -> anyhow::Result<u8> {
+    let client = connect(cli)?;
+    let timeout = Duration::from_secs_f64(a.reply_timeout);
+    let result = if stop {
+        client.stop(timeout)
+    } else {
+        client.cancel(timeout)
+    };
+    let reply = match result {
+        Ok(r) => r,
+        Err(e) => return Ok(request_error(cli, e)),
+    };
+    emit(&format!(
+        "{}: {}",
+        if stop { "stop" } else { "cancel" },
+        describe_reply(&reply)
+    ));
+    Ok(if reply.is_accepted() {
+        exit::OK
+    } else {
+        exit::REJECTED
+    })
+}
+
+/// `wlnav watch [--table] [--count N]`.
+pub fn watch(cli: &Cli, a: &WatchArgs) -> anyhow::Result<u8> {
+    let client = connect(cli)?;
+    let sub = client.subscribe_telemetry()?;
+    let silence = Duration::from_secs_f64(a.silence_timeout);
+    let mut last_sample = Instant::now();
+    let mut last_tick: Option<u64> = None;
+    let mut shown = 0u64;
+    let mut hinted = false;
+    while !signal::requested() {
+        if a.count.is_some_and(|c| shown >= c) {
+            break;
+        }
+        let Some(t) = sub.recv_timeout(Duration::from_millis(200))? else {
+            if !hinted && last_sample.elapsed() > Duration::from_secs(1) {
+                eprintln!(
+                    "wlnav: waiting for telemetry on {:?} …",
+                    client.service_names().telemetry
+                );
+                hinted = true;
+            }
+            if last_sample.elapsed() >= silence {
+                eprintln!(
+                    "wlnav: no telemetry for {:.0} s (is wlnavd running{}?)",
+                    silence.as_secs_f64(),
+                    cli.prefix
+                        .as_deref()
+                        .map(|p| format!(" with --prefix {p}"))
+                        .unwrap_or_default()
+                );
+                return Ok(exit::ERROR);
+            }
+            continue;
+        };
+        last_sample = Instant::now();
+        if let Some(prev) = last_tick {
+            if t.tick > prev + 1 {
+                eprintln!("wlnav: ({} ticks not seen)", t.tick - prev - 1);
+            }
+        }
+        last_tick = Some(t.tick);
+        let ok = if a.table {
+            (shown % 20 != 0 || emit(&view::table_header())) && emit(&view::table_row(&t))
+        } else {
+            emit(&view::line(&t))
+        };
+        if !ok {
+            break;
+        }
+        shown += 1;
+    }
+    Ok(exit::OK)
+}

@@ -1,0 +1,385 @@
+//! `wlnav demo`: the whole system in one command. Starts `wlnavd --sim` (the built-in
+//! simulated machine, no configuration) under a private prefix, waits until it is ready,
+//! drives the short loading cycle in [`LOADING_CYCLE`] through the real shared-memory path
+//! (goal requests, telemetry), prints progress and each leg's convergence time, writes an
+//! SVG of the driven path with the planned horizons, and stops the daemon with SIGTERM.
+//! Exit code 0 only if every leg was reached.
+
+use std::ffi::OsString;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+use clap::Args;
+
+use crate::config::IpcConfig;
+use crate::endpoint::Client;
+use crate::error::ClientError;
+use crate::msg::{GoalReply, Pose2};
+
+use super::commands::{
+    describe_reply, emit, follow, outcome_line, progress_line, ticks_per_second, FollowEnd,
+    FollowOptions,
+};
+use super::daemon_process::{locate_wlnavd, unique_prefix, DaemonProcess};
+use super::follow::{GoalStatus, GoalTracker};
+use super::plot::{write_svg, LegTrace};
+use super::record::{record, RecordLimits};
+use super::{args, exit, signal, Cli};
+
+/// One goal of the demo.
+#[derive(Debug, Clone, Copy)]
+pub struct Leg {
+    /// What the leg does.
+    pub name: &'static str,
+    /// Goal of the front axle.
+    pub goal: Pose2,
+}
+
+/// A short V-pattern loading cycle from the origin (heading 0): forward into the pile face
+/// 5 m ahead, back out to the apex of the V while turning the nose 60° to the right, then
+/// forward 5 m along the new heading to the dump point (truck). Each leg is 4–5 m, inside
+/// the goal distances the critic was trained on (2.5–10 m).
+pub const LOADING_CYCLE: [Leg; 3] = [
+    Leg {
+        name: "drive to the pile face",
+        goal: Pose2::new(5.0, 0.0, 0.0),
+    },
+    Leg {
+        name: "back out while turning",
+        goal: Pose2::new(1.5, 1.5, -std::f64::consts::FRAC_PI_3),
+    },
+    Leg {
+        name: "drive to the dump point",
+        goal: Pose2::new(4.0, -2.83, -std::f64::consts::FRAC_PI_3),
+    },
+];
+
+/// `wlnav demo` options.
+#[derive(Debug, Clone, Args)]
+pub struct DemoArgs {
+    /// Where to write the SVG of the driven path and planned horizons
+    #[arg(long, default_value = "wlnav-demo.svg")]
+    pub out: PathBuf,
+    /// Run the simulated machine this many times faster than real time (wlnavd --time-scale)
+    #[arg(long, value_parser = args::parse_seconds)]
+    pub time_scale: Option<f64>,
+    /// The wlnavd binary [default: next to this executable, then PATH]
+    #[arg(long)]
+    pub wlnavd: Option<PathBuf>,
+    /// Extra argument for wlnavd (repeatable)
+    #[arg(long = "daemon-arg", allow_hyphen_values = true)]
+    pub daemon_args: Vec<OsString>,
+    /// Per-leg limit in simulated seconds (the paper's success test uses 30 s)
+    #[arg(long, default_value_t = 30.0, value_parser = args::parse_seconds)]
+    pub leg_timeout: f64,
+    /// How long the daemon may take to start (load weights, first solve) [s]
+    #[arg(long, default_value_t = 60.0, value_parser = args::parse_seconds)]
+    pub ready_timeout: f64,
+    /// Also record all telemetry of the run to this MCAP file
+    #[arg(long)]
+    pub record: Option<PathBuf>,
+}
+
+/// What happened on one leg.
+#[derive(Debug, Clone)]
+pub struct LegResult {
+    /// The leg.
+    pub leg: Leg,
+    /// The daemon's reply (None if the request itself failed).
+    pub reply: Option<GoalReply>,
+    /// Final status.
+    pub status: GoalStatus,
+    /// Seconds (simulated) from the goal's first tick to the DESIGN §7 convergence.
+    pub converged_s: Option<f64>,
+    /// Seconds (simulated) until the daemon reported the goal reached.
+    pub reached_s: Option<f64>,
+    /// Driven path length [m].
+    pub path_length: f64,
+    /// Largest solve time [ms].
+    pub max_solve_ms: f64,
+    /// Ticks with the overrun flag.
+    pub overruns: u64,
+    /// Trace for the picture.
+    pub trace: LegTrace,
+}
+
+fn send_goal(client: &Client, goal: Pose2) -> Result<(u64, GoalReply), ClientError> {
+    // The daemon may answer "no server" for a moment after its first telemetry: retry.
+    let mut tries = 0;
+    loop {
+        let id = client.next_request_id();
+        let req = crate::msg::GoalRequest::set_goal(id, goal, &[]).expect("no obstacles");
+        match client.request(&req, Duration::from_secs(2)) {
+            Err(ClientError::NoDaemon { .. }) if tries < 20 => {
+                tries += 1;
+                std::thread::sleep(Duration::from_millis(100));
+            }
+            other => return other.map(|r| (id, r)),
+        }
+    }
+}
+
+fn path_length(path: &[(f64, f64)]) -> f64 {
+    path.windows(2)
+        .map(|w| (w[1].0 - w[0].0).hypot(w[1].1 - w[0].1))
+        .sum()
+}
+
+/// `wlnav demo`.
+pub fn run(cli: &Cli, a: &DemoArgs) -> anyhow::Result<u8> {
+    let tick_s = cli.tick_s();
+    let binary = locate_wlnavd(a.wlnavd.as_deref())?;
+    let prefix = cli
+        .prefix
+        .clone()
+        .unwrap_or_else(|| unique_prefix("wlnav-demo"));
+    let log = std::env::temp_dir().join(format!("wlnav-demo-{}.log", std::process::id()));
+    emit("wlnav demo: a loading cycle on the simulated machine, through shared memory");
+    let mut daemon =
+        DaemonProcess::spawn_sim(&binary, &prefix, a.time_scale, &a.daemon_args, Some(&log))?;
+    emit(&format!(
+        "  daemon   {} --sim --prefix {}{} (pid {}, log {})",
+        binary.display(),
+        prefix,
+        a.time_scale
+            .map(|s| format!(" --time-scale {s}"))
+            .unwrap_or_default(),
+        daemon.pid().unwrap_or(0),
+        log.display()
+    ));
+
+    let config = IpcConfig::new(prefix.clone());
+    let client = Client::new(&config).context("cannot open the shared-memory services")?;
+    let sub = client.subscribe_telemetry()?;
+    let started = Instant::now();
+    let first = match daemon.wait_ready(&sub, Duration::from_secs_f64(a.ready_timeout)) {
+        Ok(t) => t,
+        Err(e) => {
+            eprintln!("wlnav demo: {e:#}");
+            return Ok(exit::ERROR);
+        }
+    };
+    let start = Pose2::new(first.state.x_f, first.state.y_f, first.state.theta_f);
+    emit(&format!(
+        "  ready    after {:.1} s: mode {}, machine at ({:.2}, {:.2}) heading {:.1}°",
+        started.elapsed().as_secs_f64(),
+        super::view::mode_name(first.mode),
+        start.x,
+        start.y,
+        start.heading.to_degrees()
+    ));
+
+    // Optional recording on its own thread, with its own subscription.
+    let rec_stop = Arc::new(AtomicBool::new(false));
+    let recorder = a.record.clone().map(|path| {
+        let stop = rec_stop.clone();
+        let config = config.clone();
+        std::thread::spawn(move || record(&config, &path, &RecordLimits::default(), &stop))
+    });
+
+    let scale = a.time_scale.unwrap_or(1.0);
+    let max_ticks = (a.leg_timeout / tick_s).round() as u64;
+    let opts = FollowOptions {
+        timeout: Duration::from_secs_f64(a.leg_timeout / scale * 2.0 + 15.0),
+        silence: Duration::from_secs(3),
+        max_ticks: Some(max_ticks),
+        max_pending_samples: 50,
+    };
+    let every = ticks_per_second(tick_s);
+    let mut results: Vec<LegResult> = Vec::new();
+    let mut interrupted = false;
+    for (i, leg) in LOADING_CYCLE.iter().enumerate() {
+        let g = leg.goal;
+        let head = format!(
+            "\nleg {}/{} {}: goal ({:.2}, {:.2}) heading {:.0}°",
+            i + 1,
+            LOADING_CYCLE.len(),
+            leg.name,
+            g.x,
+            g.y,
+            g.heading.to_degrees()
+        );
+        let mut trace = LegTrace {
+            name: leg.name.to_owned(),
+            goal: g,
+            ..LegTrace::default()
+        };
+        let (id, reply) = match send_goal(&client, g) {
+            Ok(r) => r,
+            Err(e) => {
+                emit(&format!("{head}: request failed: {e}"));
+                results.push(LegResult {
+                    leg: *leg,
+                    reply: None,
+                    status: GoalStatus::Failed(e.to_string()),
+                    converged_s: None,
+                    reached_s: None,
+                    path_length: 0.0,
+                    max_solve_ms: 0.0,
+                    overruns: 0,
+                    trace,
+                });
+                continue;
+            }
+        };
+        emit(&format!("{head}: {}", describe_reply(&reply)));
+        let mut tracker = GoalTracker::new(id, g);
+        if !reply.is_accepted() {
+            tracker.fail(format!("rejected: {}", reply.reason_text()));
+        } else {
+            let end = follow(&sub, &mut tracker, &opts, |t, tr| {
+                if tr.first_tick.is_none() {
+                    return;
+                }
+                trace.path.push((t.state.x_f, t.state.y_f));
+                let n = tr.ticks_since_start(t.tick).unwrap_or(0);
+                if n % every == 0 && !tr.status().is_final() {
+                    trace
+                        .horizons
+                        .push(t.trajectory().iter().map(|s| (s.x_f, s.y_f)).collect());
+                }
+                if tr.status().is_final() || n % every == 0 {
+                    emit(&progress_line(t, tr, tick_s));
+                }
+            })?;
+            if end == FollowEnd::Interrupted {
+                tracker.fail("interrupted");
+                interrupted = true;
+            }
+        }
+        emit(&format!("  {}", outcome_line(&tracker, tick_s)));
+        let secs = |tick: Option<u64>| {
+            tick.and_then(|t| tracker.ticks_since_start(t))
+                .map(|n| n as f64 * tick_s)
+        };
+        trace.reached = *tracker.status() == GoalStatus::Reached;
+        results.push(LegResult {
+            leg: *leg,
+            reply: Some(reply),
+            status: tracker.status().clone(),
+            converged_s: secs(tracker.converged_tick),
+            reached_s: secs(tracker.reached_tick),
+            path_length: path_length(&trace.path),
+            max_solve_ms: tracker.max_solve_us / 1000.0,
+            overruns: tracker.overruns,
+            trace,
+        });
+        if interrupted {
+            break;
+        }
+    }
+
+    rec_stop.store(true, Ordering::SeqCst);
+    let rec_result = recorder.map(|h| h.join());
+
+    emit("\nsummary (times in simulated seconds from the goal's first tick; converged = DESIGN §7 test < 0.1)");
+    emit(&format!(
+        "  {:<3} {:<26} {:<24} {:<12} {:>9} {:>8} {:>7} {:>9} {:>8}",
+        "leg",
+        "what",
+        "goal (x, y, heading)",
+        "result",
+        "converged",
+        "reached",
+        "path",
+        "max solve",
+        "overruns"
+    ));
+    for (i, r) in results.iter().enumerate() {
+        let g = r.leg.goal;
+        let fmt_s = |s: Option<f64>| s.map(|s| format!("{s:.1} s")).unwrap_or_else(|| "-".into());
+        emit(&format!(
+            "  {:<3} {:<26} {:<24} {:<12} {:>9} {:>8} {:>5.1} m {:>6.1} ms {:>8}",
+            i + 1,
+            r.leg.name,
+            format!("({:.2}, {:.2}, {:.0}°)", g.x, g.y, g.heading.to_degrees()),
+            match &r.status {
+                GoalStatus::Reached => "reached",
+                GoalStatus::Failed(_) => "NOT reached",
+                _ => "?",
+            },
+            fmt_s(r.converged_s),
+            fmt_s(r.reached_s),
+            r.path_length,
+            r.max_solve_ms,
+            r.overruns
+        ));
+    }
+    let reached = results
+        .iter()
+        .filter(|r| r.status == GoalStatus::Reached)
+        .count();
+    let total: f64 = results.iter().filter_map(|r| r.reached_s).sum();
+    emit(&format!(
+        "  {reached}/{} legs reached{}",
+        LOADING_CYCLE.len(),
+        if reached == LOADING_CYCLE.len() {
+            format!(", cycle time {total:.1} s")
+        } else {
+            String::new()
+        }
+    ));
+
+    let traces: Vec<LegTrace> = results.iter().map(|r| r.trace.clone()).collect();
+    match write_svg(
+        &a.out,
+        &format!(
+            "wlnav demo: loading cycle, {reached}/{} legs reached",
+            LOADING_CYCLE.len()
+        ),
+        start,
+        &traces,
+    ) {
+        Ok(()) => {
+            emit(&format!(
+                "  picture  {} (driven path, planned horizons every 1 s)",
+                a.out.display()
+            ));
+        }
+        Err(e) => eprintln!("wlnav demo: cannot write the SVG: {e:#}"),
+    }
+    if let (Some(Ok(Ok(s))), Some(path)) = (&rec_result, &a.record) {
+        emit(&format!(
+            "  recording {} ({} ticks, {} missed)",
+            path.display(),
+            s.messages,
+            s.missing_ticks
+        ));
+    } else if let Some(Ok(Err(e))) = &rec_result {
+        eprintln!("wlnav demo: recording failed: {e:#}");
+    }
+
+    let code = match daemon.terminate(Duration::from_secs(10)) {
+        Ok((status, killed)) => {
+            emit(&format!(
+                "  daemon   stopped with SIGTERM{}: {status}",
+                if killed {
+                    ", then SIGKILL (it did not exit within 10 s)"
+                } else {
+                    ""
+                }
+            ));
+            if killed || !status.success() {
+                eprintln!(
+                    "wlnav demo: the daemon did not stop cleanly; log tail:\n{}",
+                    daemon.log_tail(15)
+                );
+            }
+            if interrupted || signal::requested() {
+                exit::INTERRUPTED
+            } else if reached == LOADING_CYCLE.len() {
+                exit::OK
+            } else {
+                exit::FAILED
+            }
+        }
+        Err(e) => {
+            eprintln!("wlnav demo: cannot stop the daemon: {e:#}");
+            exit::ERROR
+        }
+    };
+    Ok(code)
+}

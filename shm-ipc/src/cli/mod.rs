@@ -1,0 +1,202 @@
+//! The `wlnav` command-line client: talk to `wlnavd` over shared memory.
+//!
+//! The binary (`src/bin/wlnav.rs`) only parses arguments and calls [`run`]; everything else
+//! lives here so tests reach it. Subcommands:
+//!
+//! | command | what it does | exit code |
+//! |---|---|---|
+//! | `goal X Y HEADING [--obstacle x,y,r]... [--wait]` | send a goal, print the daemon's accept/reject and reason; with `--wait` follow telemetry until reached or failed | 0 accepted (reached with `--wait`), 1 rejected, 3 failed, 4 no daemon |
+//! | `cancel`, `stop` | drop the goal / controlled stop | 0, 1 rejected, 4 no daemon |
+//! | `watch [--table] [--count N]` | one line per tick, or a table | 0, 4 no telemetry |
+//! | `record FILE.mcap [--duration S] [--ticks N]` | telemetry to MCAP (JSON schema, `json` messages: opens in Foxglove) | 0 |
+//! | `demo` | start `wlnavd --sim`, drive a loading cycle, print times, write an SVG | 0 all legs reached, 3 a leg failed, 4 daemon trouble |
+//!
+//! Usage errors (bad numbers, NaN, malformed `--obstacle`) exit with 2 and name the
+//! argument. The global `--prefix` selects the daemon (`wlnavd --prefix`).
+
+pub mod args;
+pub mod commands;
+pub mod daemon_process;
+pub mod demo;
+pub mod follow;
+pub mod plot;
+pub mod record;
+pub mod signal;
+pub mod view;
+
+use std::path::PathBuf;
+
+use clap::{Args, Parser, Subcommand};
+
+use crate::config::{IpcConfig, DEFAULT_PREFIX};
+use crate::msg::Obstacle;
+
+/// Process exit codes of `wlnav` (documented in `--help`).
+pub mod exit {
+    /// Success: accepted, reached, finished.
+    pub const OK: u8 = 0;
+    /// The daemon rejected the request.
+    pub const REJECTED: u8 = 1;
+    /// Bad command line (clap's code).
+    pub const USAGE: u8 = 2;
+    /// The goal (or a demo leg) was accepted but not reached.
+    pub const FAILED: u8 = 3;
+    /// No daemon, no telemetry, a transport or file error.
+    pub const ERROR: u8 = 4;
+    /// Interrupted by Ctrl-C / SIGTERM while waiting.
+    pub const INTERRUPTED: u8 = 130;
+}
+
+const AFTER_HELP: &str = "\
+Exit codes: 0 ok (goal accepted, or reached with --wait), 1 rejected by the daemon,
+2 bad command line, 3 goal failed / demo leg not reached, 4 no daemon, no telemetry or another error,
+130 interrupted.
+
+Angles are radians unless --deg is given; lengths metres; the pose is the front axle's.";
+
+/// `wlnav`: goals, stop and telemetry for the wlnavd wheel-loader controller.
+#[derive(Debug, Parser)]
+#[command(name = "wlnav", version, about, after_help = AFTER_HELP)]
+pub struct Cli {
+    /// Service-name prefix of the daemon (as given to `wlnavd --prefix`) [default: wlnav;
+    /// `demo` picks a unique one]
+    #[arg(long, global = true, value_parser = args::parse_prefix)]
+    pub prefix: Option<String>,
+
+    /// Control tick rate of the daemon, used to turn tick counts into seconds [Hz]
+    #[arg(long, global = true, default_value_t = 5.0, value_parser = parse_rate)]
+    pub tick_hz: f64,
+
+    /// What to do
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+impl Cli {
+    /// The IPC settings for the chosen prefix (default `wlnav`).
+    pub fn ipc_config(&self) -> IpcConfig {
+        IpcConfig::new(
+            self.prefix
+                .clone()
+                .unwrap_or_else(|| DEFAULT_PREFIX.to_owned()),
+        )
+    }
+
+    /// Seconds per control tick.
+    pub fn tick_s(&self) -> f64 {
+        1.0 / self.tick_hz
+    }
+}
+
+fn parse_rate(text: &str) -> Result<f64, String> {
+    let v = args::finite_f64("--tick-hz", text)?;
+    if v <= 0.0 {
+        return Err(format!("--tick-hz must be positive, got {v}"));
+    }
+    Ok(v)
+}
+
+/// The subcommands.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Send a goal pose; prints the daemon's accept or reject and its reason
+    #[command(allow_negative_numbers = true)]
+    Goal(GoalArgs),
+    /// Drop the current goal and come to a controlled stop
+    Cancel(RequestArgs),
+    /// Controlled stop now
+    Stop(RequestArgs),
+    /// Show telemetry live, one line per tick (or a table with --table)
+    Watch(WatchArgs),
+    /// Record telemetry to an MCAP file (JSON schema; opens in Foxglove)
+    Record(RecordArgs),
+    /// Start wlnavd with its simulated machine and drive a loading cycle
+    Demo(demo::DemoArgs),
+}
+
+/// `wlnav goal`.
+#[derive(Debug, Clone, Args)]
+pub struct GoalArgs {
+    /// Goal x of the front axle [m]
+    #[arg(value_parser = args::parse_x, allow_hyphen_values = true)]
+    pub x: f64,
+    /// Goal y of the front axle [m]
+    #[arg(value_parser = args::parse_y, allow_hyphen_values = true)]
+    pub y: f64,
+    /// Goal heading of the front body [rad, or degrees with --deg], counter-clockwise
+    #[arg(value_parser = args::parse_heading, allow_hyphen_values = true)]
+    pub heading: f64,
+    /// HEADING is in degrees
+    #[arg(long)]
+    pub deg: bool,
+    /// Circular obstacle `x,y,r` [m], radius already inflated by the machine's; up to 8
+    #[arg(long = "obstacle", value_name = "x,y,r", value_parser = args::parse_obstacle,
+          allow_hyphen_values = true)]
+    pub obstacles: Vec<Obstacle>,
+    /// Follow telemetry until the goal is reached or fails; the exit code says which
+    #[arg(long)]
+    pub wait: bool,
+    /// With --wait: give up after this many seconds (wall clock)
+    #[arg(long, default_value_t = 120.0, value_parser = args::parse_seconds)]
+    pub timeout: f64,
+    /// How long to wait for the daemon's reply [s]
+    #[arg(long, default_value_t = 2.0, value_parser = args::parse_seconds)]
+    pub reply_timeout: f64,
+}
+
+/// `wlnav cancel` / `wlnav stop`.
+#[derive(Debug, Clone, Args)]
+pub struct RequestArgs {
+    /// How long to wait for the daemon's reply [s]
+    #[arg(long, default_value_t = 2.0, value_parser = args::parse_seconds)]
+    pub reply_timeout: f64,
+}
+
+/// `wlnav watch`.
+#[derive(Debug, Clone, Args)]
+pub struct WatchArgs {
+    /// Aligned table (header repeated every 20 rows) instead of one long line per tick
+    #[arg(long)]
+    pub table: bool,
+    /// Stop after this many ticks
+    #[arg(long)]
+    pub count: Option<u64>,
+    /// Give up if no telemetry arrives for this long [s]
+    #[arg(long, default_value_t = 10.0, value_parser = args::parse_seconds)]
+    pub silence_timeout: f64,
+}
+
+/// `wlnav record`.
+#[derive(Debug, Clone, Args)]
+pub struct RecordArgs {
+    /// Output file (MCAP); overwritten if it exists
+    pub file: PathBuf,
+    /// Stop after this many seconds (wall clock); default: until Ctrl-C
+    #[arg(long, value_parser = args::parse_seconds)]
+    pub duration: Option<f64>,
+    /// Stop after this many ticks
+    #[arg(long)]
+    pub ticks: Option<u64>,
+}
+
+/// Runs a parsed command line; returns the process exit code.
+pub fn run(cli: Cli) -> u8 {
+    // iceoryx2 warns on stderr when it has no config file; a CLI user cannot act on that.
+    crate::iceoryx2::prelude::set_log_level(crate::iceoryx2::prelude::LogLevel::Error);
+    signal::install();
+    let result = match &cli.command {
+        Command::Goal(a) => commands::goal(&cli, a),
+        Command::Cancel(a) => commands::cancel_or_stop(&cli, a, false),
+        Command::Stop(a) => commands::cancel_or_stop(&cli, a, true),
+        Command::Watch(a) => commands::watch(&cli, a),
+        Command::Record(a) => record::run(&cli, a),
+        Command::Demo(a) => demo::run(&cli, a),
+    };
+    match result {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("wlnav: error: {e:#}");
+            exit::ERROR
+        }
+    }
+}

@@ -1,0 +1,164 @@
+//! Human-readable renderings of [`Telemetry`]: the one-line-per-tick view and the table view
+//! of `wlnav watch`, mode and fault names (shared with `record` and `demo`).
+
+use crate::msg::{fault_flags, Mode, Telemetry};
+
+/// Fault bits and their names, in bit order.
+pub const FAULT_NAMES: [(u32, &str); 9] = [
+    (fault_flags::POSE_STALE, "pose-stale"),
+    (fault_flags::MACHINE_STATE_STALE, "machine-state-stale"),
+    (fault_flags::CAN_CRC, "can-crc"),
+    (fault_flags::CAN_ALIVE, "can-alive"),
+    (fault_flags::SOLVE_FAILED, "solve-failed"),
+    (fault_flags::FALLBACK_PLAN, "fallback-plan"),
+    (fault_flags::OVERRUN, "overrun"),
+    (fault_flags::STOP_REQUESTED, "stop-requested"),
+    (fault_flags::CAN_BUS, "can-bus"),
+];
+
+/// Names of the set fault bits (unknown bits as `bit-N`).
+pub fn fault_names(flags: u32) -> Vec<String> {
+    let mut names: Vec<String> = FAULT_NAMES
+        .iter()
+        .filter(|(bit, _)| flags & bit != 0)
+        .map(|(_, n)| (*n).to_owned())
+        .collect();
+    let known = FAULT_NAMES.iter().fold(0, |acc, (bit, _)| acc | bit);
+    for bit in 0..32 {
+        if flags & !known & (1 << bit) != 0 {
+            names.push(format!("bit-{bit}"));
+        }
+    }
+    names
+}
+
+/// Fault names joined with `,`, or `-` when there are none.
+pub fn fault_text(flags: u32) -> String {
+    if flags == 0 {
+        "-".to_owned()
+    } else {
+        fault_names(flags).join(",")
+    }
+}
+
+/// Lower-case mode name (`idle`, `tracking`, …), or `mode-N` for an unknown code.
+pub fn mode_name(code: u32) -> String {
+    match Mode::try_from(code) {
+        Ok(Mode::Startup) => "startup".into(),
+        Ok(Mode::Idle) => "idle".into(),
+        Ok(Mode::Tracking) => "tracking".into(),
+        Ok(Mode::Reached) => "reached".into(),
+        Ok(Mode::Stopping) => "stopping".into(),
+        Ok(Mode::Fault) => "fault".into(),
+        Err(c) => format!("mode-{c}"),
+    }
+}
+
+/// The distance of DESIGN §7's success test, ‖(x_f − x_g, y_f − y_g, e_θ)‖ (metres and
+/// radians mixed, as in the paper).
+pub fn goal_distance(t: &Telemetry) -> f64 {
+    t.pose_error_xy.hypot(t.pose_error_heading)
+}
+
+fn deg(rad: f64) -> f64 {
+    rad.to_degrees()
+}
+
+/// One line per tick: everything an operator looks at, in a fixed order.
+///
+/// `tick 412 tracking  x  3.21 y -0.40 θ  12.5° β   4.1° v  0.82 | goal  6.00  0.00    0.0° err 2.81 m  -12.5° | cmd β̇ -3.0°/s v 0.85 | solve 3.9 ms qp 11 cost 2.35 | faults -`
+pub fn line(t: &Telemetry) -> String {
+    let s = &t.state;
+    let goal = match t.active_goal() {
+        Some(g) => format!(
+            "goal {:5.2} {:5.2} {:6.1}° err {:5.2} m {:6.1}°",
+            g.x,
+            g.y,
+            deg(g.heading),
+            t.pose_error_xy,
+            deg(t.pose_error_heading)
+        ),
+        None => "goal none".to_owned(),
+    };
+    format!(
+        "tick {} {:<8} x {:6.2} y {:6.2} θ {:6.1}° β {:5.1}° v {:5.2} | {} | cmd β̇ {:5.1}°/s v {:5.2} | solve {:.1} ms qp {} cost {:.3} | faults {}",
+        t.tick,
+        mode_name(t.mode),
+        s.x_f,
+        s.y_f,
+        deg(s.theta_f),
+        deg(s.beta),
+        s.v_f,
+        goal,
+        deg(t.command.beta_dot),
+        t.command.v,
+        t.solve_time_us / 1000.0,
+        t.qp_iterations,
+        t.cost,
+        fault_text(t.fault_flags),
+    )
+}
+
+/// Column header of the table view (repeat it every screenful).
+pub fn table_header() -> String {
+    format!(
+        "{:>8} {:<8} {:>7} {:>7} {:>7} {:>6} {:>6} {:>7} {:>7} {:>7} {:>6} {:>6} {:>7} {:>4} {:>8}  {}\n{}",
+        "tick",
+        "mode",
+        "x[m]",
+        "y[m]",
+        "θ[°]",
+        "β[°]",
+        "v[m/s]",
+        "goal_x",
+        "goal_y",
+        "goal_θ",
+        "e_xy",
+        "e_θ[°]",
+        "solve",
+        "qp",
+        "cost",
+        "faults",
+        "-".repeat(132)
+    )
+}
+
+/// One row of the table view, aligned under [`table_header`].
+pub fn table_row(t: &Telemetry) -> String {
+    let s = &t.state;
+    let (gx, gy, gh, exy, eh) = match t.active_goal() {
+        Some(g) => (
+            format!("{:7.2}", g.x),
+            format!("{:7.2}", g.y),
+            format!("{:7.1}", deg(g.heading)),
+            format!("{:6.2}", t.pose_error_xy),
+            format!("{:6.1}", deg(t.pose_error_heading)),
+        ),
+        None => (
+            format!("{:>7}", "-"),
+            format!("{:>7}", "-"),
+            format!("{:>7}", "-"),
+            format!("{:>6}", "-"),
+            format!("{:>6}", "-"),
+        ),
+    };
+    format!(
+        "{:>8} {:<8} {:7.2} {:7.2} {:7.1} {:6.1} {:6.2} {} {} {} {} {} {:>4.1}ms {:>4} {:8.3}  {}",
+        t.tick,
+        mode_name(t.mode),
+        s.x_f,
+        s.y_f,
+        deg(s.theta_f),
+        deg(s.beta),
+        s.v_f,
+        gx,
+        gy,
+        gh,
+        exy,
+        eh,
+        t.solve_time_us / 1000.0,
+        t.qp_iterations,
+        t.cost,
+        fault_text(t.fault_flags)
+    )
+}
