@@ -1,4 +1,166 @@
-fn main() {
-    eprintln!("wlnavd: not yet implemented");
-    std::process::exit(2);
+//! `wlnavd`: parses the command line, loads the configuration, runs the daemon.
+//! See `daemon/README.md`.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::Parser;
+use wlnavd::config::{CanBackend, Config, CostKind};
+use wlnavd::logging::{self, LogTarget};
+use wlnavd::{RunOptions, ShutdownHandle};
+
+/// The wlnav controller daemon: 5 Hz actor-critic MPC for an articulated wheel loader.
+#[derive(Debug, Parser)]
+#[command(name = "wlnavd", version)]
+struct Args {
+    /// Configuration file (TOML). Without it the built-in defaults are used: the
+    /// simulated machine, prefix `wlnav`, weights from critic-weights/.
+    #[arg(short, long, value_name = "FILE")]
+    config: Option<PathBuf>,
+    /// Run against the built-in simulated machine (sets can.backend = "sim").
+    #[arg(long)]
+    sim: bool,
+    /// iceoryx2 service-name prefix (overrides ipc.prefix).
+    #[arg(long, value_name = "PREFIX")]
+    prefix: Option<String>,
+    /// Daemon seconds per real second, simulated machine only (overrides sim.time_scale).
+    #[arg(long, value_name = "K")]
+    time_scale: Option<f64>,
+    /// MPC stage cost (overrides controller.cost): the trained critic, or a quadratic
+    /// bring-up cost that needs no weights.
+    #[arg(long, value_enum, value_name = "COST")]
+    cost: Option<CostArg>,
+    /// Directory holding critic.safetensors and actor.safetensors (overrides weights.*).
+    #[arg(long, value_name = "DIR")]
+    weights_dir: Option<PathBuf>,
+    /// Log every CAN frame to FILE in candump -L format (overrides can.log).
+    #[arg(long, value_name = "FILE")]
+    can_log: Option<PathBuf>,
+    /// Stop the machine and exit after N ticks, printing loop statistics (soak runs).
+    #[arg(long, value_name = "N")]
+    max_ticks: Option<u64>,
+    /// Validate the configuration and the weight files, then exit (0 = valid).
+    #[arg(long)]
+    check_config: bool,
+    /// Print the effective configuration as TOML and exit.
+    #[arg(long)]
+    print_config: bool,
+    /// Where logs go.
+    #[arg(long, value_enum, default_value = "auto", value_name = "TARGET")]
+    log: LogTarget,
+}
+
+#[derive(Debug, Clone, Copy, clap::ValueEnum)]
+enum CostArg {
+    Critic,
+    Quadratic,
+}
+
+/// Directories searched for relative weight paths when no configuration file is given.
+fn default_bases() -> Vec<PathBuf> {
+    let mut bases = Vec::new();
+    if let Ok(d) = std::env::current_dir() {
+        bases.push(d);
+    }
+    if let Ok(exe) = std::env::current_exe() {
+        // target/{debug,release}/wlnavd → the repository root.
+        if let Some(root) = exe
+            .parent()
+            .and_then(|p| p.parent())
+            .and_then(|p| p.parent())
+        {
+            bases.push(root.to_path_buf());
+        }
+        // <prefix>/bin/wlnavd → <prefix>/share/wlnav.
+        if let Some(prefix) = exe.parent().and_then(|p| p.parent()) {
+            bases.push(prefix.join("share/wlnav"));
+        }
+    }
+    bases.push(PathBuf::from("/usr/share/wlnav"));
+    bases
+}
+
+fn build_config(args: &Args) -> Result<Config, String> {
+    let mut config = match &args.config {
+        Some(path) => Config::load(path).map_err(|e| e.to_string())?,
+        None => {
+            let mut c = Config::default();
+            c.resolve_paths(&default_bases());
+            c
+        }
+    };
+    if args.sim {
+        config.can.backend = CanBackend::Sim;
+    }
+    if let Some(p) = &args.prefix {
+        config.ipc.prefix = p.clone();
+    }
+    if let Some(k) = args.time_scale {
+        config.sim.time_scale = k;
+    }
+    if let Some(c) = args.cost {
+        config.controller.cost = match c {
+            CostArg::Critic => CostKind::Critic,
+            CostArg::Quadratic => CostKind::Quadratic,
+        };
+    }
+    if let Some(d) = &args.weights_dir {
+        config.weights.critic = d.join("critic.safetensors");
+        config.weights.actor = d.join("actor.safetensors");
+    }
+    if let Some(l) = &args.can_log {
+        config.can.log = l.clone();
+    }
+    if let Some(n) = args.max_ticks {
+        config.control.max_ticks = n;
+    }
+    // Command-line values are validated like the file's.
+    config.validate().map_err(|e| e.to_string())?;
+    Ok(config)
+}
+
+fn main() -> ExitCode {
+    let args = Args::parse();
+    let config = match build_config(&args) {
+        Ok(c) => c,
+        Err(e) => {
+            eprintln!("wlnavd: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    if args.print_config {
+        print!("{}", config.to_toml());
+        return ExitCode::SUCCESS;
+    }
+    if args.check_config {
+        return match wlnavd::controller::load_controller(&config) {
+            Ok(_) => {
+                println!("wlnavd: configuration and weights OK");
+                ExitCode::SUCCESS
+            }
+            Err(e) => {
+                eprintln!("wlnavd: {e}");
+                ExitCode::from(1)
+            }
+        };
+    }
+    logging::init(args.log);
+    let options = RunOptions {
+        shutdown: ShutdownHandle::new(),
+        handle_signals: true,
+        ..Default::default()
+    };
+    match wlnavd::run(config, options) {
+        Ok(report) => {
+            if args.max_ticks.is_some() {
+                println!("{}", report.summary());
+            }
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            tracing::error!("{e}");
+            eprintln!("wlnavd: {e}");
+            ExitCode::from(1)
+        }
+    }
 }

@@ -1,0 +1,600 @@
+//! The daemon's configuration: one TOML file, every section optional, every key
+//! with a documented default (the built-in defaults are a complete simulated set-up,
+//! so `wlnavd --sim` needs no file at all).
+//!
+//! Validation happens once, in [`Config::validate`], and every error names the key
+//! (`loop.rate_hz`, `mpc.horizon`, `sim.plant.delay`, …). Unknown keys are errors
+//! too (a typo must not silently fall back to a default on a machine).
+//!
+//! ```toml
+//! [machine]            # control::MachineParams: l_f, l_r, beta_max, beta_dot_max, v_max, beta_ddot_max, a_max
+//! [mpc]                # control::mpc::MpcSettings: horizon, dt, hessian, delay, time_budget, ...
+//! [controller]
+//! cost = "critic"      # "critic" (the trained network) or "quadratic" (no weights; for bring-up)
+//! [weights]
+//! critic = "critic-weights/critic.safetensors"
+//! actor = "critic-weights/actor.safetensors"   # "" = no actor (zero-control warm start)
+//! [loop]
+//! rate_hz = 5.0
+//! pose_timeout = 0.5   # s: older pose -> controlled stop
+//! ...
+//! [can]
+//! backend = "sim"      # or "socketcan"
+//! interface = "can0"
+//! log = ""             # candump -L file of every frame ("" = off)
+//! [ipc]
+//! prefix = "wlnav"
+//! workspace = { x_min = -50.0, x_max = 50.0, y_min = -50.0, y_max = 50.0 }
+//! [sim]                # the simulated machine (can.backend = "sim")
+//! time_scale = 1.0
+//! [sim.plant]          # control::PlantConfig: delay, tau_beta_dot, tau_v, noise, seed
+//! [sim.faults]         # fault injection for tests and demos
+//! ```
+//!
+//! Relative paths (weights, CAN log) are resolved against the configuration file's
+//! directory; without a file, see [`Config::resolve_paths`].
+
+use std::path::{Path, PathBuf};
+
+use control::mpc::MpcSettings;
+use control::{MachineParams, PlantConfig};
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+
+/// A configuration problem; the message names the key.
+#[derive(Debug, Error)]
+pub enum ConfigError {
+    /// The file could not be read.
+    #[error("config file {path}: {source}")]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// The OS error.
+        source: std::io::Error,
+    },
+    /// TOML syntax, an unknown key or a value of the wrong type (toml names the key
+    /// and the line).
+    #[error("config file {path}: {message}")]
+    Parse {
+        /// The file (or `<built-in>`).
+        path: String,
+        /// toml's message, with line and key.
+        message: String,
+    },
+    /// A value outside its valid range.
+    #[error("config key `{key}`: {message}")]
+    Invalid {
+        /// Dotted key, e.g. `loop.rate_hz`.
+        key: String,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+fn invalid(key: impl Into<String>, message: impl Into<String>) -> ConfigError {
+    ConfigError::Invalid {
+        key: key.into(),
+        message: message.into(),
+    }
+}
+
+/// The whole configuration.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Config {
+    /// Machine geometry and bounds (paper Table I by default).
+    pub machine: MachineParams,
+    /// MPC settings.
+    pub mpc: MpcSettings,
+    /// Which cost the MPC uses.
+    pub controller: ControllerConfig,
+    /// Weight files.
+    pub weights: WeightsConfig,
+    /// Control loop timing and safety thresholds.
+    #[serde(rename = "loop")]
+    pub control: LoopConfig,
+    /// CAN interface.
+    pub can: CanConfig,
+    /// iceoryx2 services.
+    pub ipc: IpcSection,
+    /// The simulated machine.
+    pub sim: SimConfig,
+}
+
+/// `[controller]`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ControllerConfig {
+    /// `critic` (default) or `quadratic`.
+    pub cost: CostKind,
+}
+
+impl Default for ControllerConfig {
+    fn default() -> Self {
+        Self {
+            cost: CostKind::Critic,
+        }
+    }
+}
+
+/// The MPC's stage cost.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum CostKind {
+    /// The trained critic L(s, a, g) (DESIGN §3), loaded from `weights.critic`.
+    Critic,
+    /// A hand-tuned quadratic cost with a distance term; needs no weights. For
+    /// bring-up and tests before the critic is trained; it reaches goals straight
+    /// ahead but is no substitute for the critic on turning manoeuvres.
+    Quadratic,
+}
+
+/// `[weights]`.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct WeightsConfig {
+    /// The critic's safetensors file.
+    pub critic: PathBuf,
+    /// The actor's safetensors file; empty = no actor.
+    pub actor: PathBuf,
+}
+
+impl Default for WeightsConfig {
+    fn default() -> Self {
+        Self {
+            critic: PathBuf::from("critic-weights/critic.safetensors"),
+            actor: PathBuf::from("critic-weights/actor.safetensors"),
+        }
+    }
+}
+
+/// `[loop]`: timing and safety thresholds. Times in (daemon) seconds.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct LoopConfig {
+    /// Tick rate [Hz]; must equal 1 / `mpc.dt`. Default 5.
+    pub rate_hz: f64,
+    /// A pose older than this is stale → controlled stop. Default 0.5 s.
+    pub pose_timeout: f64,
+    /// A machine state older than this is stale → controlled stop. Default 0.3 s.
+    pub state_timeout: f64,
+    /// Ticks the loop may drive on the shifted previous plan after a failed or
+    /// non-finite solve before it stops. Default 2.
+    pub fallback_ticks: u32,
+    /// Consecutive rejected machine-state frames (bad CRC, frozen or skipping alive
+    /// counter, bad length or range) that count as persistent → controlled stop.
+    /// Default 5.
+    pub can_bad_frames_stop: u32,
+    /// Lost frames tolerated between two accepted ones (alive-counter gap). Default 2.
+    pub can_max_lost: u8,
+    /// Goal reached when ‖(x_f − x_g, y_f − y_g, e_θ)‖ is below this. Default 0.1.
+    pub reach_tolerance: f64,
+    /// … and |v_f| is below this [m/s]. Default 0.05.
+    pub reach_speed: f64,
+    /// A machine state beyond its bound by more than this fraction of the bound is
+    /// implausible (treated like a stale one). Default 0.2.
+    pub plausibility_margin: f64,
+    /// On SIGTERM/SIGINT: longest wait for the machine to come to rest before
+    /// exiting anyway (the stop command is still the last frame). Default 5 s.
+    pub shutdown_timeout: f64,
+    /// |v_f| and |β̇| below which the machine counts as at rest. Default 0.02.
+    pub rest_speed: f64,
+    /// Stop after this many ticks (0 = run until signalled); for soak runs.
+    pub max_ticks: u64,
+}
+
+impl Default for LoopConfig {
+    fn default() -> Self {
+        Self {
+            rate_hz: 5.0,
+            pose_timeout: 0.5,
+            state_timeout: 0.3,
+            fallback_ticks: 2,
+            can_bad_frames_stop: 5,
+            can_max_lost: 2,
+            reach_tolerance: 0.1,
+            reach_speed: 0.05,
+            plausibility_margin: 0.2,
+            shutdown_timeout: 5.0,
+            rest_speed: 0.02,
+            max_ticks: 0,
+        }
+    }
+}
+
+impl LoopConfig {
+    /// Tick period [s].
+    pub fn period(&self) -> f64 {
+        1.0 / self.rate_hz
+    }
+}
+
+/// CAN backend.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum CanBackend {
+    /// A real interface through SocketCAN.
+    Socketcan,
+    /// The built-in simulated machine (`control::plant::Plant` behind the frames).
+    Sim,
+}
+
+/// `[can]`.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CanConfig {
+    /// `sim` (default) or `socketcan`.
+    pub backend: CanBackend,
+    /// SocketCAN interface name (socketcan backend). Default `can0`.
+    pub interface: String,
+    /// Log every frame sent and received to this file in `candump -L` format
+    /// (appending); empty = off.
+    pub log: PathBuf,
+}
+
+impl Default for CanConfig {
+    fn default() -> Self {
+        Self {
+            backend: CanBackend::Sim,
+            interface: "can0".into(),
+            log: PathBuf::new(),
+        }
+    }
+}
+
+/// `[ipc]`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct IpcSection {
+    /// Service-name prefix: services are `{prefix}/v1/goal|pose|telemetry`.
+    pub prefix: String,
+    /// Goals must lie inside this rectangle [m].
+    pub workspace: WorkspaceConfig,
+}
+
+impl Default for IpcSection {
+    fn default() -> Self {
+        Self {
+            prefix: shm_ipc::DEFAULT_PREFIX.into(),
+            workspace: WorkspaceConfig::default(),
+        }
+    }
+}
+
+/// `ipc.workspace`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+#[allow(missing_docs)]
+pub struct WorkspaceConfig {
+    pub x_min: f64,
+    pub x_max: f64,
+    pub y_min: f64,
+    pub y_max: f64,
+}
+
+impl Default for WorkspaceConfig {
+    fn default() -> Self {
+        let w = shm_ipc::Workspace::default();
+        Self {
+            x_min: w.x_min,
+            x_max: w.x_max,
+            y_min: w.y_min,
+            y_max: w.y_max,
+        }
+    }
+}
+
+/// `[sim]`: the simulated machine.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SimConfig {
+    /// Daemon seconds per real second (> 0). Only the simulated machine may run at
+    /// another pace than real time. Default 1.
+    pub time_scale: f64,
+    /// Machine-state frames per (daemon) second. Default 50.
+    pub state_rate_hz: f64,
+    /// Pose estimates published on `{prefix}/v1/pose` per second. Default 20.
+    pub pose_rate_hz: f64,
+    /// Publish pose estimates (the built-in localization). Default true.
+    pub publish_pose: bool,
+    /// Initial state [x_f, y_f, θ_f, β, β̇, v_f].
+    pub initial_state: [f64; 6],
+    /// Delay, velocity lag, noise of the simulated machine.
+    pub plant: PlantConfig,
+    /// Fault injection.
+    pub faults: SimFaults,
+}
+
+impl Default for SimConfig {
+    fn default() -> Self {
+        Self {
+            time_scale: 1.0,
+            state_rate_hz: 50.0,
+            pose_rate_hz: 20.0,
+            publish_pose: true,
+            initial_state: [0.0; 6],
+            plant: PlantConfig::default(),
+            faults: SimFaults::default(),
+        }
+    }
+}
+
+/// `[sim.faults]`: faults the simulated machine injects, at daemon times [s].
+/// A negative start time (the default) disables the fault.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SimFaults {
+    /// From this time, corrupt the CRC byte of machine-state frames …
+    pub crc_burst_at: f64,
+    /// … this many in a row (0 = none; a large number = permanently).
+    pub crc_burst_frames: u32,
+    /// From this time, repeat the alive counter (frozen sender) …
+    pub freeze_alive_at: f64,
+    /// … for this many frames.
+    pub freeze_alive_frames: u32,
+    /// From this time, publish no pose …
+    pub pose_dropout_at: f64,
+    /// … for this long [s].
+    pub pose_dropout_duration: f64,
+    /// From this time, send no machine-state frame …
+    pub state_dropout_at: f64,
+    /// … for this long [s].
+    pub state_dropout_duration: f64,
+}
+
+impl Default for SimFaults {
+    fn default() -> Self {
+        Self {
+            crc_burst_at: -1.0,
+            crc_burst_frames: 0,
+            freeze_alive_at: -1.0,
+            freeze_alive_frames: 0,
+            pose_dropout_at: -1.0,
+            pose_dropout_duration: 0.0,
+            state_dropout_at: -1.0,
+            state_dropout_duration: 0.0,
+        }
+    }
+}
+
+fn check_positive(key: &str, v: f64) -> Result<(), ConfigError> {
+    if v.is_finite() && v > 0.0 {
+        Ok(())
+    } else {
+        Err(invalid(key, format!("must be finite and > 0 (got {v})")))
+    }
+}
+
+fn check_non_negative(key: &str, v: f64) -> Result<(), ConfigError> {
+    if v.is_finite() && v >= 0.0 {
+        Ok(())
+    } else {
+        Err(invalid(key, format!("must be finite and >= 0 (got {v})")))
+    }
+}
+
+/// The `name` in an error message like "… `name` must …".
+fn backticked(message: &str) -> Option<&str> {
+    let start = message.find('`')? + 1;
+    let len = message[start..].find('`')?;
+    Some(&message[start..start + len])
+}
+
+impl Config {
+    /// Parses TOML text (`source` names it in errors) and validates it.
+    pub fn from_toml(text: &str, source: &str) -> Result<Self, ConfigError> {
+        let config: Config = toml::from_str(text).map_err(|e| ConfigError::Parse {
+            path: source.to_owned(),
+            message: e.to_string().trim_end().to_owned(),
+        })?;
+        config.validate()?;
+        Ok(config)
+    }
+
+    /// Reads, parses and validates a file; relative paths in it are resolved
+    /// against the file's directory.
+    pub fn load(path: &Path) -> Result<Self, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+            path: path.to_owned(),
+            source,
+        })?;
+        let mut config = Self::from_toml(&text, &path.display().to_string())?;
+        let base = path.parent().unwrap_or(Path::new("."));
+        config.resolve_paths(&[base.to_path_buf()]);
+        Ok(config)
+    }
+
+    /// Makes relative weight and log paths absolute: the first of `bases` under which
+    /// the weight file exists wins (the first base if none has it, so the error
+    /// names a concrete path).
+    pub fn resolve_paths(&mut self, bases: &[PathBuf]) {
+        let resolve = |p: &Path| -> PathBuf {
+            if p.as_os_str().is_empty() || p.is_absolute() {
+                return p.to_path_buf();
+            }
+            for b in bases {
+                let c = b.join(p);
+                if c.exists() {
+                    return c;
+                }
+            }
+            bases.first().map(|b| b.join(p)).unwrap_or_else(|| p.into())
+        };
+        self.weights.critic = resolve(&self.weights.critic);
+        self.weights.actor = resolve(&self.weights.actor);
+        if let Some(b) = bases.first() {
+            if !self.can.log.as_os_str().is_empty() && self.can.log.is_relative() {
+                self.can.log = b.join(&self.can.log);
+            }
+        }
+    }
+
+    /// Checks every value; the error names the first bad key.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        self.machine.validate().map_err(|e| {
+            let m = e.to_string();
+            let key = match backticked(&m) {
+                Some(name) => format!("machine.{name}"),
+                None => "machine".into(),
+            };
+            invalid(key, m)
+        })?;
+        self.mpc.validate().map_err(|e| {
+            let m = e.to_string();
+            let key = match backticked(&m) {
+                Some(name) => format!("mpc.{name}"),
+                None => "mpc".into(),
+            };
+            invalid(key, m)
+        })?;
+        let l = &self.control;
+        check_positive("loop.rate_hz", l.rate_hz)?;
+        if l.rate_hz > 1000.0 {
+            return Err(invalid("loop.rate_hz", "must be at most 1000 Hz"));
+        }
+        let period = l.period();
+        if (period - self.mpc.dt).abs() > 1e-9 * period.max(1.0) {
+            return Err(invalid(
+                "loop.rate_hz",
+                format!(
+                    "must equal 1 / mpc.dt (mpc.dt = {} s gives {} Hz, got {} Hz): the MPC's \
+                     stage is the command period",
+                    self.mpc.dt,
+                    1.0 / self.mpc.dt,
+                    l.rate_hz
+                ),
+            ));
+        }
+        check_positive("loop.pose_timeout", l.pose_timeout)?;
+        check_positive("loop.state_timeout", l.state_timeout)?;
+        check_positive("loop.reach_tolerance", l.reach_tolerance)?;
+        check_positive("loop.reach_speed", l.reach_speed)?;
+        check_non_negative("loop.plausibility_margin", l.plausibility_margin)?;
+        check_non_negative("loop.shutdown_timeout", l.shutdown_timeout)?;
+        check_positive("loop.rest_speed", l.rest_speed)?;
+        if l.can_bad_frames_stop == 0 {
+            return Err(invalid("loop.can_bad_frames_stop", "must be >= 1"));
+        }
+        if l.can_max_lost > can_max_lost_limit() {
+            return Err(invalid(
+                "loop.can_max_lost",
+                format!("must be at most {}", can_max_lost_limit()),
+            ));
+        }
+        if self.weights.critic.as_os_str().is_empty() && self.controller.cost == CostKind::Critic {
+            return Err(invalid(
+                "weights.critic",
+                "must name a file when controller.cost = \"critic\"",
+            ));
+        }
+        if self.can.backend == CanBackend::Socketcan && self.can.interface.trim().is_empty() {
+            return Err(invalid("can.interface", "must not be empty"));
+        }
+        shm_ipc::validate_prefix(&self.ipc.prefix)
+            .map_err(|e| invalid("ipc.prefix", e.to_string()))?;
+        let w = &self.ipc.workspace;
+        if shm_ipc::Workspace::new(w.x_min, w.x_max, w.y_min, w.y_max).is_none() {
+            return Err(invalid(
+                "ipc.workspace",
+                "needs finite bounds with x_min < x_max and y_min < y_max",
+            ));
+        }
+        let s = &self.sim;
+        check_positive("sim.time_scale", s.time_scale)?;
+        if s.time_scale > 1000.0 {
+            return Err(invalid("sim.time_scale", "must be at most 1000"));
+        }
+        if s.time_scale != 1.0 && self.can.backend != CanBackend::Sim {
+            return Err(invalid(
+                "sim.time_scale",
+                "must be 1 unless can.backend = \"sim\": a real machine runs in real time",
+            ));
+        }
+        check_positive("sim.state_rate_hz", s.state_rate_hz)?;
+        check_positive("sim.pose_rate_hz", s.pose_rate_hz)?;
+        if s.initial_state.iter().any(|v| !v.is_finite()) {
+            return Err(invalid("sim.initial_state", "must be 6 finite numbers"));
+        }
+        s.plant.validate().map_err(|e| {
+            let m = e.to_string();
+            let key = match backticked(&m) {
+                Some(name) => format!("sim.plant.{name}"),
+                None => "sim.plant".into(),
+            };
+            invalid(key, m)
+        })?;
+        let f = &s.faults;
+        for (key, v) in [
+            ("sim.faults.crc_burst_at", f.crc_burst_at),
+            ("sim.faults.freeze_alive_at", f.freeze_alive_at),
+            ("sim.faults.pose_dropout_at", f.pose_dropout_at),
+            ("sim.faults.state_dropout_at", f.state_dropout_at),
+        ] {
+            if !v.is_finite() {
+                return Err(invalid(key, "must be finite (negative = off)"));
+            }
+        }
+        check_non_negative("sim.faults.pose_dropout_duration", f.pose_dropout_duration)?;
+        check_non_negative(
+            "sim.faults.state_dropout_duration",
+            f.state_dropout_duration,
+        )?;
+        Ok(())
+    }
+
+    /// The goal validator for the configured workspace.
+    pub fn goal_validator(&self) -> shm_ipc::GoalValidator {
+        let w = &self.ipc.workspace;
+        shm_ipc::GoalValidator::new(
+            shm_ipc::Workspace::new(w.x_min, w.x_max, w.y_min, w.y_max).unwrap_or_default(),
+        )
+    }
+
+    /// The configuration as TOML (for `--print-config`).
+    pub fn to_toml(&self) -> String {
+        toml::to_string_pretty(self).unwrap_or_else(|e| format!("# cannot serialise: {e}\n"))
+    }
+}
+
+fn can_max_lost_limit() -> u8 {
+    crate::can::AliveTracker::MAX_LOST_LIMIT
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_are_valid_and_round_trip() {
+        let c = Config::default();
+        c.validate().unwrap();
+        let back = Config::from_toml(&c.to_toml(), "t").unwrap();
+        assert_eq!(back, c);
+    }
+
+    fn err(text: &str) -> String {
+        Config::from_toml(text, "test.toml")
+            .unwrap_err()
+            .to_string()
+    }
+
+    #[test]
+    fn errors_name_the_key() {
+        assert!(err("[loop]\nrate_hz = -1\n").contains("`loop.rate_hz`"));
+        assert!(err("[loop]\nrate_hz = 10\n").contains("`loop.rate_hz`"));
+        assert!(err("[mpc]\nhorizon = 0\n").contains("`mpc.horizon`"));
+        assert!(err("[machine]\nv_max = 0\n").contains("`machine.v_max`"));
+        assert!(err("[sim.plant]\ndelay = -1\n").contains("`sim.plant.delay`"));
+        assert!(err("[sim]\ntime_scale = 0\n").contains("`sim.time_scale`"));
+        assert!(
+            err("[can]\nbackend = \"socketcan\"\n[sim]\ntime_scale = 2\n")
+                .contains("`sim.time_scale`")
+        );
+        assert!(err("[ipc]\nprefix = \"\"\n").contains("`ipc.prefix`"));
+        assert!(err("[ipc.workspace]\nx_min = 5\nx_max = 1\n").contains("`ipc.workspace`"));
+        let unknown = err("[loop]\nrate_hz = 5\ntypo = 1\n");
+        assert!(unknown.contains("typo"), "{unknown}");
+        let wrong_type = err("[loop]\nrate_hz = \"fast\"\n");
+        assert!(wrong_type.contains("rate_hz"), "{wrong_type}");
+    }
+}

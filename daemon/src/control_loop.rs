@@ -1,0 +1,633 @@
+//! The control loop: one dedicated thread, ticking on absolute deadlines
+//! `t₀ + k·T` of the [`DaemonClock`] (no drift: a late tick does not shift the
+//! next one; missed deadlines are skipped and counted as overruns).
+//!
+//! Per tick:
+//! 1. newest goal request (from the IPC task), newest pose (from `{prefix}/v1/pose`),
+//!    newest machine state and CAN integrity counters (from the CAN I/O task);
+//! 2. staleness and plausibility checks;
+//! 3. the mode decision (below);
+//! 4. while tracking: the MPC step (which propagates the measured state over the
+//!    actuator delay, `mpc.delay`, with the commands already sent, then solves);
+//! 5. the command, through the stop ramp when stopping, to the CAN I/O task;
+//! 6. telemetry on `{prefix}/v1/telemetry`; WATCHDOG=1 if the tick was healthy.
+//!
+//! Safety (DESIGN §6): a controlled stop — velocities ramped to zero at no more
+//! than the machine's acceleration limits (β̈_max, a_max) from the last command —
+//! on: no goal, goal reached, stale or implausible pose or machine state,
+//! persistent CAN integrity failures (consecutive rejected frames ≥
+//! `loop.can_bad_frames_stop`; single ones are counted and flagged), a failed or
+//! non-finite solve that persists beyond `loop.fallback_ticks` ticks on the
+//! shifted plan, a stop or cancel request, and shutdown. A fault drops the goal: the
+//! machine stays stopped until a new goal arrives after the fault has cleared.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+use control::model::{goal_distance, ix, pose_error};
+use control::mpc::Obstacle;
+use control::{Goal, MachineParams, State};
+use shm_ipc::{
+    fault_flags, DaemonEndpoint, MachineState as IpcState, Mode, Pose2, Telemetry, ValidRequest,
+};
+use tokio::sync::mpsc;
+
+use crate::can::{DriveMode, MachineStatus};
+use crate::can_io::{CanShared, CanSnapshot, OutCommand, RejectKind};
+use crate::clock::DaemonClock;
+use crate::config::Config;
+use crate::controller::{Controller, PlanStatus};
+use crate::ipc::GoalSlot;
+use crate::notify::Notifier;
+use crate::stats::LoopStats;
+
+/// Why the loop ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ExitReason {
+    /// Shutdown requested (signal or handle), machine stopped.
+    Shutdown,
+    /// `loop.max_ticks` reached, machine stopped.
+    MaxTicks,
+}
+
+/// What the control thread shares with the rest of the daemon.
+pub struct LoopContext {
+    /// The configuration.
+    pub config: Config,
+    /// The clock.
+    pub clock: DaemonClock,
+    /// iceoryx2 endpoint (poses in, telemetry out).
+    pub endpoint: Arc<DaemonEndpoint>,
+    /// CAN receive side.
+    pub can: Arc<CanShared>,
+    /// CAN send side.
+    pub commands: mpsc::Sender<OutCommand>,
+    /// Goals from the IPC task.
+    pub goals: Arc<GoalSlot>,
+    /// Set to request a controlled stop and exit.
+    pub shutdown: Arc<AtomicBool>,
+    /// Loop statistics, shared with the reporter.
+    pub stats: Arc<std::sync::Mutex<LoopStats>>,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct ActiveGoal {
+    goal: Goal,
+    obstacles: [Obstacle; shm_ipc::MAX_OBSTACLES],
+    n_obstacles: usize,
+    request_id: u64,
+    reached: bool,
+}
+
+/// The loop's state between ticks.
+pub struct ControlLoop {
+    ctx: LoopContext,
+    controller: Box<dyn Controller>,
+    notifier: Notifier,
+    params: MachineParams,
+    goal: Option<ActiveGoal>,
+    goal_seq: u64,
+    /// The controller has the current goal and a consistent command history.
+    controller_engaged: bool,
+    stop_requested: bool,
+    /// Faults that hold until a new goal (solver failure).
+    latched: u32,
+    last_cmd: [f64; 2],
+    pose: Option<(Pose2, f64)>,
+    fallback_count: u32,
+    fallback_plan: Vec<State>,
+    fallback_age: usize,
+    prev_counters: crate::can::RxCounters,
+    mode: Mode,
+    telemetry: Telemetry,
+    shutdown_started: Option<f64>,
+    tick: u64,
+    /// Fresh pose and machine state have been seen at least once (until then the
+    /// mode stays `Startup`).
+    seen_data: bool,
+}
+
+/// Moves `v` towards 0 by at most `step`.
+fn towards_zero(v: f64, step: f64) -> f64 {
+    if v.abs() <= step {
+        0.0
+    } else {
+        v - step.copysign(v)
+    }
+}
+
+impl ControlLoop {
+    /// A loop around a controller that passed its first solve.
+    pub fn new(ctx: LoopContext, controller: Box<dyn Controller>, notifier: Notifier) -> Self {
+        let horizon = ctx.config.mpc.horizon;
+        let params = ctx.config.machine;
+        Self {
+            ctx,
+            controller,
+            notifier,
+            params,
+            goal: None,
+            goal_seq: 0,
+            controller_engaged: false,
+            stop_requested: false,
+            latched: 0,
+            last_cmd: [0.0; 2],
+            pose: None,
+            fallback_count: 0,
+            fallback_plan: Vec::with_capacity(horizon + 1),
+            fallback_age: 0,
+            prev_counters: Default::default(),
+            mode: Mode::Startup,
+            telemetry: Telemetry::ZERO,
+            shutdown_started: None,
+            tick: 0,
+            seen_data: false,
+        }
+    }
+
+    /// Runs until shutdown (or `loop.max_ticks`); the last command sent is a stop.
+    pub fn run(mut self) -> ExitReason {
+        let period = self.ctx.config.control.period();
+        let clock = self.ctx.clock;
+        let t0 = clock.now();
+        let mut k: u64 = 0;
+        let reason = loop {
+            let deadline = t0 + k as f64 * period;
+            clock.sleep_until(deadline);
+            let start = clock.now();
+            let outcome = self.tick(start);
+            let end = clock.now();
+            let late_start = start - deadline;
+            let overrun = end - deadline > period;
+            let healthy = !overrun && late_start < period && outcome.sent;
+            {
+                let mut s = self.ctx.stats.lock().unwrap_or_else(|p| p.into_inner());
+                s.record(late_start, outcome.solve_time, overrun);
+            }
+            if healthy {
+                self.notifier.watchdog();
+            }
+            if let Some(r) = outcome.exit {
+                break r;
+            }
+            // Next deadline: the next k whose deadline is still ahead (skip missed ones).
+            k += 1;
+            let now = clock.now();
+            let next = t0 + k as f64 * period;
+            if now > next {
+                let missed = ((now - next) / period).floor() as u64 + 1;
+                k += missed;
+                let mut s = self.ctx.stats.lock().unwrap_or_else(|p| p.into_inner());
+                s.missed_deadlines += missed;
+            }
+        };
+        self.notifier.stopping("stopped: machine at rest");
+        reason
+    }
+
+    fn set_mode(&mut self, mode: Mode, detail: &str) {
+        if mode != self.mode {
+            tracing::info!("mode {:?} -> {:?} {detail}", self.mode, mode);
+            self.mode = mode;
+            let text = format!(
+                "{}{}{detail}",
+                mode_name(mode),
+                if detail.is_empty() { "" } else { ": " }
+            );
+            self.notifier.status(&text);
+        }
+    }
+
+    /// Applies the newest goal request, if any.
+    fn take_goal(&mut self) {
+        let Some(req) = self.ctx.goals.take_newer(&mut self.goal_seq) else {
+            return;
+        };
+        match req {
+            ValidRequest::SetGoal {
+                request_id,
+                goal,
+                obstacles,
+            } => {
+                let mut obs = [Obstacle::default(); shm_ipc::MAX_OBSTACLES];
+                for (dst, o) in obs.iter_mut().zip(obstacles.iter()) {
+                    *dst = Obstacle::new(o.x, o.y, o.r);
+                }
+                self.goal = Some(ActiveGoal {
+                    goal: Goal::new(goal.x, goal.y, goal.heading),
+                    obstacles: obs,
+                    n_obstacles: obstacles.len(),
+                    request_id,
+                    reached: false,
+                });
+                self.controller_engaged = false;
+                self.stop_requested = false;
+                self.latched = 0;
+                self.fallback_count = 0;
+            }
+            ValidRequest::Cancel { .. } => {
+                self.drop_goal();
+                self.stop_requested = false;
+            }
+            ValidRequest::Stop { .. } => {
+                self.drop_goal();
+                self.stop_requested = true;
+            }
+        }
+    }
+
+    fn drop_goal(&mut self) {
+        self.goal = None;
+        self.controller_engaged = false;
+        self.fallback_count = 0;
+    }
+
+    /// The controlled-stop command: the last command ramped towards zero at the
+    /// acceleration limits.
+    fn ramp_down(&self) -> [f64; 2] {
+        let dt = self.ctx.config.control.period();
+        [
+            towards_zero(self.last_cmd[0], self.params.beta_ddot_max * dt),
+            towards_zero(self.last_cmd[1], self.params.a_max * dt),
+        ]
+    }
+
+    fn pose_fresh(&self, now: f64) -> Option<Pose2> {
+        let (p, t) = self.pose?;
+        (now - t <= self.ctx.config.control.pose_timeout).then_some(p)
+    }
+
+    fn state_fresh(&self, can: &CanSnapshot, now: f64) -> Option<crate::can::MachineState> {
+        let (s, t) = can.latest?;
+        if now - t > self.ctx.config.control.state_timeout {
+            return None;
+        }
+        let m = 1.0 + self.ctx.config.control.plausibility_margin;
+        let p = &self.params;
+        let plausible = s.beta.abs() <= p.beta_max * m
+            && s.beta_dot.abs() <= p.beta_dot_max * m
+            && s.v_f.abs() <= p.v_max * m;
+        plausible.then_some(s)
+    }
+
+    fn tick(&mut self, start: f64) -> TickOutcome {
+        let cfg = self.ctx.config.control;
+        self.tick += 1;
+        let mut t = Telemetry::ZERO;
+        t.tick = self.tick;
+        t.timestamp_ns = shm_ipc::monotonic_now_ns();
+        let mut solve_time = None;
+
+        self.take_goal();
+        let shutting_down = self.ctx.shutdown.load(Ordering::Relaxed)
+            || (cfg.max_ticks > 0 && self.tick > cfg.max_ticks);
+        if shutting_down && self.shutdown_started.is_none() {
+            self.shutdown_started = Some(start);
+            self.notifier
+                .stopping("stopping: controlled stop before exit");
+            tracing::info!("shutdown: controlled stop");
+        }
+
+        // Inputs.
+        match self.ctx.endpoint.latest_pose() {
+            Ok(Some(p)) if p.is_usable() => {
+                self.pose = Some((p.pose(), self.ctx.clock.from_monotonic_ns(p.timestamp_ns)));
+            }
+            Ok(_) => {}
+            Err(e) => tracing::warn!("pose: {e}"),
+        }
+        let can = self.ctx.can.snapshot();
+        let pose = self.pose_fresh(start);
+        let state = self.state_fresh(&can, start);
+
+        let mut flags = 0u32;
+        let mut stop_faults = 0u32;
+        if pose.is_none() {
+            flags |= fault_flags::POSE_STALE;
+        }
+        if state.is_none() {
+            flags |= fault_flags::MACHINE_STATE_STALE;
+        }
+        let c = can.counters;
+        let p = self.prev_counters;
+        if c.bad_crc + c.wrong_length + c.out_of_range > p.bad_crc + p.wrong_length + p.out_of_range
+        {
+            flags |= fault_flags::CAN_CRC;
+        }
+        if c.frozen + c.skipped > p.frozen + p.skipped {
+            flags |= fault_flags::CAN_ALIVE;
+        }
+        self.prev_counters = c;
+        let persistent_can = c.consecutive_bad >= cfg.can_bad_frames_stop;
+        if persistent_can {
+            match can.last_reject {
+                Some(RejectKind::Alive) => flags |= fault_flags::CAN_ALIVE,
+                _ => flags |= fault_flags::CAN_CRC,
+            }
+        }
+        if can.closed {
+            flags |= fault_flags::CAN_BUS;
+        }
+        // Stale data and persistent integrity failures stop the machine.
+        stop_faults |= flags
+            & (fault_flags::POSE_STALE | fault_flags::MACHINE_STATE_STALE | fault_flags::CAN_BUS);
+        if persistent_can {
+            stop_faults |= flags & (fault_flags::CAN_CRC | fault_flags::CAN_ALIVE);
+        }
+        let machine_blocked = matches!(
+            state.map(|s| s.status),
+            Some(MachineStatus::Manual | MachineStatus::EStop | MachineStatus::Fault)
+        );
+
+        // The measured state (for telemetry, goal check and the MPC).
+        let x = match (pose, state) {
+            (Some(p), Some(s)) => Some(State::from_column_slice(&[
+                p.x, p.y, p.heading, s.beta, s.beta_dot, s.v_f,
+            ])),
+            _ => None,
+        };
+        if let Some(x) = &x {
+            t.state = IpcState::from_array([x[0], x[1], x[2], x[3], x[4], x[5]]);
+        } else {
+            let mut a = [f64::NAN; 6];
+            if let Some(p) = self.pose {
+                a[0] = p.0.x;
+                a[1] = p.0.y;
+                a[2] = p.0.heading;
+            }
+            if let Some((s, _)) = can.latest {
+                a[3] = s.beta;
+                a[4] = s.beta_dot;
+                a[5] = s.v_f;
+            }
+            t.state = IpcState::from_array(a);
+        }
+
+        self.ctx
+            .goals
+            .set_blocking_faults(stop_faults | self.latched);
+        self.seen_data |= x.is_some();
+
+        // Mode decision.
+        let (mode, mut cmd, drive_mode);
+        if shutting_down {
+            mode = Mode::Stopping;
+            cmd = self.ramp_down();
+            drive_mode = DriveMode::Stop;
+            self.drop_goal();
+        } else if !self.seen_data && x.is_none() {
+            // Waiting for the first pose and machine state.
+            mode = Mode::Startup;
+            cmd = self.ramp_down();
+            drive_mode = DriveMode::Hold;
+        } else if stop_faults != 0 || self.latched != 0 {
+            if self.goal.is_some() {
+                tracing::warn!(
+                    "fault {:#x}: controlled stop, goal dropped",
+                    stop_faults | self.latched
+                );
+            }
+            self.drop_goal();
+            flags |= self.latched;
+            mode = Mode::Fault;
+            cmd = self.ramp_down();
+            drive_mode = DriveMode::Fault;
+            if stop_faults == 0 && cmd == [0.0, 0.0] {
+                // The solver fault has been shown through the whole stop; clear it.
+                self.latched = 0;
+            }
+        } else if self.goal.is_none() || machine_blocked {
+            if machine_blocked && self.goal.is_some() {
+                tracing::warn!("machine status {:?}: goal dropped", state.map(|s| s.status));
+                self.drop_goal();
+            }
+            if self.stop_requested {
+                flags |= fault_flags::STOP_REQUESTED;
+            }
+            cmd = self.ramp_down();
+            if cmd == [0.0, 0.0] {
+                mode = Mode::Idle;
+                drive_mode = DriveMode::Hold;
+            } else {
+                mode = Mode::Stopping;
+                drive_mode = DriveMode::Stop;
+            }
+        } else {
+            // A goal, fresh data, no fault. x is Some here (both inputs fresh).
+            let x = x.unwrap_or_else(State::zeros);
+            let mut g = self.goal.unwrap_or_else(|| unreachable!());
+            if !g.reached
+                && goal_distance(&x, &g.goal) < cfg.reach_tolerance
+                && x[ix::V].abs() < cfg.reach_speed
+            {
+                g.reached = true;
+                self.controller_engaged = false;
+                tracing::info!("goal {} reached", g.request_id);
+            }
+            if g.reached {
+                mode = Mode::Reached;
+                cmd = self.ramp_down();
+                drive_mode = if cmd == [0.0, 0.0] {
+                    DriveMode::Hold
+                } else {
+                    DriveMode::Stop
+                };
+            } else {
+                let (c, f, st) = self.track(&x, &g, &mut t);
+                flags |= f;
+                solve_time = st;
+                if self.fallback_count > cfg.fallback_ticks {
+                    tracing::error!(
+                        "solver failed {} ticks in a row: controlled stop",
+                        self.fallback_count
+                    );
+                    self.latched |= fault_flags::SOLVE_FAILED;
+                    flags |= fault_flags::SOLVE_FAILED;
+                    self.drop_goal();
+                    mode = Mode::Fault;
+                    cmd = self.ramp_down();
+                    drive_mode = DriveMode::Fault;
+                } else {
+                    mode = Mode::Tracking;
+                    cmd = c;
+                    drive_mode = DriveMode::Drive;
+                }
+            }
+            if let Some(goal) = self.goal.as_mut() {
+                goal.reached = g.reached;
+            }
+        }
+
+        // Last-line bounds (the CAN task checks again).
+        let p = &self.params;
+        if !(cmd[0].is_finite() && cmd[1].is_finite()) {
+            cmd = self.ramp_down();
+        }
+        cmd[0] = cmd[0].clamp(-p.beta_dot_max, p.beta_dot_max);
+        cmd[1] = cmd[1].clamp(-p.v_max, p.v_max);
+
+        // Shutdown completes once the command is zero and the machine at rest (or
+        // its state is unknown, or the timeout passed).
+        let mut exit = None;
+        if let Some(t_stop) = self.shutdown_started {
+            let at_rest = match state {
+                Some(s) => s.v_f.abs() < cfg.rest_speed && s.beta_dot.abs() < cfg.rest_speed,
+                None => true,
+            };
+            let timed_out = start - t_stop > cfg.shutdown_timeout;
+            if cmd == [0.0, 0.0] && (at_rest || timed_out) {
+                exit = Some(if self.ctx.shutdown.load(Ordering::Relaxed) {
+                    ExitReason::Shutdown
+                } else {
+                    ExitReason::MaxTicks
+                });
+            }
+        }
+
+        let out = OutCommand {
+            beta_dot: cmd[0],
+            v: cmd[1],
+            mode: drive_mode,
+        };
+        let sent = match self.ctx.commands.try_send(out) {
+            Ok(()) => true,
+            Err(e) => {
+                flags |= fault_flags::CAN_BUS;
+                tracing::warn!("command not queued: {e}");
+                false
+            }
+        };
+        self.last_cmd = cmd;
+        let detail = match (&self.goal, mode) {
+            (Some(g), _) => format!(
+                "goal ({:.2}, {:.2}, {:.2})",
+                g.goal.x, g.goal.y, g.goal.theta
+            ),
+            (None, Mode::Fault) => format!("faults {flags:#x}"),
+            _ => String::new(),
+        };
+        self.set_mode(mode, &detail);
+
+        // Telemetry.
+        t.mode = mode.code();
+        t.fault_flags = flags;
+        t.command.beta_dot = cmd[0];
+        t.command.v = cmd[1];
+        if let Some(g) = &self.goal {
+            t.goal_active = 1;
+            t.goal = Pose2::new(g.goal.x, g.goal.y, g.goal.theta);
+            t.goal_request_id = g.request_id;
+            if let Some(x) = &x {
+                let e = pose_error(x, &g.goal);
+                t.pose_error_xy = e[0];
+                t.pose_error_heading = e[1];
+            }
+        }
+        if let Err(e) = self.ctx.endpoint.publish_telemetry(&t) {
+            tracing::warn!("telemetry: {e}");
+        }
+        self.telemetry = t;
+        TickOutcome {
+            sent,
+            solve_time,
+            exit,
+        }
+    }
+
+    /// One tracking tick: the MPC step, with the fallback on the shifted plan.
+    fn track(
+        &mut self,
+        x: &State,
+        g: &ActiveGoal,
+        t: &mut Telemetry,
+    ) -> ([f64; 2], u32, Option<f64>) {
+        let mut flags = 0;
+        if !self.controller_engaged {
+            self.controller.reset();
+            if let Err(e) = self
+                .controller
+                .set_goal(g.goal, &g.obstacles[..g.n_obstacles])
+            {
+                // Validated goals cannot fail here; treat it as a solver failure.
+                tracing::error!("controller refused the goal: {e}");
+                self.fallback_count = u32::MAX / 2;
+                return (self.ramp_down(), fault_flags::SOLVE_FAILED, None);
+            }
+            self.controller_engaged = true;
+            self.fallback_plan.clear();
+            self.fallback_age = 0;
+        }
+        let result = self.controller.step(x);
+        let mut solve_time = None;
+        let good = match result {
+            Ok(plan) => {
+                solve_time = Some(plan.solve_time.as_secs_f64());
+                t.solve_time_us = plan.solve_time.as_secs_f64() * 1e6;
+                t.cost = plan.cost;
+                t.qp_iterations = plan.qp_iterations;
+                t.sqp_iterations = plan.sqp_iterations;
+                let finite = plan.command.iter().all(|v| v.is_finite())
+                    && plan.states.iter().all(|s| s.iter().all(|v| v.is_finite()));
+                let mut traj = [IpcState::ZERO; shm_ipc::MAX_TRAJECTORY];
+                let n = plan.states.len().min(shm_ipc::MAX_TRAJECTORY);
+                for (dst, s) in traj.iter_mut().zip(plan.states) {
+                    *dst = IpcState::from_array([s[0], s[1], s[2], s[3], s[4], s[5]]);
+                }
+                t.set_trajectory(&traj[..n]);
+                if finite {
+                    self.fallback_plan.clear();
+                    self.fallback_plan.extend_from_slice(plan.states);
+                    self.fallback_age = 0;
+                    Some((plan.command, plan.status))
+                } else {
+                    None
+                }
+            }
+            Err(e) => {
+                tracing::warn!("solve failed: {e}");
+                None
+            }
+        };
+        let cmd = match good {
+            Some((c, PlanStatus::Solved)) => {
+                self.fallback_count = 0;
+                c
+            }
+            Some((c, PlanStatus::Fallback)) => {
+                // The controller already shifted its plan.
+                self.fallback_count += 1;
+                flags |= fault_flags::FALLBACK_PLAN;
+                c
+            }
+            None => {
+                // No usable plan this tick: drive on our copy of the last one, shifted.
+                self.fallback_count += 1;
+                self.fallback_age += 1;
+                flags |= fault_flags::FALLBACK_PLAN;
+                match self.fallback_plan.get(self.fallback_age) {
+                    Some(s) => [s[ix::BETA_DOT], s[ix::V]],
+                    None => self.ramp_down(),
+                }
+            }
+        };
+        (cmd, flags, solve_time)
+    }
+}
+
+struct TickOutcome {
+    sent: bool,
+    solve_time: Option<f64>,
+    exit: Option<ExitReason>,
+}
+
+/// The mode's name as used in STATUS= and logs.
+pub fn mode_name(mode: Mode) -> &'static str {
+    match mode {
+        Mode::Startup => "startup",
+        Mode::Idle => "idle",
+        Mode::Tracking => "tracking",
+        Mode::Reached => "reached",
+        Mode::Stopping => "stopping",
+        Mode::Fault => "fault",
+    }
+}
