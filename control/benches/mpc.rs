@@ -100,6 +100,43 @@ fn percentiles(horizon: usize, hessian: HessianMode) {
 
 /// `MPC_BENCH_PROBE=1`: time split and QP iterations for a few QP settings.
 fn probe() {
+    {
+        use control::mpc::cost::project_psd8;
+        use control::{CriticWorkspace, Derivatives};
+        let critic = Critic::from_weights(random_network(
+            NetworkMetadata::new(NetworkRole::Critic, 8),
+            &PAPER_HIDDEN,
+            1,
+        ))
+        .unwrap();
+        let mut ws = CriticWorkspace::new(&critic);
+        let mut d = Derivatives::default();
+        let x = State::new(1.0, 0.5, 0.3, 0.1, 0.05, 0.5);
+        let u = control::Control::new(0.1, 0.2);
+        for mode in [HessianMode::Exact, HessianMode::GaussNewton] {
+            let t = Instant::now();
+            for _ in 0..2000 {
+                critic.hessian(&mut ws, &x, &u, &GOAL, mode, &mut d);
+            }
+            println!(
+                "critic {mode:?} hessian: {:.1} us",
+                t.elapsed().as_secs_f64() * 1e6 / 2000.0
+            );
+        }
+        critic.hessian(&mut ws, &x, &u, &GOAL, HessianMode::Exact, &mut d);
+        let t = Instant::now();
+        let mut sink = 0.0;
+        for _ in 0..2000 {
+            let mut h = d.hess;
+            h[0][0] -= 1.0;
+            project_psd8(&mut h, 0.0);
+            sink += h[1][1];
+        }
+        println!(
+            "project_psd8: {:.1} us ({sink})",
+            t.elapsed().as_secs_f64() * 1e6 / 2000.0
+        );
+    }
     for horizon in [10, 20, 40] {
         for (name, s) in [
             (
@@ -118,11 +155,11 @@ fn probe() {
                 },
             ),
             (
-                "tol 1e-6 no refine",
+                "tol 1e-7 + refinement",
                 MpcSettings {
                     horizon,
-                    qp_tolerance: 1e-6,
-                    qp_iterative_refinement: false,
+                    qp_tolerance: 1e-7,
+                    qp_iterative_refinement: true,
                     ..MpcSettings::default()
                 },
             ),

@@ -109,7 +109,9 @@ fn control_bounds_hard_state_bounds_paid() {
         let critic = common::random_critic(8, 5);
         let actor = common::random_actor(6);
         let mpc = Mpc::new(p, critic, Some(actor), s).unwrap();
-        total += run(mpc, &starts(&p), Goal::new(6.0, -3.0, 2.0), 25);
+        let v = run(mpc, &starts(&p), Goal::new(6.0, -3.0, 2.0), 25);
+        eprintln!("{hessian:?}: {v:.3}");
+        total += v;
     }
     // A cost that wants to go faster than v_max towards a far goal.
     let mut pull = QuadraticCost::diagonal([1.0, 1.0, 0.0, 0.0, 0.0, 0.0], [0.01, 0.01]);

@@ -21,6 +21,9 @@
 //! Allocation: nothing in a tick allocates except inside Clarabel's `solve`
 //! (its timers; counted in `tests/mpc_alloc.rs`).
 
+// Index loops over small fixed-size blocks read like the math.
+#![allow(clippy::needless_range_loop)]
+
 pub mod constraints;
 pub mod cost;
 pub mod dynamics;
