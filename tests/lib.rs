@@ -1,1 +1,190 @@
 //! Helpers shared by the end-to-end tests in `tests/tests/`.
+//!
+//! The tests run the real binaries: `wlnavd --sim` (the daemon with its simulated machine)
+//! and `wlnav` (the client CLI), talking over iceoryx2 shared memory. Cargo does not expose
+//! another package's binaries to a test (`CARGO_BIN_EXE_*` is per package), so
+//! [`binaries`] runs `cargo build -p daemon -p shm-ipc --bins` once per test process, with
+//! the test's own profile and target directory, and returns the paths (a no-op build when
+//! they are fresh). Set `WLNAV_E2E_BIN_DIR` to use prebuilt binaries instead.
+//!
+//! Every daemon gets its own service-name prefix ([`unique_prefix`]), so tests run in
+//! parallel, and other people's daemons on the host, never meet.
+
+use std::ffi::OsString;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::OnceLock;
+use std::time::Duration;
+
+use shm_ipc::cli::daemon_process::DaemonProcess;
+use shm_ipc::{Client, IpcConfig, Telemetry, TelemetrySubscriber};
+
+/// Paths of the two binaries under test.
+#[derive(Debug, Clone)]
+pub struct Binaries {
+    /// `wlnavd`
+    pub wlnavd: PathBuf,
+    /// `wlnav`
+    pub wlnav: PathBuf,
+}
+
+/// The repository root (the workspace).
+pub fn repo_root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .expect("tests/ has a parent")
+        .to_path_buf()
+}
+
+/// Builds (once per process) and returns `wlnavd` and `wlnav`.
+pub fn binaries() -> &'static Binaries {
+    static BINS: OnceLock<Binaries> = OnceLock::new();
+    BINS.get_or_init(|| {
+        if let Some(dir) = std::env::var_os("WLNAV_E2E_BIN_DIR") {
+            let dir = PathBuf::from(dir);
+            return Binaries {
+                wlnavd: dir.join("wlnavd"),
+                wlnav: dir.join("wlnav"),
+            };
+        }
+        // The test executable is target/<profile>/deps/e2e-<hash>.
+        let exe = std::env::current_exe().expect("current exe");
+        let profile_dir = exe
+            .parent()
+            .and_then(Path::parent)
+            .expect("test executable under target/<profile>/deps")
+            .to_path_buf();
+        let target_dir = profile_dir.parent().expect("target dir").to_path_buf();
+        let profile = profile_dir
+            .file_name()
+            .and_then(|n| n.to_str())
+            .unwrap_or("debug")
+            .to_owned();
+        let cargo = std::env::var_os("CARGO").unwrap_or_else(|| OsString::from("cargo"));
+        let mut cmd = Command::new(cargo);
+        cmd.current_dir(repo_root())
+            .args(["build", "-p", "daemon", "-p", "shm-ipc", "--bins"])
+            .env("CARGO_TARGET_DIR", &target_dir);
+        match profile.as_str() {
+            "debug" => {}
+            "release" => {
+                cmd.arg("--release");
+            }
+            other => {
+                cmd.args(["--profile", other]);
+            }
+        }
+        eprintln!("e2e: building the binaries: {cmd:?}");
+        let status = cmd.status().expect("run cargo build");
+        assert!(status.success(), "cargo build of wlnavd and wlnav failed");
+        Binaries {
+            wlnavd: profile_dir.join("wlnavd"),
+            wlnav: profile_dir.join("wlnav"),
+        }
+    })
+}
+
+/// A prefix no other test or process uses: `wlnav-e2e/<test>/<pid>/<ns>`.
+pub fn unique_prefix(test: &str) -> String {
+    format!(
+        "wlnav-e2e/{test}/{}/{}",
+        std::process::id(),
+        shm_ipc::monotonic_now_ns() % 1_000_000_000_000
+    )
+}
+
+/// The MPC cost the tests run the daemon with: `WLNAV_E2E_COST` if set, else the trained
+/// critic when `critic-weights/` holds it, else the quadratic bring-up cost (no weights).
+pub fn cost() -> String {
+    if let Ok(c) = std::env::var("WLNAV_E2E_COST") {
+        return c;
+    }
+    let w = repo_root().join("critic-weights");
+    if w.join("critic.safetensors").is_file() && w.join("actor.safetensors").is_file() {
+        "critic".into()
+    } else {
+        "quadratic".into()
+    }
+}
+
+/// A running `wlnavd --sim` with a client and a telemetry subscription on its prefix.
+pub struct SimDaemon {
+    /// The process (dropping it sends SIGTERM).
+    pub process: DaemonProcess,
+    /// A client on the daemon's prefix.
+    pub client: Client,
+    /// A telemetry subscription made before the daemon became ready.
+    pub telemetry: TelemetrySubscriber,
+    /// The IPC settings (prefix).
+    pub config: IpcConfig,
+    /// The first ready telemetry sample.
+    pub first: Telemetry,
+}
+
+impl SimDaemon {
+    /// Starts `wlnavd --sim --prefix <unique> --time-scale <scale> --cost <cost()>` and waits
+    /// until it is ready (idle). Its log goes to a file in the temp directory, shown on
+    /// failure.
+    pub fn start(test: &str, time_scale: f64) -> Self {
+        Self::start_with(test, time_scale, &[])
+    }
+
+    /// Like [`SimDaemon::start`], with extra `wlnavd` arguments.
+    pub fn start_with(test: &str, time_scale: f64, extra: &[&str]) -> Self {
+        let bins = binaries();
+        let prefix = unique_prefix(test);
+        let log = std::env::temp_dir().join(format!(
+            "wlnav-e2e-{test}-{}-{}.log",
+            std::process::id(),
+            shm_ipc::monotonic_now_ns()
+        ));
+        let mut args: Vec<OsString> = vec!["--cost".into(), cost().into()];
+        args.extend(extra.iter().map(OsString::from));
+        let scale = (time_scale != 1.0).then_some(time_scale);
+        let mut process = DaemonProcess::spawn_sim(&bins.wlnavd, &prefix, scale, &args, Some(&log))
+            .expect("spawn wlnavd");
+        let config = IpcConfig::new(prefix);
+        let client = Client::new(&config).expect("client");
+        let telemetry = client.subscribe_telemetry().expect("subscribe");
+        let first = match process.wait_ready(&telemetry, Duration::from_secs(60)) {
+            Ok(t) => t,
+            Err(e) => panic!("wlnavd did not start: {e:#}"),
+        };
+        Self {
+            process,
+            client,
+            telemetry,
+            config,
+            first,
+        }
+    }
+
+    /// The prefix.
+    pub fn prefix(&self) -> &str {
+        &self.config.prefix
+    }
+
+    /// The next telemetry sample, panicking after `timeout` without one.
+    pub fn next(&self, timeout: Duration) -> Telemetry {
+        match self.telemetry.recv_timeout(timeout).expect("telemetry") {
+            Some(t) => t,
+            None => panic!(
+                "no telemetry within {timeout:?}; daemon log:\n{}",
+                self.process.log_tail(20)
+            ),
+        }
+    }
+
+    /// Stops the daemon with SIGTERM and asserts a clean exit.
+    pub fn stop(mut self) {
+        let (status, killed) = self
+            .process
+            .terminate(Duration::from_secs(10))
+            .expect("terminate");
+        assert!(
+            !killed && status.success(),
+            "wlnavd did not exit cleanly on SIGTERM ({status}, killed: {killed}); log:\n{}",
+            self.process.log_tail(20)
+        );
+    }
+}

@@ -156,15 +156,16 @@ impl DaemonProcess {
         all[all.len().saturating_sub(lines)..].join("\n")
     }
 
-    /// Waits until the daemon publishes telemetry in a mode other than start-up (weights
-    /// loaded, first solve done), or fails if it exits or `timeout` passes. Returns the
-    /// first such sample.
+    /// Waits until the daemon publishes telemetry in a driving-ready mode (idle, tracking or
+    /// reached: weights loaded, first solve done, pose and machine state fresh), or fails if
+    /// it exits or `timeout` passes. Returns the first such sample.
     pub fn wait_ready(
         &mut self,
         sub: &TelemetrySubscriber,
         timeout: Duration,
     ) -> anyhow::Result<Telemetry> {
         let start = Instant::now();
+        let mut last: Option<Telemetry> = None;
         loop {
             if let Some(status) = self.try_wait()? {
                 bail!(
@@ -177,13 +178,23 @@ impl DaemonProcess {
                 bail!("interrupted while waiting for the daemon");
             }
             if let Some(t) = sub.recv_timeout(Duration::from_millis(100))? {
-                if t.mode() != Ok(Mode::Startup) {
+                if matches!(t.mode(), Ok(Mode::Idle | Mode::Tracking | Mode::Reached)) {
                     return Ok(t);
                 }
+                last = Some(t);
             }
             if start.elapsed() >= timeout {
+                let seen = match &last {
+                    Some(t) => format!(
+                        "last telemetry: tick {}, mode {}, faults {}",
+                        t.tick,
+                        super::view::mode_name(t.mode),
+                        super::view::fault_text(t.fault_flags)
+                    ),
+                    None => "no telemetry at all".to_owned(),
+                };
                 bail!(
-                    "{} published no telemetry outside start-up within {:.0} s{}",
+                    "{} did not become ready (idle) within {:.0} s ({seen}){}",
                     self.binary.display(),
                     timeout.as_secs_f64(),
                     self.log_hint()

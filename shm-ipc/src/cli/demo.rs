@@ -69,6 +69,10 @@ pub struct DemoArgs {
     /// The wlnavd binary [default: next to this executable, then PATH]
     #[arg(long)]
     pub wlnavd: Option<PathBuf>,
+    /// MPC stage cost for wlnavd (`critic`, the trained critic in critic-weights/, or
+    /// `quadratic`, a bring-up cost that needs no weights) [default: wlnavd's, the critic]
+    #[arg(long, value_name = "COST")]
+    pub cost: Option<String>,
     /// Extra argument for wlnavd (repeatable)
     #[arg(long = "daemon-arg", allow_hyphen_values = true)]
     pub daemon_args: Vec<OsString>,
@@ -123,9 +127,11 @@ fn send_goal(client: &Client, goal: Pose2) -> Result<(u64, GoalReply), ClientErr
 }
 
 fn path_length(path: &[(f64, f64)]) -> f64 {
-    path.windows(2)
+    let length: f64 = path
+        .windows(2)
         .map(|w| (w[1].0 - w[0].0).hypot(w[1].1 - w[0].1))
-        .sum()
+        .sum();
+    length + 0.0 // an empty sum is -0.0; print 0.0
 }
 
 /// `wlnav demo`.
@@ -138,15 +144,24 @@ pub fn run(cli: &Cli, a: &DemoArgs) -> anyhow::Result<u8> {
         .unwrap_or_else(|| unique_prefix("wlnav-demo"));
     let log = std::env::temp_dir().join(format!("wlnav-demo-{}.log", std::process::id()));
     emit("wlnav demo: a loading cycle on the simulated machine, through shared memory");
-    let mut daemon =
-        DaemonProcess::spawn_sim(&binary, &prefix, a.time_scale, &a.daemon_args, Some(&log))?;
+    let mut extra: Vec<OsString> = Vec::new();
+    if let Some(cost) = &a.cost {
+        extra.push("--cost".into());
+        extra.push(cost.into());
+    }
+    extra.extend(a.daemon_args.iter().cloned());
+    let mut daemon = DaemonProcess::spawn_sim(&binary, &prefix, a.time_scale, &extra, Some(&log))?;
     emit(&format!(
-        "  daemon   {} --sim --prefix {}{} (pid {}, log {})",
+        "  daemon   {} --sim --prefix {}{}{} (pid {}, log {})",
         binary.display(),
         prefix,
         a.time_scale
             .map(|s| format!(" --time-scale {s}"))
             .unwrap_or_default(),
+        extra
+            .iter()
+            .map(|x| format!(" {}", x.to_string_lossy()))
+            .collect::<String>(),
         daemon.pid().unwrap_or(0),
         log.display()
     ));
@@ -207,6 +222,13 @@ pub fn run(cli: &Cli, a: &DemoArgs) -> anyhow::Result<u8> {
             goal: g,
             ..LegTrace::default()
         };
+        if i > 0 && !matches!(results.last().map(|r| &r.status), Some(GoalStatus::Reached)) {
+            // After a failed leg the daemon may still be stopping or faulted: give it time to
+            // come back (a fault clears once the machine stands still) before the next goal.
+            if let Err(e) = daemon.wait_ready(&sub, Duration::from_secs(10)) {
+                emit(&format!("  the daemon did not recover: {e:#}"));
+            }
+        }
         let (id, reply) = match send_goal(&client, g) {
             Ok(r) => r,
             Err(e) => {
