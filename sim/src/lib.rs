@@ -3,8 +3,20 @@
 //! - [`ipopt`]: a small FFI over IPOPT's C interface, and [`nlp`] to assemble
 //!   sparse NLPs from elements; [`collocation`] (Hermite–Simpson) and [`ocp`]:
 //!   the paper's baseline trajectory optimisation and the min-time bound.
+//! - [`runner`]: closed-loop runs of the MPC and the actor on the simulated
+//!   plant, the baseline's replay, min-time; scenarios in parallel.
+//! - [`results`]: the results CSV and summary statistics; [`plots`]: SVGs;
+//!   [`eval`]: the `eval` command's outputs; [`report`]: the `paper` command.
+//!
+//! Scenario files are parsed by [`control::scenario`]; the committed ones are
+//! in `sim/scenarios/`.
 
 pub mod collocation;
+pub mod eval;
 pub mod ipopt;
 pub mod nlp;
 pub mod ocp;
+pub mod plots;
+pub mod report;
+pub mod results;
+pub mod runner;

@@ -1,0 +1,218 @@
+//! `wlnav-sim`: scenario files, evaluation, the baseline and the results report.
+//!
+//! ```text
+//! wlnav-sim eval --scenarios sim/scenarios/paper128.csv --methods mpc,actor,baseline,min-time \
+//!     [--horizon 10] [--hessian exact|gauss-newton] [--obstacles distance|cbf] \
+//!     [--delay 0.2] [--lag 0.1] [--tolerance 0.1] [--weights critic-weights] --out out/eval
+//! wlnav-sim paper [--weights critic-weights] [--out docs]
+//! wlnav-sim scenarios --out sim/scenarios
+//! ```
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use clap::{Parser, Subcommand, ValueEnum};
+use control::critic::HessianMode;
+use control::mpc::{MpcSettings, ObstacleConstraint};
+use control::plant::PlantConfig;
+use control::scenario;
+use sim::eval;
+use sim::runner::{EvalConfig, Method, Networks};
+
+#[derive(Parser)]
+#[command(
+    name = "wlnav-sim",
+    about = "wlnav scenarios, closed-loop evaluation, baseline and report"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum Hessian {
+    Exact,
+    GaussNewton,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum Obstacles {
+    Distance,
+    Cbf,
+}
+
+#[derive(clap::Args, Clone)]
+struct Common {
+    /// Directory with critic.safetensors and actor.safetensors; random
+    /// networks (with a warning) when it has none.
+    #[arg(long, default_value = "critic-weights")]
+    weights: PathBuf,
+    /// Refuse to fall back to random networks.
+    #[arg(long)]
+    require_weights: bool,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    jobs: Option<usize>,
+    /// Success-test tolerance (DESIGN §7).
+    #[arg(long, default_value_t = 0.1)]
+    tolerance: f64,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Evaluate methods on a scenario file; writes DIR/results.csv, summary.md and SVGs.
+    Eval {
+        #[arg(long)]
+        scenarios: PathBuf,
+        /// Comma-separated: mpc, actor, baseline, min-time.
+        #[arg(long, default_value = "mpc,actor,baseline,min-time")]
+        methods: String,
+        /// MPC horizon N.
+        #[arg(long, default_value_t = 10)]
+        horizon: usize,
+        #[arg(long, value_enum, default_value_t = Hessian::Exact)]
+        hessian: Hessian,
+        #[arg(long, value_enum, default_value_t = Obstacles::Distance)]
+        obstacles: Obstacles,
+        /// Plant input delay [s] (compensated by the MPC).
+        #[arg(long, default_value_t = 0.0)]
+        delay: f64,
+        /// Plant velocity-lag time constant of β̇ and v [s] (0: ideal ramp).
+        #[arg(long, default_value_t = 0.0)]
+        lag: f64,
+        /// Simulated duration [s].
+        #[arg(long, default_value_t = 30.0)]
+        duration: f64,
+        /// Skip the per-scenario trajectory plots.
+        #[arg(long)]
+        no_scenario_plots: bool,
+        #[command(flatten)]
+        common: Common,
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// The whole study: writes OUT/results.md and OUT/results/*.
+    Paper {
+        #[arg(long, default_value = "sim/scenarios/paper128.csv")]
+        scenarios: PathBuf,
+        #[arg(long, default_value = "sim/scenarios/highlighted.csv")]
+        highlighted: PathBuf,
+        #[command(flatten)]
+        common: Common,
+        #[arg(long, default_value = "docs")]
+        out: PathBuf,
+    },
+    /// Writes the paper's 128 scenarios to OUT/paper128.csv.
+    Scenarios {
+        #[arg(long, default_value = "sim/scenarios")]
+        out: PathBuf,
+    },
+}
+
+fn load_scenarios(path: &Path) -> Result<Vec<scenario::Scenario>> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    Ok(scenario::parse(&text, &path.display().to_string())?)
+}
+
+fn networks(c: &Common) -> Result<Networks> {
+    match Networks::load(&c.weights) {
+        Ok(n) => Ok(n),
+        Err(e) if !c.require_weights => {
+            eprintln!("warning: {e:#}; using RANDOM networks (they do not reach goals)");
+            Ok(Networks::random(0))
+        }
+        Err(e) => Err(e),
+    }
+}
+
+fn base_config(c: &Common) -> EvalConfig {
+    let mut cfg = EvalConfig {
+        tolerance: c.tolerance,
+        ..Default::default()
+    };
+    cfg.min_time.tolerance = c.tolerance;
+    if let Some(j) = c.jobs {
+        cfg.jobs = j.max(1);
+    }
+    cfg
+}
+
+fn main() -> Result<()> {
+    let cli = Cli::parse();
+    match cli.command {
+        Command::Eval {
+            scenarios,
+            methods,
+            horizon,
+            hessian,
+            obstacles,
+            delay,
+            lag,
+            duration,
+            no_scenario_plots,
+            common,
+            out,
+        } => {
+            if !(delay >= 0.0 && lag >= 0.0 && duration > 0.0 && common.tolerance > 0.0) {
+                bail!("--delay and --lag must be >= 0, --duration and --tolerance > 0");
+            }
+            let set = load_scenarios(&scenarios)?;
+            let nets = networks(&common)?;
+            let mut cfg = base_config(&common);
+            cfg.methods = Method::parse_list(&methods)?;
+            cfg.duration = duration;
+            cfg.mpc = MpcSettings {
+                horizon,
+                hessian: match hessian {
+                    Hessian::Exact => HessianMode::Exact,
+                    Hessian::GaussNewton => HessianMode::GaussNewton,
+                },
+                obstacle_constraint: match obstacles {
+                    Obstacles::Distance => ObstacleConstraint::Distance,
+                    Obstacles::Cbf => ObstacleConstraint::Cbf,
+                },
+                ..cfg.mpc
+            };
+            cfg.mpc.validate()?;
+            cfg.plant = PlantConfig {
+                delay,
+                tau_beta_dot: lag,
+                tau_v: lag,
+                ..PlantConfig::ideal()
+            };
+            cfg.plant.validate()?;
+            let ev = eval::evaluate(&cfg, &nets, &set)?;
+            let header = format!(
+                "# eval: {}\n\nmethods {methods}, N = {horizon}, delay {delay} s, lag {lag} s, tolerance {}, networks: {}\n",
+                scenarios.display(),
+                common.tolerance,
+                nets.source
+            );
+            eval::write_outputs(&ev, &out, &header, !no_scenario_plots)?;
+            print!("{}", sim::results::summary_markdown(&ev.summaries));
+            print!("{}", eval::timing_text(&ev));
+            println!("wrote {}", out.join("results.csv").display());
+        }
+        Command::Paper {
+            scenarios,
+            highlighted,
+            common,
+            out,
+        } => {
+            let set = load_scenarios(&scenarios)?;
+            let hl = load_scenarios(&highlighted)?;
+            let nets = networks(&common)?;
+            let cfg = base_config(&common);
+            let cmd = "cargo run --release -p sim --bin wlnav-sim -- paper";
+            sim::report::paper(&cfg, &nets, &set, &hl, &out, cmd)?;
+        }
+        Command::Scenarios { out } => {
+            std::fs::create_dir_all(&out)?;
+            let path = out.join("paper128.csv");
+            std::fs::write(&path, scenario::to_csv(&scenario::paper_scenarios()))?;
+            println!("wrote {}", path.display());
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,245 @@
+//! SVG plots (paper Fig. 5–8): trajectories with goal arrows and obstacles,
+//! and the histogram of convergence times. plotters' SVG backend without font
+//! features: text is laid out naively and left to the SVG viewer's fonts.
+
+use std::path::Path;
+
+use anyhow::{anyhow, Result};
+use control::model::State;
+use control::scenario::Scenario;
+use plotters::prelude::*;
+
+/// Colours of the methods, in a fixed order.
+pub fn method_color(method: &str) -> RGBColor {
+    match method {
+        "mpc" => RGBColor(31, 119, 180),
+        "baseline" => RGBColor(214, 39, 40),
+        "actor" => RGBColor(44, 160, 44),
+        "min-time" => RGBColor(148, 103, 189),
+        _ => RGBColor(255, 127, 14),
+    }
+}
+
+/// A trajectory to draw.
+pub struct Track<'a> {
+    pub label: String,
+    pub states: &'a [State],
+    pub color: RGBColor,
+}
+
+fn arrow(x: f64, y: f64, theta: f64, len: f64) -> [Vec<(f64, f64)>; 2] {
+    let tip = (x + len * theta.cos(), y + len * theta.sin());
+    let head = 0.35 * len;
+    let l = (
+        tip.0 + head * (theta + 2.6).cos(),
+        tip.1 + head * (theta + 2.6).sin(),
+    );
+    let r = (
+        tip.0 + head * (theta - 2.6).cos(),
+        tip.1 + head * (theta - 2.6).sin(),
+    );
+    [vec![(x, y), tip], vec![l, tip, r]]
+}
+
+fn circle(x: f64, y: f64, r: f64) -> Vec<(f64, f64)> {
+    (0..=48)
+        .map(|i| {
+            let a = i as f64 / 48.0 * std::f64::consts::TAU;
+            (x + r * a.cos(), y + r * a.sin())
+        })
+        .collect()
+}
+
+fn err<E: std::fmt::Display>(e: E) -> anyhow::Error {
+    anyhow!("plotting: {e}")
+}
+
+/// Draws the scenarios' start and goal arrows and obstacles, and the tracks,
+/// with equal axis scales.
+pub fn trajectory_svg(
+    path: &Path,
+    title: &str,
+    scenarios: &[&Scenario],
+    tracks: &[Track],
+) -> Result<()> {
+    let (w, h) = (720u32, 640u32);
+    let mut xs: Vec<f64> = Vec::new();
+    let mut ys: Vec<f64> = Vec::new();
+    for sc in scenarios {
+        xs.extend([sc.start[0], sc.goal.x]);
+        ys.extend([sc.start[1], sc.goal.y]);
+        for o in &sc.obstacles {
+            xs.extend([o.x - o.r, o.x + o.r]);
+            ys.extend([o.y - o.r, o.y + o.r]);
+        }
+    }
+    for t in tracks {
+        for x in t.states {
+            if x[0].is_finite() && x[1].is_finite() {
+                xs.push(x[0]);
+                ys.push(x[1]);
+            }
+        }
+    }
+    let (mut x0, mut x1) = xs
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+            (a.min(v), b.max(v))
+        });
+    let (mut y0, mut y1) = ys
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+            (a.min(v), b.max(v))
+        });
+    x0 -= 1.0;
+    x1 += 1.0;
+    y0 -= 1.0;
+    y1 += 1.0;
+    // Equal scales: the plotting area is about (w − 70) × (h − 90) pixels.
+    let aspect = (w as f64 - 70.0) / (h as f64 - 90.0);
+    let (cx, cy) = ((x0 + x1) / 2.0, (y0 + y1) / 2.0);
+    let (mut sx, mut sy) = (x1 - x0, y1 - y0);
+    if sx / sy > aspect {
+        sy = sx / aspect;
+    } else {
+        sx = sy * aspect;
+    }
+    let (x0, x1, y0, y1) = (cx - sx / 2.0, cx + sx / 2.0, cy - sy / 2.0, cy + sy / 2.0);
+    let arrow_len = 0.04 * sx.max(sy).max(4.0);
+
+    let root = SVGBackend::new(path, (w, h)).into_drawing_area();
+    root.fill(&WHITE).map_err(err)?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(title, ("sans-serif", 18))
+        .margin(10)
+        .x_label_area_size(35)
+        .y_label_area_size(45)
+        .build_cartesian_2d(x0..x1, y0..y1)
+        .map_err(err)?;
+    chart
+        .configure_mesh()
+        .x_desc("x [m]")
+        .y_desc("y [m]")
+        .light_line_style(WHITE)
+        .draw()
+        .map_err(err)?;
+    for sc in scenarios {
+        for o in &sc.obstacles {
+            chart
+                .draw_series(std::iter::once(Polygon::new(
+                    circle(o.x, o.y, o.r),
+                    RGBColor(160, 160, 160).mix(0.5).filled(),
+                )))
+                .map_err(err)?;
+        }
+        for part in arrow(sc.goal.x, sc.goal.y, sc.goal.theta, arrow_len) {
+            chart
+                .draw_series(std::iter::once(PathElement::new(
+                    part,
+                    BLACK.stroke_width(2),
+                )))
+                .map_err(err)?;
+        }
+        let orange = RGBColor(255, 127, 14);
+        for part in arrow(sc.start[0], sc.start[1], sc.start[2], arrow_len) {
+            chart
+                .draw_series(std::iter::once(PathElement::new(
+                    part,
+                    orange.stroke_width(2),
+                )))
+                .map_err(err)?;
+        }
+    }
+    let mut labelled: Vec<String> = Vec::new();
+    for t in tracks {
+        let pts: Vec<(f64, f64)> = t
+            .states
+            .iter()
+            .filter(|x| x[0].is_finite() && x[1].is_finite())
+            .map(|x| (x[0], x[1]))
+            .collect();
+        let color = t.color;
+        let series = chart
+            .draw_series(LineSeries::new(pts, color.stroke_width(2)))
+            .map_err(err)?;
+        if !labelled.contains(&t.label) {
+            labelled.push(t.label.clone());
+            series.label(t.label.clone()).legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 18, y)], color.stroke_width(2))
+            });
+        }
+    }
+    if !labelled.is_empty() {
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .position(SeriesLabelPosition::UpperLeft)
+            .draw()
+            .map_err(err)?;
+    }
+    root.present().map_err(err)?;
+    Ok(())
+}
+
+/// Histogram of convergence times, one bar colour per method, 1 s bins
+/// (paper Fig. 8).
+pub fn histogram_svg(path: &Path, title: &str, series: &[(String, Vec<f64>)]) -> Result<()> {
+    let t_max = series
+        .iter()
+        .flat_map(|(_, v)| v.iter().cloned())
+        .fold(1.0, f64::max)
+        .ceil()
+        + 1.0;
+    let bins = t_max as usize;
+    let mut counts = vec![vec![0usize; bins]; series.len()];
+    for (m, (_, v)) in series.iter().enumerate() {
+        for &t in v {
+            let b = (t.max(0.0).floor() as usize).min(bins - 1);
+            counts[m][b] += 1;
+        }
+    }
+    let c_max = counts.iter().flatten().cloned().max().unwrap_or(1).max(1);
+    let root = SVGBackend::new(path, (720, 420)).into_drawing_area();
+    root.fill(&WHITE).map_err(err)?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(title, ("sans-serif", 18))
+        .margin(10)
+        .x_label_area_size(35)
+        .y_label_area_size(45)
+        .build_cartesian_2d(0.0..t_max, 0.0..(c_max as f64 * 1.1))
+        .map_err(err)?;
+    chart
+        .configure_mesh()
+        .x_desc("convergence time [s]")
+        .y_desc("scenarios")
+        .light_line_style(WHITE)
+        .draw()
+        .map_err(err)?;
+    let width = 0.9 / series.len().max(1) as f64;
+    for (m, (name, _)) in series.iter().enumerate() {
+        let color = method_color(name);
+        let bars = counts[m]
+            .iter()
+            .enumerate()
+            .filter(|(_, &c)| c > 0)
+            .map(|(b, &c)| {
+                let x = b as f64 + 0.05 + m as f64 * width;
+                Rectangle::new([(x, 0.0), (x + width, c as f64)], color.mix(0.8).filled())
+            });
+        chart
+            .draw_series(bars)
+            .map_err(err)?
+            .label(name.clone())
+            .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 14, y + 5)], color.filled()));
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .position(SeriesLabelPosition::UpperRight)
+        .draw()
+        .map_err(err)?;
+    root.present().map_err(err)?;
+    Ok(())
+}

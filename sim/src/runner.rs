@@ -1,0 +1,527 @@
+//! The closed-loop runner: every scenario × method, scenarios in parallel on
+//! worker threads, with a progress bar.
+//!
+//! - `mpc`: [`control::mpc::Mpc`] with the critic on [`control::plant::Plant`]
+//!   (ideal, or with delay and velocity lag; the MPC compensates the configured
+//!   delay). One tick every Δt = 0.2 s for 30 s.
+//! - `actor`: the actor's deterministic action, sent as the velocity of the
+//!   model's next state, on the same plant (delay compensated the same way).
+//! - `baseline`: [`crate::ocp::solve_baseline`], its open-loop controls replayed
+//!   on the ideal model.
+//! - `min-time`: [`crate::ocp::solve_min_time`] from several initial guesses
+//!   (the other methods' converged trajectories among them).
+//!
+//! Every trajectory is sampled every 0.2 s (min-time at its own step) and
+//! scored the same way ([`score`]).
+
+use std::path::Path;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Mutex;
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use control::delay::DelayCompensator;
+use control::mlp::PAPER_HIDDEN;
+use control::model::{converged, env_step, ix, Control, MachineParams, State};
+use control::mpc::{Mpc, MpcSettings, Obstacle as MpcObstacle};
+use control::plant::{Plant, PlantConfig, VelocityCommand};
+use control::scenario::Scenario;
+use control::weights::{decode, random_network, NetworkMetadata, NetworkRole};
+use control::{Actor, ActorWorkspace, Critic};
+use indicatif::{ProgressBar, ProgressStyle};
+
+use crate::ocp::{self, BaselineSettings, Guess, MinTimeSettings};
+use crate::results::ResultRow;
+
+/// Success-test speed threshold of `t_settle` [m/s] (DESIGN §7).
+pub const SETTLE_SPEED: f64 = 0.05;
+
+/// An evaluated method.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Method {
+    Mpc,
+    Actor,
+    Baseline,
+    MinTime,
+}
+
+impl Method {
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Mpc => "mpc",
+            Method::Actor => "actor",
+            Method::Baseline => "baseline",
+            Method::MinTime => "min-time",
+        }
+    }
+
+    pub fn parse(s: &str) -> Result<Self> {
+        Ok(match s.trim() {
+            "mpc" => Method::Mpc,
+            "actor" => Method::Actor,
+            "baseline" => Method::Baseline,
+            "min-time" | "mintime" => Method::MinTime,
+            other => bail!("unknown method `{other}` (expected mpc, actor, baseline, min-time)"),
+        })
+    }
+
+    /// A comma-separated list; min-time is moved last (it uses the others' trajectories).
+    pub fn parse_list(s: &str) -> Result<Vec<Self>> {
+        let mut v: Vec<Method> = s
+            .split(',')
+            .filter(|t| !t.trim().is_empty())
+            .map(Method::parse)
+            .collect::<Result<_>>()?;
+        v.dedup();
+        v.sort_by_key(|m| *m == Method::MinTime);
+        if v.is_empty() {
+            bail!("no method given");
+        }
+        Ok(v)
+    }
+}
+
+/// The trained networks (or random ones, before training).
+#[derive(Debug, Clone)]
+pub struct Networks {
+    pub critic: Critic,
+    pub actor: Actor,
+    /// Where they came from (for reports).
+    pub source: String,
+    pub random: bool,
+}
+
+impl Networks {
+    /// Loads `dir/critic.safetensors` and `dir/actor.safetensors`.
+    pub fn load(dir: &Path) -> Result<Self> {
+        let read = |name: &str| -> Result<_> {
+            let path = dir.join(name);
+            let bytes =
+                std::fs::read(&path).with_context(|| format!("reading {}", path.display()))?;
+            Ok(decode(&bytes, &path.display().to_string())?)
+        };
+        let critic = Critic::from_weights(read("critic.safetensors")?)?;
+        let actor = Actor::from_weights(read("actor.safetensors")?)?;
+        Ok(Self {
+            critic,
+            actor,
+            source: dir.display().to_string(),
+            random: false,
+        })
+    }
+
+    /// Random networks of the paper's sizes (they do not reach goals).
+    pub fn random(seed: u64) -> Self {
+        let c = random_network(
+            NetworkMetadata::new(NetworkRole::Critic, 1),
+            &PAPER_HIDDEN,
+            seed,
+        );
+        let a = random_network(
+            NetworkMetadata::new(NetworkRole::Actor, 4),
+            &PAPER_HIDDEN,
+            seed + 1,
+        );
+        Self {
+            critic: Critic::from_weights(c).expect("random critic is valid"),
+            actor: Actor::from_weights(a).expect("random actor is valid"),
+            source: format!("random weights (seed {seed})"),
+            random: true,
+        }
+    }
+}
+
+/// Everything an evaluation is configured by.
+#[derive(Debug, Clone)]
+pub struct EvalConfig {
+    pub params: MachineParams,
+    pub methods: Vec<Method>,
+    /// MPC settings; `delay` is overwritten with the plant's.
+    pub mpc: MpcSettings,
+    pub plant: PlantConfig,
+    /// Success-test tolerance (DESIGN §7: 0.1).
+    pub tolerance: f64,
+    /// Simulated duration of closed-loop runs [s] (DESIGN §7: 30).
+    pub duration: f64,
+    pub baseline: BaselineSettings,
+    pub min_time: MinTimeSettings,
+    /// Worker threads.
+    pub jobs: usize,
+    pub progress: bool,
+}
+
+impl Default for EvalConfig {
+    fn default() -> Self {
+        Self {
+            params: MachineParams::default(),
+            methods: vec![
+                Method::Mpc,
+                Method::Actor,
+                Method::Baseline,
+                Method::MinTime,
+            ],
+            mpc: MpcSettings {
+                delay: 0.0,
+                ..Default::default()
+            },
+            plant: PlantConfig::ideal(),
+            tolerance: 0.1,
+            duration: 30.0,
+            baseline: BaselineSettings::default(),
+            min_time: MinTimeSettings::default(),
+            jobs: std::thread::available_parallelism().map_or(2, |n| n.get()),
+            progress: true,
+        }
+    }
+}
+
+/// One method on one scenario.
+#[derive(Debug, Clone)]
+pub struct Run {
+    pub row: ResultRow,
+    /// The trajectory, sampled every `dt`.
+    pub states: Vec<State>,
+    pub dt: f64,
+    /// Individual solve times [ms] (per tick, or per NLP solve).
+    pub solve_ms: Vec<f64>,
+    /// Wall time of the whole run [s].
+    pub wall_s: f64,
+}
+
+/// All methods on one scenario.
+#[derive(Debug, Clone)]
+pub struct ScenarioRuns {
+    pub scenario: Scenario,
+    pub runs: Vec<(Method, Run)>,
+}
+
+/// Scores a trajectory sampled every `dt` (DESIGN §7).
+pub fn score(
+    sc: &Scenario,
+    method: &str,
+    states: &[State],
+    dt: f64,
+    tolerance: f64,
+    solve_ms: &[f64],
+) -> ResultRow {
+    let inside = |x: &State| converged(x, &sc.goal, tolerance);
+    let first = states.iter().position(inside);
+    // Sample instants, free of the round-off of k·Δt.
+    let at = |k: usize| (k as f64 * dt * 1e9).round() / 1e9;
+    let t_converge = first.map(at);
+    let t_settle = first.map(|_| {
+        let last_bad = states
+            .iter()
+            .rposition(|x| !inside(x) || x[ix::V].abs() >= SETTLE_SPEED);
+        last_bad.map_or(0.0, |k| at(k + 1))
+    });
+    // A run that never stays inside and slow by its end has not settled.
+    let t_settle = t_settle.filter(|t| *t < states.len() as f64 * dt - 1e-9 || states.len() == 1);
+    let upto = first.map_or(states.len(), |k| k + 1);
+    let path_length = states[..upto]
+        .windows(2)
+        .map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]))
+        .sum();
+    let min_clearance = (!sc.obstacles.is_empty()).then(|| {
+        states
+            .iter()
+            .flat_map(|x| {
+                sc.obstacles
+                    .iter()
+                    .map(move |o| (x[0] - o.x).hypot(x[1] - o.y) - o.r)
+            })
+            .fold(f64::INFINITY, f64::min)
+    });
+    let (median, max) = if solve_ms.is_empty() {
+        (0.0, 0.0)
+    } else {
+        (
+            crate::results::quantile(solve_ms, 0.5),
+            solve_ms.iter().cloned().fold(0.0, f64::max),
+        )
+    };
+    ResultRow {
+        name: sc.name.clone(),
+        method: method.to_string(),
+        success: first.is_some(),
+        t_converge,
+        t_settle,
+        path_length,
+        min_clearance,
+        solve_ms_median: median,
+        solve_ms_max: max,
+    }
+}
+
+fn mpc_obstacles(sc: &Scenario) -> Vec<MpcObstacle> {
+    sc.obstacles
+        .iter()
+        .map(|o| MpcObstacle::new(o.x, o.y, o.r))
+        .collect()
+}
+
+/// The MPC in closed loop with the plant.
+pub fn run_mpc(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run> {
+    let start = Instant::now();
+    let settings = MpcSettings {
+        delay: cfg.plant.delay,
+        ..cfg.mpc
+    };
+    let mut mpc = Mpc::new(
+        cfg.params,
+        nets.critic.clone(),
+        Some(nets.actor.clone()),
+        settings,
+    )?;
+    mpc.set_goal(sc.goal, &mpc_obstacles(sc))?;
+    let mut plant = Plant::new(cfg.params, cfg.plant, sc.start)?;
+    let steps = (cfg.duration / settings.dt).round() as usize;
+    let mut states = Vec::with_capacity(steps + 1);
+    let mut solve_ms = Vec::with_capacity(steps);
+    for k in 0..=steps {
+        let x = plant.measure();
+        states.push(plant.state());
+        if k == steps {
+            break;
+        }
+        let sol = mpc.step(&x)?;
+        solve_ms.push(sol.solve_time.as_secs_f64() * 1e3);
+        plant.command(sol.command)?;
+        plant.advance(settings.dt);
+    }
+    let row = score(
+        sc,
+        Method::Mpc.name(),
+        &states,
+        settings.dt,
+        cfg.tolerance,
+        &solve_ms,
+    );
+    Ok(Run {
+        row,
+        states,
+        dt: settings.dt,
+        solve_ms,
+        wall_s: start.elapsed().as_secs_f64(),
+    })
+}
+
+/// The actor alone in closed loop with the plant.
+pub fn run_actor(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run> {
+    let start = Instant::now();
+    let dt = cfg.mpc.dt;
+    let mut ws = ActorWorkspace::new(&nets.actor);
+    let mut delay = DelayCompensator::new(cfg.params, cfg.plant.delay, dt)?;
+    let mut plant = Plant::new(cfg.params, cfg.plant, sc.start)?;
+    let steps = (cfg.duration / dt).round() as usize;
+    let mut states = Vec::with_capacity(steps + 1);
+    let mut solve_ms = Vec::with_capacity(steps);
+    for k in 0..=steps {
+        let x = plant.measure();
+        states.push(plant.state());
+        if k == steps {
+            break;
+        }
+        let t0 = Instant::now();
+        let now = k as f64 * dt;
+        let x_hat = delay.propagate(now, &x);
+        let u = nets.actor.action(&mut ws, &x_hat, &sc.goal);
+        let next = env_step(&cfg.params, &x_hat, &u, dt);
+        let cmd = VelocityCommand {
+            beta_dot: next[ix::BETA_DOT],
+            v: next[ix::V],
+        };
+        delay.record(now, cmd);
+        solve_ms.push(t0.elapsed().as_secs_f64() * 1e3);
+        plant.command(cmd)?;
+        plant.advance(dt);
+    }
+    let row = score(
+        sc,
+        Method::Actor.name(),
+        &states,
+        dt,
+        cfg.tolerance,
+        &solve_ms,
+    );
+    Ok(Run {
+        row,
+        states,
+        dt,
+        solve_ms,
+        wall_s: start.elapsed().as_secs_f64(),
+    })
+}
+
+/// The baseline: solve, then replay its controls on the ideal model.
+pub fn run_baseline(cfg: &EvalConfig, sc: &Scenario) -> Result<(Run, ocp::Plan)> {
+    let start = Instant::now();
+    let plan = ocp::solve_baseline(&cfg.params, sc, &cfg.baseline);
+    let states = ocp::replay(
+        &cfg.params,
+        &plan.states[0],
+        &plan.controls,
+        plan.dt,
+        cfg.duration,
+    );
+    let solve_ms = vec![plan.solve_time.as_secs_f64() * 1e3];
+    let mut row = score(
+        sc,
+        Method::Baseline.name(),
+        &states,
+        plan.dt,
+        cfg.tolerance,
+        &solve_ms,
+    );
+    if !plan.status.success() {
+        // A failed solve's controls may still converge; keep the replay's verdict
+        // but say so in the log.
+        tracing_note(&format!(
+            "baseline {}: IPOPT {}",
+            sc.name,
+            plan.status.name()
+        ));
+    }
+    row.success &= plan.violation < 1e-3;
+    Ok((
+        Run {
+            row,
+            states,
+            dt: plan.dt,
+            solve_ms,
+            wall_s: start.elapsed().as_secs_f64(),
+        },
+        plan,
+    ))
+}
+
+fn tracing_note(msg: &str) {
+    eprintln!("note: {msg}");
+}
+
+/// Converts a 0.2 s trajectory that converged into a min-time initial guess.
+fn guess_from(run: &Run) -> Option<Guess> {
+    let t = run.row.t_converge?;
+    if t <= 0.0 {
+        return None;
+    }
+    let controls = run
+        .states
+        .windows(2)
+        .map(|w| {
+            Control::new(
+                (w[1][ix::BETA_DOT] - w[0][ix::BETA_DOT]) / run.dt,
+                (w[1][ix::V] - w[0][ix::V]) / run.dt,
+            )
+        })
+        .collect();
+    Some(Guess {
+        states: run.states.clone(),
+        controls,
+        dt: run.dt,
+        duration: t,
+    })
+}
+
+/// The min-time bound, seeded with the other methods' converged trajectories.
+pub fn run_min_time(cfg: &EvalConfig, sc: &Scenario, others: &[(Method, Run)]) -> Result<Run> {
+    let start = Instant::now();
+    let guesses: Vec<Guess> = others.iter().filter_map(|(_, r)| guess_from(r)).collect();
+    let s = MinTimeSettings {
+        tolerance: cfg.tolerance,
+        ..cfg.min_time
+    };
+    let r = ocp::solve_min_time(&cfg.params, sc, &s, &guesses);
+    let solve_ms = vec![r.solve_time.as_secs_f64() * 1e3];
+    let (states, dt) = match &r.plan {
+        Some(p) => (p.states.clone(), p.dt),
+        None => (vec![sc.start], cfg.mpc.dt),
+    };
+    let mut row = score(
+        sc,
+        Method::MinTime.name(),
+        &states,
+        dt,
+        cfg.tolerance,
+        &solve_ms,
+    );
+    // The bound is T*, reached at the last node (the test is held at 0.999 × tol).
+    row.success = r.plan.is_some();
+    row.t_converge = r.plan.as_ref().map(|_| r.time);
+    row.t_settle = None;
+    if row.success {
+        row.path_length = states
+            .windows(2)
+            .map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]))
+            .sum();
+    }
+    Ok(Run {
+        row,
+        states,
+        dt,
+        solve_ms,
+        wall_s: start.elapsed().as_secs_f64(),
+    })
+}
+
+/// All configured methods on one scenario.
+pub fn run_scenario(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<ScenarioRuns> {
+    let mut runs: Vec<(Method, Run)> = Vec::new();
+    for &m in &cfg.methods {
+        let run = match m {
+            Method::Mpc => run_mpc(cfg, nets, sc)?,
+            Method::Actor => run_actor(cfg, nets, sc)?,
+            Method::Baseline => run_baseline(cfg, sc)?.0,
+            Method::MinTime => run_min_time(cfg, sc, &runs)?,
+        };
+        runs.push((m, run));
+    }
+    Ok(ScenarioRuns {
+        scenario: sc.clone(),
+        runs,
+    })
+}
+
+/// Runs every scenario on `cfg.jobs` threads; results in scenario order.
+pub fn run_all(
+    cfg: &EvalConfig,
+    nets: &Networks,
+    scenarios: &[Scenario],
+) -> Result<Vec<ScenarioRuns>> {
+    let bar = if cfg.progress {
+        ProgressBar::new(scenarios.len() as u64)
+    } else {
+        ProgressBar::hidden()
+    };
+    bar.set_style(
+        ProgressStyle::with_template(
+            "{elapsed_precise} [{bar:40}] {pos}/{len} scenarios ({eta}) {msg}",
+        )
+        .expect("valid template")
+        .progress_chars("=> "),
+    );
+    let next = AtomicUsize::new(0);
+    let out: Mutex<Vec<Option<Result<ScenarioRuns>>>> =
+        Mutex::new((0..scenarios.len()).map(|_| None).collect());
+    std::thread::scope(|s| {
+        for _ in 0..cfg.jobs.max(1) {
+            s.spawn(|| loop {
+                let i = next.fetch_add(1, Ordering::Relaxed);
+                if i >= scenarios.len() {
+                    break;
+                }
+                let r = run_scenario(cfg, nets, &scenarios[i]);
+                bar.set_message(scenarios[i].name.clone());
+                bar.inc(1);
+                out.lock().unwrap_or_else(|e| e.into_inner())[i] = Some(r);
+            });
+        }
+    });
+    bar.finish_and_clear();
+    out.into_inner()
+        .unwrap_or_else(|e| e.into_inner())
+        .into_iter()
+        .zip(scenarios)
+        .map(|(r, sc)| r.unwrap_or_else(|| bail!("scenario {} was not run", sc.name)))
+        .collect()
+}

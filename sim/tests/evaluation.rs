@@ -1,0 +1,214 @@
+//! Scenario files, scoring, the results CSV and the runner end to end (with
+//! random networks, which do not reach goals: only the plumbing is tested).
+
+use control::model::{Goal, State};
+use control::scenario::{self, Obstacle, Scenario};
+use sim::results::{self, ResultRow};
+use sim::runner::{self, EvalConfig, Method, Networks};
+
+fn manifest(path: &str) -> std::path::PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(path)
+}
+
+#[test]
+fn committed_paper_set_matches_the_generator() {
+    let text = std::fs::read_to_string(manifest("scenarios/paper128.csv")).unwrap();
+    assert_eq!(text, scenario::to_csv(&scenario::paper_scenarios()));
+    assert_eq!(scenario::parse(&text, "paper128.csv").unwrap().len(), 128);
+}
+
+#[test]
+fn committed_highlighted_scenarios_parse() {
+    let all = scenario::parse(
+        &std::fs::read_to_string(manifest("scenarios/highlighted.csv")).unwrap(),
+        "h",
+    )
+    .unwrap();
+    assert_eq!(all.len(), 5);
+    let mut parts = Vec::new();
+    for f in ["loading_cycle.csv", "compact_turn.csv", "obstacles.csv"] {
+        let p = format!("scenarios/{f}");
+        parts.extend(scenario::parse(&std::fs::read_to_string(manifest(&p)).unwrap(), f).unwrap());
+    }
+    assert_eq!(parts, all);
+    // The loading cycle's legs chain: each starts where the previous one ends.
+    for w in all[..3].windows(2) {
+        assert_eq!(
+            (w[1].start[0], w[1].start[1], w[1].start[2]),
+            (w[0].goal.x, w[0].goal.y, w[0].goal.theta)
+        );
+    }
+    assert_eq!(all[4].obstacles.len(), 4);
+}
+
+#[test]
+fn sim_level_parse_errors_name_file_line_and_column() {
+    let text = format!(
+        "{}\nok,0,0,0,0,0,0,1,1,0,\nbad,0,0,0,0,0,0,1,1,0,2:2\n",
+        scenario::HEADER
+    );
+    let e = scenario::parse(&text, "sim/scenarios/x.csv").unwrap_err();
+    assert_eq!(
+        e.to_string(),
+        "sim/scenarios/x.csv:3:23: obstacle `2:2` is not `x:y:r` with finite numbers"
+    );
+}
+
+fn row(
+    name: &str,
+    method: &str,
+    success: bool,
+    t: Option<f64>,
+    clearance: Option<f64>,
+) -> ResultRow {
+    ResultRow {
+        name: name.into(),
+        method: method.into(),
+        success,
+        t_converge: t,
+        t_settle: t.map(|t| t + 0.4),
+        path_length: 6.123456789012345,
+        min_clearance: clearance,
+        solve_ms_median: 0.1 + 0.2,
+        solve_ms_max: 1e-300,
+    }
+}
+
+#[test]
+fn results_csv_round_trips() {
+    let rows = vec![
+        row("r4.5_b0_h0", "mpc", true, Some(10.6), None),
+        row("r4.5_b0_h0", "baseline", true, Some(13.9), Some(-0.25)),
+        row("c_obstacles", "min-time", false, None, Some(1.0 / 3.0)),
+    ];
+    let text = results::to_csv(&rows);
+    assert!(text.starts_with(results::HEADER));
+    assert_eq!(results::parse(&text, "results.csv").unwrap(), rows);
+    let bad = format!("{}\nx,mpc,yes,1,1,1,,1,1\n", results::HEADER);
+    let e = results::parse(&bad, "r.csv").unwrap_err();
+    assert_eq!((e.line, e.column), (2, 7), "{e}");
+    let bad = format!("{}\nx,mpc,true,1,1,oops,,1,1\n", results::HEADER);
+    assert_eq!(results::parse(&bad, "r.csv").unwrap_err().column, 16);
+}
+
+#[test]
+fn scoring_follows_design_section_7() {
+    let sc = Scenario {
+        name: "s".into(),
+        start: State::zeros(),
+        goal: Goal::new(1.0, 0.0, 0.0),
+        obstacles: vec![Obstacle {
+            x: 0.5,
+            y: 1.0,
+            r: 0.5,
+        }],
+    };
+    // Approach at 0.5 m/s, pass inside at 1.8 s while still moving, stop at 2.4 s.
+    let xs: Vec<f64> = vec![
+        0.0, 0.2, 0.4, 0.6, 0.75, 0.85, 0.92, 0.96, 0.98, 0.99, 0.995, 0.995, 0.995, 0.995,
+    ];
+    let vs: Vec<f64> = vec![
+        0.5, 0.5, 0.5, 0.5, 0.4, 0.3, 0.2, 0.1, 0.08, 0.06, 0.04, 0.0, 0.0, 0.0,
+    ];
+    let states: Vec<State> = xs
+        .iter()
+        .zip(&vs)
+        .map(|(&x, &v)| State::new(x, 0.0, 0.0, 0.0, 0.0, v))
+        .collect();
+    let r = runner::score(&sc, "m", &states, 0.2, 0.1, &[1.0, 3.0, 2.0]);
+    assert!(r.success);
+    // x = 0.92 (distance 0.08) at k = 6; |v| < 0.05 from k = 10 on.
+    assert!((r.t_converge.unwrap() - 1.2).abs() < 1e-12, "{r:?}");
+    assert!((r.t_settle.unwrap() - 2.0).abs() < 1e-12, "{r:?}");
+    // Closest samples: x = 0.4 and 0.6, √(0.1² + 1) − 0.5.
+    assert!((r.min_clearance.unwrap() - (1.01f64.sqrt() - 0.5)).abs() < 1e-12);
+    assert_eq!((r.solve_ms_median, r.solve_ms_max), (2.0, 3.0));
+    // Path length up to convergence.
+    assert!((r.path_length - 0.92).abs() < 1e-12);
+}
+
+#[test]
+fn a_scenario_already_at_its_goal_converges_at_t0() {
+    let nets = Networks::random(3);
+    let goal = Goal::new(2.0, -1.0, 0.7);
+    let sc = Scenario {
+        name: "at_goal".into(),
+        start: State::new(2.0, -1.0, 0.7, 0.0, 0.0, 0.0),
+        goal,
+        obstacles: vec![],
+    };
+    let cfg = EvalConfig {
+        duration: 2.0,
+        methods: vec![Method::Mpc, Method::Actor, Method::Baseline],
+        ..Default::default()
+    };
+    let runs = runner::run_scenario(&cfg, &nets, &sc).unwrap();
+    for (m, r) in &runs.runs {
+        assert!(r.row.success, "{}", m.name());
+        assert_eq!(r.row.t_converge, Some(0.0), "{}", m.name());
+    }
+}
+
+#[test]
+fn runner_runs_every_method_in_parallel_and_writes_outputs() {
+    let nets = Networks::random(1);
+    let set: Vec<Scenario> = vec![
+        Scenario {
+            name: "near".into(),
+            start: State::zeros(),
+            goal: Goal::new(2.5, 0.0, 0.0),
+            obstacles: vec![],
+        },
+        Scenario {
+            name: "obs".into(),
+            start: State::zeros(),
+            goal: Goal::new(4.0, 0.3, 0.0),
+            obstacles: vec![Obstacle {
+                x: 2.0,
+                y: 0.0,
+                r: 0.6,
+            }],
+        },
+    ];
+    let cfg = EvalConfig {
+        duration: 12.0,
+        jobs: 2,
+        progress: false,
+        ..Default::default()
+    };
+    let ev = sim::eval::evaluate(&cfg, &nets, &set).unwrap();
+    assert_eq!(ev.rows.len(), 8);
+    assert_eq!(ev.runs[1].scenario.name, "obs");
+    // The NLP methods do not depend on the networks: both reach the goals.
+    for r in ev
+        .rows
+        .iter()
+        .filter(|r| r.method == "baseline" || r.method == "min-time")
+    {
+        assert!(r.success, "{r:?}");
+    }
+    let mt = ev
+        .rows
+        .iter()
+        .find(|r| r.name == "obs" && r.method == "min-time")
+        .unwrap();
+    assert!(mt.min_clearance.unwrap() > -1e-3, "{mt:?}");
+    let dir = std::env::temp_dir().join(format!("wlnav-sim-test-{}", std::process::id()));
+    sim::eval::write_outputs(&ev, &dir, "# test", true).unwrap();
+    let back = results::parse(
+        &std::fs::read_to_string(dir.join("results.csv")).unwrap(),
+        "results.csv",
+    )
+    .unwrap();
+    assert_eq!(back, ev.rows);
+    for f in [
+        "summary.md",
+        "histogram.svg",
+        "overview_mpc.svg",
+        "trajectories/obs.svg",
+    ] {
+        let text = std::fs::read_to_string(dir.join(f)).unwrap();
+        assert!(text.len() > 100, "{f}");
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
