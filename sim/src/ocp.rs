@@ -44,6 +44,11 @@ pub struct BaselineSettings {
     /// IPOPT's tolerance.
     pub tol: f64,
     pub max_iter: i32,
+    /// Fraction of the state bounds (β, β̇, v) the NLP may use. Below 1 so the
+    /// replay on the RK4 model, whose clamping rule zeroes β̇ at the β stop,
+    /// does not touch the stops between nodes (that made open-loop replays
+    /// drift off the plan).
+    pub state_margin: f64,
 }
 
 impl Default for BaselineSettings {
@@ -57,6 +62,7 @@ impl Default for BaselineSettings {
             hessian: HessianKind::FiniteDifference,
             tol: 1e-6,
             max_iter: 1000,
+            state_margin: 0.97,
         }
     }
 }
@@ -260,7 +266,7 @@ impl Element for FinalTime {
 }
 
 /// Sets the model's state and control bounds on every node and interval.
-fn set_model_bounds(nlp: &mut ElementNlp, p: &MachineParams, k_intervals: usize) {
+fn set_model_bounds(nlp: &mut ElementNlp, p: &MachineParams, k_intervals: usize, margin: f64) {
     for k in 0..=k_intervals {
         let b = xi(k);
         for (i, max) in [
@@ -268,6 +274,7 @@ fn set_model_bounds(nlp: &mut ElementNlp, p: &MachineParams, k_intervals: usize)
             (ix::BETA_DOT, p.beta_dot_max),
             (ix::V, p.v_max),
         ] {
+            let max = max * margin;
             nlp.z_lower[b + i] = -max;
             nlp.z_upper[b + i] = max;
         }
@@ -332,7 +339,7 @@ pub fn baseline_nlp(
     }
     obstacle_elements(&mut elements, &sc.obstacles, k_intervals);
     let mut nlp = ElementNlp::new(n, elements, s.hessian);
-    set_model_bounds(&mut nlp, p, k_intervals);
+    set_model_bounds(&mut nlp, p, k_intervals, s.state_margin);
     fix_state(&mut nlp, 0, &admissible_start(p, &sc.start));
     fix_state(
         &mut nlp,
@@ -554,7 +561,7 @@ pub fn min_time_nlp(
     }));
     elements.push(Box::new(FinalTime { vars: [t_index] }));
     let mut nlp = ElementNlp::new(n, elements, s.hessian);
-    set_model_bounds(&mut nlp, p, k_intervals);
+    set_model_bounds(&mut nlp, p, k_intervals, 1.0);
     fix_state(&mut nlp, 0, &admissible_start(p, &sc.start));
     nlp.z_lower[t_index] = s.t_min;
     nlp.z_upper[t_index] = s.t_max;
