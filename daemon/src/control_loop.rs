@@ -442,7 +442,8 @@ impl ControlLoop {
                         self.fallback_count
                     );
                     self.latched |= fault_flags::SOLVE_FAILED;
-                    flags |= fault_flags::SOLVE_FAILED;
+                    // This tick stops instead of driving on the fallback plan.
+                    flags = (flags & !fault_flags::FALLBACK_PLAN) | fault_flags::SOLVE_FAILED;
                     self.drop_goal();
                     mode = Mode::Fault;
                     cmd = self.ramp_down();

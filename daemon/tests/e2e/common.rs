@@ -1,0 +1,209 @@
+//! Harness: run the daemon in-process against the simulated machine in
+//! accelerated time, talk to it through the real iceoryx2 services.
+
+#![allow(dead_code)]
+
+use std::sync::atomic::{AtomicU32, Ordering};
+use std::time::{Duration, Instant};
+
+use control::MachineParams;
+use shm_ipc::{Client, IpcConfig, Pose2, Telemetry, TelemetrySubscriber};
+use wlnavd::can::DriveMode;
+use wlnavd::config::{Config, CostKind};
+use wlnavd::controller::ControllerFactory;
+use wlnavd::sim::{SimHandle, SimLog};
+use wlnavd::{DaemonError, RunOptions, RunReport, ShutdownHandle};
+
+/// Time scale of the e2e tests: 1 real second = 4 daemon seconds (the MPC's solve
+/// time, unscaled, must fit in 50 ms of real time even on a busy 2-core machine).
+pub const TIME_SCALE: f64 = 4.0;
+
+/// A service prefix no other test (or process) uses.
+pub fn unique_prefix(name: &str) -> String {
+    static N: AtomicU32 = AtomicU32::new(0);
+    format!(
+        "wlnavd-test-{name}-{}-{}",
+        std::process::id(),
+        N.fetch_add(1, Ordering::Relaxed)
+    )
+}
+
+/// Simulated machine, quadratic MPC (no weights), accelerated time.
+pub fn sim_config(name: &str) -> Config {
+    let mut c = Config::default();
+    c.controller.cost = CostKind::Quadratic;
+    c.sim.time_scale = TIME_SCALE;
+    c.ipc.prefix = unique_prefix(name);
+    c.validate().unwrap();
+    c
+}
+
+pub struct Running {
+    pub shutdown: ShutdownHandle,
+    pub thread: Option<std::thread::JoinHandle<Result<RunReport, DaemonError>>>,
+    pub sim: SimHandle,
+    pub client: Client,
+    pub telemetry: TelemetrySubscriber,
+    pub config: Config,
+}
+
+/// Starts the daemon on its own thread and connects a client.
+pub fn start(config: Config, controller: Option<ControllerFactory>) -> Running {
+    let shutdown = ShutdownHandle::new();
+    let (tx, rx) = tokio::sync::oneshot::channel();
+    let options = RunOptions {
+        controller,
+        shutdown: shutdown.clone(),
+        handle_signals: false,
+        sim_handle: Some(tx),
+    };
+    let cfg = config.clone();
+    let thread = std::thread::spawn(move || wlnavd::run(cfg, options));
+    let sim = rx
+        .blocking_recv()
+        .expect("daemon started its simulated machine");
+    let client = Client::new(&IpcConfig::new(config.ipc.prefix.clone())).unwrap();
+    let telemetry = client.subscribe_telemetry().unwrap();
+    Running {
+        shutdown,
+        thread: Some(thread),
+        sim,
+        client,
+        telemetry,
+        config,
+    }
+}
+
+impl Running {
+    /// Sends a goal until the daemon accepts it (it rejects goals until its first
+    /// pose and machine state arrived).
+    pub fn goal(&self, x: f64, y: f64, heading: f64) {
+        let deadline = Instant::now() + Duration::from_secs(20);
+        loop {
+            match self
+                .client
+                .set_goal(Pose2::new(x, y, heading), &[], Duration::from_secs(2))
+            {
+                Ok(r) if r.is_accepted() => return,
+                Ok(r) => assert!(
+                    Instant::now() < deadline,
+                    "goal rejected: {}",
+                    r.reason_text()
+                ),
+                Err(e) => assert!(Instant::now() < deadline, "goal: {e}"),
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+
+    /// Telemetry samples until `pred` holds (returns all samples seen, the matching
+    /// one last) or the real-time `timeout` passes (panics).
+    pub fn wait_for(
+        &self,
+        timeout: Duration,
+        what: &str,
+        mut pred: impl FnMut(&Telemetry) -> bool,
+    ) -> Vec<Telemetry> {
+        let deadline = Instant::now() + timeout;
+        let mut seen = Vec::new();
+        loop {
+            while let Some(t) = self.telemetry.try_recv().unwrap() {
+                seen.push(t);
+                if pred(&t) {
+                    return seen;
+                }
+            }
+            if Instant::now() > deadline {
+                let last = seen
+                    .last()
+                    .map(|t| (t.tick, t.mode, t.fault_flags, t.state));
+                panic!("timed out waiting for {what}; last telemetry {last:?}");
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    }
+
+    /// Controlled stop and exit; the run's report.
+    pub fn stop(mut self) -> RunReport {
+        self.shutdown.trigger();
+        let report = self
+            .thread
+            .take()
+            .unwrap()
+            .join()
+            .expect("daemon thread")
+            .expect("daemon run");
+        check_commands(&report, &self.config.machine);
+        report
+    }
+}
+
+impl Drop for Running {
+    fn drop(&mut self) {
+        self.shutdown.trigger();
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+/// Every command the machine received is finite and inside the configured bounds,
+/// and the guard never had to step in.
+pub fn check_commands(report: &RunReport, p: &MachineParams) {
+    let log = report.sim.as_ref().expect("sim log");
+    assert!(!log.commands.is_empty(), "no command received");
+    for c in &log.commands {
+        let v = &c.command;
+        assert!(
+            v.beta_dot_cmd.abs() <= p.beta_dot_max + 1e-4 && v.v_cmd.abs() <= p.v_max + 1e-4,
+            "command out of bounds at t = {:.2}: {v:?}",
+            c.time
+        );
+    }
+    assert_eq!(
+        report.commands_clamped, 0,
+        "the last-line guard had to clamp"
+    );
+    assert_eq!(
+        log.rejected_commands, 0,
+        "the machine rejected command frames"
+    );
+}
+
+/// After the first command at or after `from` with a stopping mode: the speeds
+/// ramp down monotonically within the acceleration limits and reach zero.
+pub fn check_ramp_down(log: &SimLog, from: usize, p: &MachineParams, dt: f64) {
+    let cmds = &log.commands[from..];
+    let mut prev = (cmds[0].command.beta_dot_cmd, cmds[0].command.v_cmd);
+    let mut reached_zero = prev == (0.0, 0.0);
+    for c in &cmds[1..] {
+        let now = (c.command.beta_dot_cmd, c.command.v_cmd);
+        assert!(
+            now.1.abs() <= prev.1.abs() + 1e-4,
+            "speed grew while stopping: {prev:?} -> {now:?}"
+        );
+        assert!(
+            (now.1 - prev.1).abs() <= p.a_max * dt + 1e-3,
+            "deceleration above a_max: {prev:?} -> {now:?}"
+        );
+        assert!(
+            (now.0 - prev.0).abs() <= p.beta_ddot_max * dt + 1e-3,
+            "articulation rate change above beta_ddot_max: {prev:?} -> {now:?}"
+        );
+        assert_ne!(
+            c.command.mode,
+            DriveMode::Drive,
+            "drive command while stopping"
+        );
+        reached_zero |= now == (0.0, 0.0);
+        prev = now;
+    }
+    assert!(reached_zero, "commands never reached zero: last {prev:?}");
+}
+
+/// Index of the first command received at or after daemon time `t` with `mode`.
+pub fn first_command(log: &SimLog, t: f64, mode: DriveMode) -> Option<usize> {
+    log.commands
+        .iter()
+        .position(|c| c.time >= t && c.command.mode == mode)
+}
