@@ -15,7 +15,7 @@
 //! construction.
 
 use crate::encoder::{Encoder, CRITIC_INPUTS, NZ};
-use crate::mlp::{axpy, Mlp, MlpWorkspace};
+use crate::mlp::{axpy, Layer, Mlp, MlpWorkspace};
 use crate::model::{Control, Goal, State, NX};
 use crate::weights::{NetworkMetadata, NetworkRole, NetworkWeights, WeightsError, WeightsProblem};
 
@@ -103,6 +103,41 @@ fn add_outer(hess: &mut [[f64; NZ]; NZ], c: f64, r: &[f64; NZ]) {
         for b in 0..NZ {
             hess[a][b] = ca.mul_add(r[b], hess[a][b]);
         }
+    }
+}
+
+/// out[i] = Σ_k W[i,k] · scale[k] · prev[k] for rows of width 8. Four output
+/// rows at a time give eight independent FMA chains (two vector registers per
+/// row); one row alone would wait on its own accumulator's latency.
+fn jacobian_product(layer: &Layer, scale: Option<&[f64]>, prev: &[[f64; NZ]], out: &mut [[f64; NZ]]) {
+    let n_in = layer.n_in;
+    let coef = |w: &[f64], k: usize| match scale {
+        Some(s) => w[k] * s[k],
+        None => w[k],
+    };
+    let mut i = 0;
+    while i + 4 <= layer.n_out {
+        let (w0, w1, w2, w3) = (layer.row(i), layer.row(i + 1), layer.row(i + 2), layer.row(i + 3));
+        let mut acc = [[0.0; NZ]; 4];
+        for k in 0..n_in {
+            let p = &prev[k];
+            let c = [coef(w0, k), coef(w1, k), coef(w2, k), coef(w3, k)];
+            for r in 0..4 {
+                for j in 0..NZ {
+                    acc[r][j] = c[r].mul_add(p[j], acc[r][j]);
+                }
+            }
+        }
+        out[i..i + 4].copy_from_slice(&acc);
+        i += 4;
+    }
+    for (i, row) in out.iter_mut().enumerate().take(layer.n_out).skip(i) {
+        let w = layer.row(i);
+        let mut acc = [0.0; NZ];
+        for (k, p) in prev.iter().enumerate().take(n_in) {
+            axpy(coef(w, k), p, &mut acc);
+        }
+        *row = acc;
     }
 }
 
@@ -208,42 +243,17 @@ impl Critic {
         let hidden = self.mlp.hidden();
         for (l, layer) in hidden.iter().enumerate() {
             let (done, rest) = ws.jz.split_at_mut(l);
-            let jz = &mut rest[0];
-            for (i, row) in jz.iter_mut().enumerate() {
-                let w = layer.row(i);
-                let mut acc = [0.0; NZ];
-                if l == 0 {
-                    for (k, wk) in w.iter().enumerate() {
-                        axpy(*wk, &ws.enc_jac[k], &mut acc);
-                    }
-                } else {
-                    // ∂h_{l−1}/∂z = σ'(z_{l−1}) ⊙ ∂z_{l−1}/∂z, fused into the product.
-                    let d1 = &ws.mlp.d1[l - 1];
-                    for (k, prev) in done[l - 1].iter().enumerate() {
-                        axpy(w[k] * d1[k], prev, &mut acc);
-                    }
-                }
-                *row = acc;
+            if l == 0 {
+                jacobian_product(layer, None, &ws.enc_jac, &mut rest[0]);
+            } else {
+                // ∂h_{l−1}/∂z = σ'(z_{l−1}) ⊙ ∂z_{l−1}/∂z, fused into the product.
+                jacobian_product(layer, Some(&ws.mlp.d1[l - 1]), &done[l - 1], &mut rest[0]);
             }
         }
         let out = self.mlp.output_layer();
-        for i in 0..out.n_out {
-            let w = out.row(i);
-            let mut acc = [0.0; NZ];
-            match hidden.len() {
-                0 => {
-                    for (k, wk) in w.iter().enumerate() {
-                        axpy(*wk, &ws.enc_jac[k], &mut acc);
-                    }
-                }
-                n => {
-                    let d1 = &ws.mlp.d1[n - 1];
-                    for (k, prev) in ws.jz[n - 1].iter().enumerate() {
-                        axpy(w[k] * d1[k], prev, &mut acc);
-                    }
-                }
-            }
-            ws.jq[i] = acc;
+        match hidden.len() {
+            0 => jacobian_product(out, None, &ws.enc_jac, &mut ws.jq),
+            n => jacobian_product(out, Some(&ws.mlp.d1[n - 1]), &ws.jz[n - 1], &mut ws.jq),
         }
     }
 

@@ -11,6 +11,7 @@ pub mod mlp;
 pub mod model;
 pub mod mpc;
 pub mod plant;
+pub mod scenario;
 pub mod weights;
 
 pub use actor::{Actor, ActorWorkspace};

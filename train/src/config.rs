@@ -65,6 +65,11 @@ pub struct GoalSampling {
     pub near_r_min: f64,
     /// Start β uniform in ±this share of β_max, v_f likewise of v_max.
     pub start_jitter: f64,
+    /// Curriculum: over this many updates the far band's upper radius grows
+    /// from `r_min` to `r_max` (0 = the full band from the start). Near goals
+    /// teach the precise final approach first; the goal-relative encoder
+    /// carries it outwards.
+    pub curriculum_updates: u64,
 }
 
 impl Default for GoalSampling {
@@ -75,6 +80,7 @@ impl Default for GoalSampling {
             near_fraction: 0.2,
             near_r_min: 0.2,
             start_jitter: 0.1,
+            curriculum_updates: 0,
         }
     }
 }

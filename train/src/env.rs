@@ -25,13 +25,15 @@ pub fn transition_cost(cfg: &TrainConfig, next: &State, a: &[f64; 2], g: &Goal) 
     cfg.cost.stage_cost(next, g) + cfg.action_cost * (a[0] * a[0] + a[1] * a[1])
 }
 
-/// A goal at distance r ∈ [r_min, r_max] (or the near band), uniform bearing and heading.
-pub fn sample_goal(cfg: &TrainConfig, rng: &mut ChaCha8Rng) -> Goal {
+/// A goal at distance r ∈ [r_min, r_max] (or the near band), uniform bearing and
+/// heading; `progress` ∈ [0, 1] is the curriculum's position (1 = full band).
+pub fn sample_goal(cfg: &TrainConfig, rng: &mut ChaCha8Rng, progress: f64) -> Goal {
     let g = &cfg.goal;
+    let far_hi = g.r_min + (g.r_max - g.r_min) * progress.clamp(0.0, 1.0);
     let (lo, hi) = if rng.gen::<f64>() < g.near_fraction {
         (g.near_r_min, g.r_min)
     } else {
-        (g.r_min, g.r_max)
+        (g.r_min, far_hi)
     };
     let r = rng.gen_range(lo..=hi);
     let bearing = rng.gen_range(-std::f64::consts::PI..std::f64::consts::PI);
@@ -58,6 +60,8 @@ pub struct VecEnv {
     pub goals: Vec<Goal>,
     steps: Vec<usize>,
     episodes: Vec<Vec<Transition>>,
+    /// Curriculum position in [0, 1], set by the training loop.
+    pub progress: f64,
 }
 
 impl VecEnv {
@@ -70,6 +74,7 @@ impl VecEnv {
             episodes: (0..n)
                 .map(|_| Vec::with_capacity(cfg.episode_steps()))
                 .collect(),
+            progress: 1.0,
         };
         for i in 0..n {
             env.reset(cfg, i, rng);
@@ -79,7 +84,7 @@ impl VecEnv {
 
     fn reset(&mut self, cfg: &TrainConfig, i: usize, rng: &mut ChaCha8Rng) {
         self.states[i] = sample_start(cfg, rng);
-        self.goals[i] = sample_goal(cfg, rng);
+        self.goals[i] = sample_goal(cfg, rng, self.progress);
         self.steps[i] = 0;
         self.episodes[i].clear();
     }
@@ -131,9 +136,12 @@ mod tests {
         };
         let mut rng = ChaCha8Rng::seed_from_u64(3);
         for _ in 0..1000 {
-            let g = sample_goal(&cfg, &mut rng);
+            let g = sample_goal(&cfg, &mut rng, 1.0);
             let r = g.x.hypot(g.y);
             assert!(r >= cfg.goal.near_r_min - 1e-12 && r <= cfg.goal.r_max + 1e-12);
+            // At the curriculum's start the far band has collapsed to r_min.
+            let g = sample_goal(&cfg, &mut rng, 0.0);
+            assert!(g.x.hypot(g.y) <= cfg.goal.r_min + 1e-12);
         }
         let mut env = VecEnv::new(&cfg, &mut rng);
         let mut ended = Vec::new();

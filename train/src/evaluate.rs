@@ -67,7 +67,7 @@ pub fn held_out_goals(cfg: &TrainConfig) -> Vec<(State, Goal)> {
         ..cfg.clone()
     };
     (0..cfg.eval_goals)
-        .map(|_| (sample_start(&far, &mut rng), sample_goal(&far, &mut rng)))
+        .map(|_| (sample_start(&far, &mut rng), sample_goal(&far, &mut rng, 1.0)))
         .collect()
 }
 
@@ -121,7 +121,7 @@ pub fn lyapunov_samples(
     let (k, lam) = (1.0 - lambda_l, lambda_l.min(cfg.gamma));
     let mut out = Vec::new();
     for _ in 0..episodes {
-        let (mut x, g) = (sample_start(cfg, &mut rng), sample_goal(cfg, &mut rng));
+        let (mut x, g) = (sample_start(cfg, &mut rng), sample_goal(cfg, &mut rng, 1.0));
         let steps = cfg.episode_steps();
         let keep = rng.gen_range(0..steps);
         for i in 0..steps {

@@ -231,6 +231,10 @@ pub fn train(cfg: &TrainConfig, opts: &RunOptions) -> Result<RunSummary> {
     let (mut first_loss, mut last_loss) = (f64::NAN, f64::NAN);
     let fresh = !opts.resume;
     while agent.updates < stop_at {
+        env.progress = match cfg.goal.curriculum_updates {
+            0 => 1.0,
+            n => agent.updates as f64 / n as f64,
+        };
         // Collect one vector step: uniform random actions while a fresh run warms up.
         for (i, (x, g)) in env.states.iter().zip(&env.goals).enumerate() {
             encoder.encode_state(x, g, &mut f);
