@@ -56,6 +56,17 @@ enum Cmd {
         #[arg(long)]
         out: Option<PathBuf>,
     },
+    /// Copy a run's exported weights, config and learning curves to a
+    /// directory (critic-weights/) and write its README with the figures.
+    Publish {
+        #[arg(long)]
+        run: PathBuf,
+        #[arg(long)]
+        out: PathBuf,
+        /// The command that produced the run, for the README.
+        #[arg(long)]
+        command: String,
+    },
     /// Check the Lyapunov decrease condition (eq. 4c) and L ≥ c on states sampled under the actor.
     Verify {
         #[arg(long)]
@@ -173,6 +184,7 @@ fn main() -> Result<()> {
                 None => print!("{csv}"),
             }
         }
+        Cmd::Publish { run: run_dir, out, command } => publish(&run_dir, &out, &command)?,
         Cmd::Verify {
             actor,
             critic,
@@ -211,5 +223,69 @@ fn main() -> Result<()> {
             }
         }
     }
+    Ok(())
+}
+
+/// Success of the actor alone on the paper's 128 scenarios: (reached, mean time).
+fn actor_on_paper_set(actor: &Actor, cfg: &TrainConfig, tolerance: f64) -> (usize, f64) {
+    let set = control::scenario::paper_scenarios();
+    let runs = train::evaluate::rollout_scenarios(actor, cfg, &set, tolerance);
+    let ok: Vec<f64> = runs.iter().filter_map(|r| r.t_converge).collect();
+    (ok.len(), ok.iter().sum::<f64>() / ok.len().max(1) as f64)
+}
+
+fn publish(run_dir: &std::path::Path, out: &std::path::Path, command: &str) -> Result<()> {
+    fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    for name in ["critic.safetensors", "actor.safetensors", "learning_curves.svg", "log.csv", "eval.csv"] {
+        let src = run_dir.join(name);
+        fs::copy(&src, out.join(name)).with_context(|| format!("copying {}", src.display()))?;
+    }
+    fs::copy(run_dir.join(run::CONFIG), out.join("train-config.toml")).context("copying the run's config")?;
+    let actor = Actor::from_weights(load_net(&out.join("actor.safetensors"))?)?;
+    let critic = Critic::from_weights(load_net(&out.join("critic.safetensors"))?)?;
+    let meta = critic.metadata().clone();
+    let cfg = config_from_metadata(&meta);
+    let samples = train::evaluate::lyapunov_samples(&actor, &critic, &cfg, 200, 7);
+    let n = samples.len() as f64;
+    let decrease = samples.iter().filter(|s| s.delta <= 0.0).count() as f64 / n * 100.0;
+    let above = samples.iter().filter(|s| s.l >= s.cost).count() as f64 / n * 100.0;
+    let (ok01, t01) = actor_on_paper_set(&actor, &cfg, 0.1);
+    let (ok03, t03) = actor_on_paper_set(&actor, &cfg, 0.3);
+    let (_, log) = train::plot::read_csv(&run_dir.join("log.csv"))?;
+    let wall = log.last().and_then(|r| r.get(2)).copied().unwrap_or(f64::NAN);
+    let readme = format!(
+        "# Trained actor and critic\n\n\
+         Produced by `{command}` (config: `train-config.toml`), then\n\
+         `wlnav-train publish --run {run} --out {out} --command ...`.\n\n\
+         | | |\n|---|---|\n\
+         | git commit of the training binary | `{commit}` |\n\
+         | gradient updates | {steps} |\n\
+         | wall time of the run | {wall:.0} s ({hours:.1} h, 2 CPU cores shared) |\n\
+         | final λ_l | {lambda:.3} |\n\
+         | γ, cost W, p | {gamma}, {w:?}, {p} |\n\
+         | critic outputs m | {m} |\n\n\
+         ## Verify (`wlnav-train verify`, {n} states under the actor)\n\n\
+         - decrease condition of the paper's eq. 4c met on {decrease:.1} % of states\n\
+         - L ≥ c on {above:.1} %\n\n\
+         ## The actor alone on the paper's 128 scenarios (ideal model)\n\n\
+         - within 0.1: {ok01}/128 (mean time {t01:.2} s)\n\
+         - within 0.3: {ok03}/128 (mean time {t03:.2} s)\n\n\
+         The MPC with this critic is evaluated in `docs/results.md`.\n\n\
+         ## Learning curves\n\n![learning curves](learning_curves.svg)\n\n\
+         `log.csv` and `eval.csv` are the run's logs.\n",
+        run = run_dir.display(),
+        out = out.display(),
+        commit = meta.git_commit,
+        steps = meta.steps,
+        hours = wall / 3600.0,
+        lambda = meta.lambda_l,
+        gamma = meta.gamma,
+        w = meta.cost.w,
+        p = meta.cost.p,
+        m = meta.output_size,
+        n = samples.len(),
+    );
+    fs::write(out.join("README.md"), readme).context("writing README.md")?;
+    println!("published update {} to {}: actor {ok01}/128 within 0.1, decrease met on {decrease:.1} %", meta.steps, out.display());
     Ok(())
 }
