@@ -213,6 +213,13 @@ impl ControlLoop {
                 for (dst, o) in obs.iter_mut().zip(obstacles.iter()) {
                     *dst = Obstacle::new(o.x, o.y, o.r);
                 }
+                tracing::info!(
+                    "new goal {request_id}: ({:.2}, {:.2}, {:.2}) with {} obstacle(s)",
+                    goal.x,
+                    goal.y,
+                    goal.heading,
+                    obstacles.len()
+                );
                 self.goal = Some(ActiveGoal {
                     goal: Goal::new(goal.x, goal.y, goal.heading),
                     obstacles: obs,
@@ -225,11 +232,13 @@ impl ControlLoop {
                 self.latched = 0;
                 self.fallback_count = 0;
             }
-            ValidRequest::Cancel { .. } => {
+            ValidRequest::Cancel { request_id } => {
+                tracing::info!("cancel {request_id}: controlled stop");
                 self.drop_goal();
                 self.stop_requested = false;
             }
-            ValidRequest::Stop { .. } => {
+            ValidRequest::Stop { request_id } => {
+                tracing::info!("stop request {request_id}: controlled stop");
                 self.drop_goal();
                 self.stop_requested = true;
             }

@@ -104,7 +104,8 @@ pub struct RunReport {
     pub commands_clamped: u64,
     /// Goal requests served and rejected.
     pub goal_requests: (u64, u64),
-    /// Resident memory after start-up and at the end [bytes].
+    /// Resident memory after warm-up (tick 100, or ready if the run was shorter)
+    /// and at the end [bytes].
     pub rss: (Option<u64>, Option<u64>),
     /// The simulated machine's log (sim backend).
     pub sim: Option<SimLog>,
@@ -121,7 +122,7 @@ impl RunReport {
              solve time: {}\n\
              commands sent {}, clamped by the guard {}\n\
              goal requests {} ({} rejected)\n\
-             resident memory: start {}, end {}",
+             resident memory: after warm-up {}, at the end {}",
             self.stats.ticks,
             self.stats.overruns,
             self.stats.missed_deadlines,
@@ -182,7 +183,7 @@ async fn run_async(
     let mut sim_parts = None;
     let bus: Box<dyn CanBus> = match config.can.backend {
         CanBackend::Sim => {
-            let (bus, handle, task) = sim::spawn(&config, clock)?;
+            let (bus, handle, task) = sim::spawn(&config, clock, sim_handle_tx.is_some())?;
             tracing::info!(
                 "simulated machine (time scale {}, plant delay {} s)",
                 scale,
@@ -277,7 +278,7 @@ async fn run_async(
         }
         return Err(DaemonError::FirstSolve(e));
     }
-    let rss_start = stats::resident_memory();
+    let rss_ready = stats::resident_memory();
     if let Some(interval) = Notifier::watchdog_interval() {
         tracing::info!("systemd watchdog every {:?}", interval);
     }
@@ -346,13 +347,14 @@ async fn run_async(
         None => None,
     };
     let stats = stats.lock().unwrap_or_else(|p| p.into_inner()).clone();
+    let rss_warm = stats.rss_warm.or(rss_ready);
     let report = RunReport {
         exit,
         stats,
         commands_sent: can_shared.sent(),
         commands_clamped: can_shared.clamped(),
         goal_requests: (goals.requests(), goals.rejected()),
-        rss: (rss_start, stats::resident_memory()),
+        rss: (rss_warm, stats::resident_memory()),
         sim,
     };
     tracing::info!("stopped ({:?})", report.exit);

@@ -152,7 +152,7 @@ pub async fn serve_goals(
                     GoalReply::reject(req.request_id, RejectCode::NotReady, &text)
                 }
                 Ok(v) => {
-                    tracing::info!("goal request {}: accepted {:?}", req.request_id, v);
+                    tracing::debug!("goal request {}: accepted {:?}", req.request_id, v);
                     slot.put(v);
                     reply
                 }

@@ -52,8 +52,10 @@ pub struct ReceivedCommand {
 /// What the simulated machine saw and did.
 #[derive(Debug, Clone, Default)]
 pub struct SimLog {
-    /// Every valid command received, in order.
+    /// Every valid command received, in order (when recording).
     pub commands: Vec<ReceivedCommand>,
+    /// Valid commands received.
+    pub commands_received: u64,
     /// Command frames rejected by the machine's checks.
     pub rejected_commands: u64,
     /// Machine-state frames sent (including corrupted ones).
@@ -101,9 +103,12 @@ pub enum SimError {
 /// Starts the simulated machine on the current tokio runtime. Returns the daemon's
 /// end of the bus, the log handle and the task (it ends when the daemon's end is
 /// dropped).
+/// With `record`, every received command is kept in the log (tests); without, only
+/// counters are (a long-running simulation must not grow).
 pub fn spawn(
     config: &Config,
     clock: DaemonClock,
+    record: bool,
 ) -> Result<(LoopbackBus, SimHandle, JoinHandle<()>), SimError> {
     let s = &config.sim;
     let initial = State::from_row_slice(&s.initial_state);
@@ -127,6 +132,7 @@ pub fn spawn(
         last_command_time: f64::NEG_INFINITY,
         stopped_by_timeout: true,
         pose_seq: 0,
+        record,
         burst_sent: 0,
         frozen_sent: 0,
     };
@@ -146,6 +152,7 @@ struct Machine {
     last_command_time: f64,
     stopped_by_timeout: bool,
     pose_seq: u32,
+    record: bool,
     burst_sent: u32,
     frozen_sent: u32,
 }
@@ -231,11 +238,15 @@ impl Machine {
                 let _ = self.plant.command(control::VelocityCommand { beta_dot, v });
                 self.last_command_time = now;
                 self.stopped_by_timeout = false;
+                let record = self.record;
                 self.log.with(|l| {
-                    l.commands.push(ReceivedCommand {
-                        time: now,
-                        command: cmd,
-                    })
+                    l.commands_received += 1;
+                    if record {
+                        l.commands.push(ReceivedCommand {
+                            time: now,
+                            command: cmd,
+                        });
+                    }
                 });
             }
             Err(e) => {

@@ -81,6 +81,8 @@ pub struct LoopStats {
     pub overruns: u64,
     /// Deadlines skipped because a tick overran.
     pub missed_deadlines: u64,
+    /// Resident memory after warm-up (tick [`LoopStats::WARM_TICK`]).
+    pub rss_warm: Option<u64>,
     jitter: Ring,
     solve: Ring,
 }
@@ -92,6 +94,9 @@ impl Default for LoopStats {
 }
 
 impl LoopStats {
+    /// The tick after which memory use counts as settled.
+    pub const WARM_TICK: u64 = 100;
+
     /// Samples kept for quantiles.
     pub const WINDOW: usize = 16384;
 
@@ -101,6 +106,7 @@ impl LoopStats {
             ticks: 0,
             overruns: 0,
             missed_deadlines: 0,
+            rss_warm: None,
             jitter: Ring::new(Self::WINDOW),
             solve: Ring::new(Self::WINDOW),
         }
@@ -109,6 +115,9 @@ impl LoopStats {
     /// One tick: lateness of its start [s], solve time if the MPC ran [s], overrun.
     pub fn record(&mut self, late_start: f64, solve_time: Option<f64>, overrun: bool) {
         self.ticks += 1;
+        if self.ticks == Self::WARM_TICK {
+            self.rss_warm = resident_memory();
+        }
         self.overruns += u64::from(overrun);
         self.jitter.push(late_start.max(0.0));
         if let Some(s) = solve_time {
