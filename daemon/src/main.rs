@@ -145,6 +145,9 @@ fn main() -> ExitCode {
         };
     }
     logging::init(args.log);
+    // iceoryx2's own logger warns about its missing optional config file on every
+    // start; our own logs report what matters.
+    shm_ipc::iceoryx2::prelude::set_log_level(shm_ipc::iceoryx2::prelude::LogLevel::Error);
     let options = RunOptions {
         shutdown: ShutdownHandle::new(),
         handle_signals: true,
