@@ -84,6 +84,19 @@ pub fn binaries() -> &'static Binaries {
     })
 }
 
+/// Serializes the daemon tests of one test binary: on a 2-core machine, several daemons
+/// plus a 10,000-goal flood in parallel would measure the machine, not the daemon. Hold
+/// the guard for the whole test (a panicking test poisons nothing: the lock is recovered).
+pub fn serial() -> std::sync::MutexGuard<'static, ()> {
+    static LOCK: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    LOCK.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+/// Time scale the tests run the simulated daemon at: fast, yet with its 0.3 s state
+/// timeout still 100 ms of wall time, so scheduling hiccups on a loaded host do not look
+/// like a dead CAN bus.
+pub const FAST: f64 = 3.0;
+
 /// A prefix no other test or process uses: `wlnav-e2e/<test>/<pid>/<ns>`.
 pub fn unique_prefix(test: &str) -> String {
     format!(

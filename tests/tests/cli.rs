@@ -57,7 +57,8 @@ fn bad_input_is_refused_before_anything_is_sent() {
 
 #[test]
 fn goal_cancel_and_watch_through_the_cli() {
-    let d = SimDaemon::start("cli", 5.0);
+    let _serial = e2e::serial();
+    let d = SimDaemon::start("cli", e2e::FAST);
     let p = d.prefix().to_owned();
 
     let o = wlnav(&["--prefix", &p, "goal", "60", "0", "0"]);
@@ -87,10 +88,10 @@ fn goal_cancel_and_watch_through_the_cli() {
     let out = String::from_utf8_lossy(&o.stdout).to_string();
     let lines: Vec<&str> = out.lines().collect();
     assert_eq!(lines.len(), 5, "{out}");
+    // The first line may be the sample published just before the goal was taken up.
+    assert!(lines.iter().all(|l| l.starts_with("tick ")), "{out}");
     assert!(
-        lines
-            .iter()
-            .all(|l| l.starts_with("tick ") && l.contains("goal  3.00 -1.00")),
+        lines[1..].iter().all(|l| l.contains("goal  3.00 -1.00")),
         "{out}"
     );
 
@@ -104,13 +105,24 @@ fn goal_cancel_and_watch_through_the_cli() {
     );
     assert_eq!(out.lines().count(), 5, "header, rule, 3 rows:\n{out}");
 
+    // Skip the samples buffered while the CLI ran (some predate the goal).
+    let before_cancel = d
+        .telemetry
+        .latest()
+        .expect("telemetry")
+        .map_or(0, |t| t.tick);
     let o = wlnav(&["--prefix", &p, "cancel"]);
     assert_eq!(o.status.code(), Some(0), "{}", text(&o));
     assert!(text(&o).contains("cancel: accepted"), "{}", text(&o));
-    let deadline = std::time::Instant::now() + Duration::from_secs(5);
+    // The goal is dropped and the machine comes to rest.
+    let deadline = std::time::Instant::now() + Duration::from_secs(10);
     loop {
         let t = d.next(Duration::from_secs(2));
-        if t.goal_active == 0 && matches!(t.mode(), Ok(Mode::Idle | Mode::Stopping)) {
+        if t.tick > before_cancel
+            && t.goal_active == 0
+            && t.mode() == Ok(Mode::Idle)
+            && t.state.v_f.abs() < 0.02
+        {
             break;
         }
         assert!(
@@ -119,16 +131,30 @@ fn goal_cancel_and_watch_through_the_cli() {
         );
     }
 
+    // A goal 3 m straight ahead of where the machine stands (the quadratic bring-up cost
+    // used without trained weights only reaches goals ahead of the machine).
+    let s = d
+        .telemetry
+        .latest()
+        .expect("telemetry")
+        .unwrap_or_else(|| d.next(Duration::from_secs(2)))
+        .state;
+    let (gx, gy) = (s.x_f + 3.0 * s.theta_f.cos(), s.y_f + 3.0 * s.theta_f.sin());
+    let (gx, gy, gh) = (
+        format!("{gx:.3}"),
+        format!("{gy:.3}"),
+        format!("{:.4}", s.theta_f),
+    );
     let o = wlnav(&[
         "--prefix",
         &p,
         "goal",
-        "4",
-        "0.5",
-        "0",
+        &gx,
+        &gy,
+        &gh,
         "--wait",
         "--timeout",
-        "60",
+        "30",
     ]);
     let out = text(&o);
     assert!(out.contains("accepted") && out.contains("  t "), "{out}");
@@ -144,12 +170,13 @@ fn goal_cancel_and_watch_through_the_cli() {
 
 #[test]
 fn demo_drives_the_loading_cycle_and_stops_the_daemon() {
+    let _serial = e2e::serial();
     let dir = std::env::temp_dir().join(format!("wlnav-e2e-demo-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let svg = dir.join("demo.svg");
     let rec = dir.join("demo.mcap");
     let o = Command::new(&binaries().wlnav)
-        .args(["demo", "--time-scale", "10", "--cost", &e2e::cost()])
+        .args(["demo", "--time-scale", "4", "--cost", &e2e::cost()])
         .arg("--out")
         .arg(&svg)
         .arg("--record")

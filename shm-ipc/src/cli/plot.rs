@@ -8,6 +8,16 @@ use plotters::prelude::*;
 
 use crate::msg::Pose2;
 
+/// Leg colours: dark enough on white for thin horizon lines.
+const LEG_COLORS: [RGBColor; 6] = [
+    RGBColor(200, 40, 40),
+    RGBColor(30, 130, 60),
+    RGBColor(30, 90, 200),
+    RGBColor(150, 60, 170),
+    RGBColor(210, 120, 0),
+    RGBColor(0, 140, 150),
+];
+
 /// One goal's part of the drive.
 #[derive(Debug, Clone, Default)]
 pub struct LegTrace {
@@ -91,12 +101,12 @@ pub fn write_svg(path: &Path, title: &str, start: Pose2, legs: &[LegTrace]) -> a
         .map_err(err)?;
 
     for (i, leg) in legs.iter().enumerate() {
-        let color = Palette99::pick(i).to_rgba();
+        let color = LEG_COLORS[i % LEG_COLORS.len()];
         for h in &leg.horizons {
             chart
                 .draw_series(LineSeries::new(
                     h.iter().copied(),
-                    color.mix(0.3).stroke_width(1),
+                    color.mix(0.45).stroke_width(1),
                 ))
                 .map_err(err)?;
         }
@@ -151,7 +161,7 @@ pub fn write_svg(path: &Path, title: &str, start: Pose2, legs: &[LegTrace]) -> a
             BLACK.filled(),
         )])
         .map_err(err)?
-        .label("start (black ticks: headings; faint lines: planned horizons)")
+        .label("start; ticks: headings; faint lines: planned horizons")
         .legend(|(x, y)| Rectangle::new([(x + 6, y - 4), (x + 14, y + 4)], BLACK.filled()));
     chart
         .configure_series_labels()
