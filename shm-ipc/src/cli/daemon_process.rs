@@ -87,7 +87,8 @@ impl DaemonProcess {
             let out = File::create(log)
                 .with_context(|| format!("cannot create the daemon log {}", log.display()))?;
             let err = out.try_clone()?;
-            cmd.stdout(out).stderr(err);
+            // A log file, not a terminal: no colour escapes (tracing-subscriber honours it).
+            cmd.stdout(out).stderr(err).env("NO_COLOR", "1");
         }
         let child = cmd
             .spawn()

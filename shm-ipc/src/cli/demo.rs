@@ -174,6 +174,12 @@ pub fn run(cli: &Cli, a: &DemoArgs) -> anyhow::Result<u8> {
         Ok(t) => t,
         Err(e) => {
             eprintln!("wlnav demo: {e:#}");
+            if a.cost.is_none() && daemon.log_tail(50).contains("weights file") {
+                eprintln!(
+                    "wlnav demo: hint: without trained weights in critic-weights/, \
+                     `wlnav demo --cost quadratic` runs the daemon with its bring-up cost"
+                );
+            }
             return Ok(exit::ERROR);
         }
     };

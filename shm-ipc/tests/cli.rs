@@ -1,0 +1,196 @@
+//! The `wlnav` CLI's library parts without a daemon: argument parsing and its errors, the
+//! goal tracker's decisions, the telemetry views, and the MCAP writer (read back with the
+//! `mcap` crate). The CLI against a real daemon is tested in `tests/` (package `e2e`).
+#![cfg(feature = "cli")]
+
+use clap::Parser;
+use shm_ipc::cli::follow::{GoalStatus, GoalTracker};
+use shm_ipc::cli::record::TelemetryWriter;
+use shm_ipc::cli::{view, Cli, Command};
+use shm_ipc::{fault_flags, MachineState, Mode, Obstacle, Pose2, Telemetry};
+
+fn parse(args: &[&str]) -> Result<Cli, String> {
+    Cli::try_parse_from(std::iter::once("wlnav").chain(args.iter().copied()))
+        .map_err(|e| e.to_string())
+}
+
+#[test]
+fn goal_arguments_parse_with_negative_numbers_degrees_and_obstacles() {
+    let cli = parse(&[
+        "--prefix",
+        "site-2",
+        "goal",
+        "-3.5",
+        "-1",
+        "-90",
+        "--deg",
+        "--obstacle",
+        "-1,2.5,0.8",
+        "--obstacle",
+        "4,4,1",
+        "--wait",
+    ])
+    .unwrap();
+    assert_eq!(cli.ipc_config().prefix, "site-2");
+    let Command::Goal(g) = cli.command else {
+        panic!("not a goal")
+    };
+    assert_eq!(
+        (g.x, g.y, g.heading, g.deg, g.wait),
+        (-3.5, -1.0, -90.0, true, true)
+    );
+    assert_eq!(
+        g.obstacles,
+        vec![Obstacle::new(-1.0, 2.5, 0.8), Obstacle::new(4.0, 4.0, 1.0)]
+    );
+    assert_eq!(parse(&["watch"]).unwrap().ipc_config().prefix, "wlnav");
+}
+
+#[test]
+fn bad_input_names_what_was_wrong() {
+    let cases: [(&[&str], &str); 7] = [
+        (
+            &["goal", "nan", "0", "0"],
+            "X must be a finite number, got `nan`",
+        ),
+        (&["goal", "1", "inf", "0"], "Y must be a finite number"),
+        (
+            &["goal", "1", "2", "north"],
+            "HEADING must be a number, got `north`",
+        ),
+        (
+            &["goal", "1", "2", "0", "--obstacle", "1,2"],
+            "expected x,y,r",
+        ),
+        (
+            &["goal", "1", "2", "0", "--obstacle", "1,x,2"],
+            "obstacle y must be a number",
+        ),
+        (
+            &["goal", "1", "2", "0", "--obstacle", "1,2,-0.5"],
+            "radius r must be positive",
+        ),
+        (
+            &["--prefix", "/abs", "watch"],
+            "must not start or end with '/'",
+        ),
+    ];
+    for (args, want) in cases {
+        let err = parse(args).expect_err(&format!("{args:?} parsed"));
+        assert!(err.contains(want), "{args:?}: {err}");
+    }
+}
+
+fn sample(tick: u64, request_id: u64, mode: Mode, err_xy: f64) -> Telemetry {
+    let mut t = Telemetry {
+        tick,
+        goal_request_id: request_id,
+        mode: mode.code(),
+        goal_active: u32::from(request_id != 0),
+        pose_error_xy: err_xy,
+        goal: Pose2::new(5.0, 0.0, 0.0),
+        ..Telemetry::ZERO
+    };
+    t.set_trajectory(&[MachineState::ZERO; 11]);
+    t
+}
+
+#[test]
+fn tracker_follows_only_its_goal_and_reports_times() {
+    let mut tr = GoalTracker::new(7, Pose2::new(5.0, 0.0, 0.0));
+    assert_eq!(
+        *tr.update(&sample(10, 3, Mode::Reached, 0.0)),
+        GoalStatus::Pending
+    );
+    assert_eq!(
+        *tr.update(&sample(11, 7, Mode::Tracking, 5.0)),
+        GoalStatus::Active
+    );
+    tr.update(&sample(20, 7, Mode::Tracking, 0.05));
+    assert_eq!(
+        *tr.update(&sample(25, 7, Mode::Reached, 0.01)),
+        GoalStatus::Reached
+    );
+    assert_eq!(tr.first_tick, Some(11));
+    assert_eq!(tr.converged_tick, Some(20));
+    assert_eq!(tr.reached_tick, Some(25));
+    // Final: later samples change nothing.
+    assert_eq!(
+        *tr.update(&sample(26, 0, Mode::Idle, 0.0)),
+        GoalStatus::Reached
+    );
+}
+
+#[test]
+fn tracker_reports_faults_supersession_and_drops() {
+    let mut tr = GoalTracker::new(7, Pose2::default());
+    tr.update(&sample(1, 7, Mode::Tracking, 3.0));
+    let mut f = sample(2, 7, Mode::Fault, 3.0);
+    f.fault_flags = fault_flags::POSE_STALE;
+    match tr.update(&f) {
+        GoalStatus::Failed(why) => assert!(why.contains("pose-stale"), "{why}"),
+        s => panic!("{s:?}"),
+    }
+    let mut tr = GoalTracker::new(7, Pose2::default());
+    tr.update(&sample(1, 7, Mode::Tracking, 3.0));
+    match tr.update(&sample(2, 8, Mode::Tracking, 3.0)) {
+        GoalStatus::Failed(why) => assert!(why.contains("superseded"), "{why}"),
+        s => panic!("{s:?}"),
+    }
+    // An overrun alone does not end a goal.
+    let mut tr = GoalTracker::new(7, Pose2::default());
+    let mut o = sample(1, 7, Mode::Tracking, 3.0);
+    o.fault_flags = fault_flags::OVERRUN;
+    assert_eq!(*tr.update(&o), GoalStatus::Active);
+    assert_eq!(tr.overruns, 1);
+}
+
+#[test]
+fn views_show_mode_goal_and_faults() {
+    let mut t = sample(42, 7, Mode::Tracking, 2.5);
+    t.fault_flags = fault_flags::OVERRUN | fault_flags::CAN_CRC;
+    let line = view::line(&t);
+    assert!(line.starts_with("tick 42 tracking"), "{line}");
+    assert!(line.contains("goal  5.00  0.00"), "{line}");
+    assert!(line.contains("faults can-crc,overrun"), "{line}");
+    let header = view::table_header();
+    let row = view::table_row(&t);
+    assert!(header.contains("mode") && row.contains("tracking"));
+    assert_eq!(view::fault_text(0), "-");
+    assert_eq!(view::fault_names(1 << 20), vec!["bit-20"]);
+    assert_eq!(view::mode_name(99), "mode-99");
+}
+
+#[test]
+fn mcap_writer_output_reads_back_with_schema_and_every_message() {
+    let path = std::env::temp_dir().join(format!("wlnav-cli-test-{}.mcap", std::process::id()));
+    let mut w = TelemetryWriter::create(&path, "unit").unwrap();
+    for tick in 100..150 {
+        let mut t = sample(tick, 7, Mode::Tracking, 1.0);
+        t.cost = if tick == 120 { f64::NAN } else { 1.5 };
+        t.timestamp_ns = shm_ipc::monotonic_now_ns();
+        w.write(&t).unwrap();
+    }
+    w.finish().unwrap();
+    let bytes = std::fs::read(&path).unwrap();
+    let mut ticks = Vec::new();
+    for m in mcap::MessageStream::new(&bytes).unwrap() {
+        let m = m.unwrap();
+        let schema = m.channel.schema.as_ref().unwrap();
+        assert_eq!(
+            (schema.name.as_str(), schema.encoding.as_str()),
+            ("wlnav.Telemetry", "jsonschema")
+        );
+        assert_eq!(m.channel.message_encoding, "json");
+        let v: serde_json::Value = serde_json::from_slice(&m.data).unwrap();
+        if v["tick"] == 120 {
+            assert!(v["cost"].is_null(), "NaN is written as null");
+        }
+        assert_eq!(v["trajectory"].as_array().unwrap().len(), 11);
+        ticks.push(v["tick"].as_u64().unwrap());
+    }
+    assert_eq!(ticks, (100..150).collect::<Vec<_>>());
+    let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
+    assert_eq!(summary.stats.unwrap().message_count, 50);
+    std::fs::remove_file(&path).unwrap();
+}
