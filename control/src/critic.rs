@@ -55,6 +55,21 @@ pub struct TerminalDerivatives {
     pub hess: [[f64; NX]; NX],
 }
 
+impl TerminalDerivatives {
+    /// The state part of derivatives taken at u = 0.
+    pub fn state_block(full: &Derivatives) -> Self {
+        let mut out = Self {
+            value: full.value,
+            ..Self::default()
+        };
+        out.grad.copy_from_slice(&full.grad[..NX]);
+        for (dst, src) in out.hess.iter_mut().zip(&full.hess) {
+            dst.copy_from_slice(&src[..NX]);
+        }
+        out
+    }
+}
+
 /// The deployed critic.
 #[derive(Debug, Clone)]
 pub struct Critic {
@@ -109,7 +124,12 @@ fn add_outer(hess: &mut [[f64; NZ]; NZ], c: f64, r: &[f64; NZ]) {
 /// out[i] = Σ_k W[i,k] · scale[k] · prev[k] for rows of width 8. Four output
 /// rows at a time give eight independent FMA chains (two vector registers per
 /// row); one row alone would wait on its own accumulator's latency.
-fn jacobian_product(layer: &Layer, scale: Option<&[f64]>, prev: &[[f64; NZ]], out: &mut [[f64; NZ]]) {
+fn jacobian_product(
+    layer: &Layer,
+    scale: Option<&[f64]>,
+    prev: &[[f64; NZ]],
+    out: &mut [[f64; NZ]],
+) {
     let n_in = layer.n_in;
     let coef = |w: &[f64], k: usize| match scale {
         Some(s) => w[k] * s[k],
@@ -117,7 +137,12 @@ fn jacobian_product(layer: &Layer, scale: Option<&[f64]>, prev: &[[f64; NZ]], ou
     };
     let mut i = 0;
     while i + 4 <= layer.n_out {
-        let (w0, w1, w2, w3) = (layer.row(i), layer.row(i + 1), layer.row(i + 2), layer.row(i + 3));
+        let (w0, w1, w2, w3) = (
+            layer.row(i),
+            layer.row(i + 1),
+            layer.row(i + 2),
+            layer.row(i + 3),
+        );
         let mut acc = [[0.0; NZ]; 4];
         for k in 0..n_in {
             let p = &prev[k];
@@ -301,10 +326,6 @@ impl Critic {
     ) {
         let mut full = Derivatives::default();
         self.hessian(ws, x, &Control::zeros(), g, mode, &mut full);
-        out.value = full.value;
-        out.grad.copy_from_slice(&full.grad[..NX]);
-        for (dst, src) in out.hess.iter_mut().zip(&full.hess) {
-            dst.copy_from_slice(&src[..NX]);
-        }
+        *out = TerminalDerivatives::state_block(&full);
     }
 }

@@ -130,8 +130,8 @@ pub fn f_continuous(p: &MachineParams, x: &State, u: &Control) -> State {
     )
 }
 
-/// ∂f_c/∂x; ∂f_c/∂u is constant (rows 4 and 5 of the identity), see [`continuous_b`].
-fn continuous_a(p: &MachineParams, x: &State) -> StateJacobian {
+/// ∂f_c/∂x of paper eq. 5; ∂f_c/∂u is constant, see [`continuous_b`].
+pub fn continuous_a(p: &MachineParams, x: &State) -> StateJacobian {
     let (theta, beta, beta_dot, v) = (x[ix::THETA], x[ix::BETA], x[ix::BETA_DOT], x[ix::V]);
     let (st, ct) = theta.sin_cos();
     let (sb, cb) = beta.sin_cos();
@@ -150,7 +150,8 @@ fn continuous_a(p: &MachineParams, x: &State) -> StateJacobian {
     a
 }
 
-fn continuous_b() -> ControlJacobian {
+/// ∂f_c/∂u: rows β̇ and v_f of the identity.
+pub fn continuous_b() -> ControlJacobian {
     let mut b = ControlJacobian::zeros();
     b[(4, 0)] = 1.0;
     b[(5, 1)] = 1.0;

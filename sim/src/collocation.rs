@@ -8,37 +8,20 @@
 //! open-loop controls of a collocated trajectory replayed on the RK4 model
 //! (Δt = h) follow it closely.
 
-use control::model::{f_continuous, ix, Control, MachineParams, State};
+use control::model::{f_continuous, Control, MachineParams, State};
 use nalgebra::SMatrix;
 
 pub type Mat6 = SMatrix<f64, 6, 6>;
 pub type Mat62 = SMatrix<f64, 6, 2>;
 
-/// ∂f_c/∂x of paper eq. 5 (∂f_c/∂u is constant: rows β̇ and v of the identity).
+/// ∂f_c/∂x of paper eq. 5 (the model's own, hand-derived).
 pub fn jacobian_x(p: &MachineParams, x: &State) -> Mat6 {
-    let (theta, beta, beta_dot, v) = (x[ix::THETA], x[ix::BETA], x[ix::BETA_DOT], x[ix::V]);
-    let (st, ct) = theta.sin_cos();
-    let (sb, cb) = beta.sin_cos();
-    let denom = p.l_f * cb + p.l_r;
-    let num = p.l_r * beta_dot + v * sb;
-    let mut a = Mat6::zeros();
-    a[(0, ix::THETA)] = -v * st;
-    a[(0, ix::V)] = ct;
-    a[(1, ix::THETA)] = v * ct;
-    a[(1, ix::V)] = st;
-    a[(2, ix::BETA)] = (v * cb * denom + num * p.l_f * sb) / (denom * denom);
-    a[(2, ix::BETA_DOT)] = p.l_r / denom;
-    a[(2, ix::V)] = sb / denom;
-    a[(3, ix::BETA_DOT)] = 1.0;
-    a
+    control::model::continuous_a(p, x)
 }
 
 /// ∂f_c/∂u.
 pub fn jacobian_u() -> Mat62 {
-    let mut b = Mat62::zeros();
-    b[(4, 0)] = 1.0;
-    b[(5, 1)] = 1.0;
-    b
+    control::model::continuous_b()
 }
 
 /// A Hermite–Simpson defect and its derivatives.

@@ -39,11 +39,7 @@ pub trait StageCost {
     ) {
         let mut full = Derivatives::default();
         self.stage(ws, x, &Control::zeros(), g, mode, &mut full);
-        out.value = full.value;
-        out.grad.copy_from_slice(&full.grad[..NX]);
-        for (dst, src) in out.hess.iter_mut().zip(&full.hess) {
-            dst.copy_from_slice(&src[..NX]);
-        }
+        *out = TerminalDerivatives::state_block(&full);
     }
 }
 
