@@ -40,6 +40,8 @@ pub fn repo_root() -> PathBuf {
 pub fn binaries() -> &'static Binaries {
     static BINS: OnceLock<Binaries> = OnceLock::new();
     BINS.get_or_init(|| {
+        // iceoryx2's "no config file, using defaults" warning is noise in test output.
+        shm_ipc::iceoryx2::prelude::set_log_level(shm_ipc::iceoryx2::prelude::LogLevel::Error);
         if let Some(dir) = std::env::var_os("WLNAV_E2E_BIN_DIR") {
             let dir = PathBuf::from(dir);
             return Binaries {
@@ -60,6 +62,16 @@ pub fn binaries() -> &'static Binaries {
             .and_then(|n| n.to_str())
             .unwrap_or("debug")
             .to_owned();
+        let bins = Binaries {
+            wlnavd: profile_dir.join("wlnavd"),
+            wlnav: profile_dir.join("wlnav"),
+        };
+        // `cargo test --workspace` has already built both (daemon and shm-ipc have
+        // integration tests); a nested build with a different package selection could
+        // unify features differently and rebuild half the dependency tree for nothing.
+        if fresh(&bins.wlnavd) && fresh(&bins.wlnav) {
+            return bins;
+        }
         let cargo = std::env::var_os("CARGO").unwrap_or_else(|| OsString::from("cargo"));
         let mut cmd = Command::new(cargo);
         cmd.current_dir(repo_root())
@@ -77,11 +89,45 @@ pub fn binaries() -> &'static Binaries {
         eprintln!("e2e: building the binaries: {cmd:?}");
         let status = cmd.status().expect("run cargo build");
         assert!(status.success(), "cargo build of wlnavd and wlnav failed");
-        Binaries {
-            wlnavd: profile_dir.join("wlnavd"),
-            wlnav: profile_dir.join("wlnav"),
-        }
+        bins
     })
+}
+
+/// True if `binary` exists and is newer than every source it is built from (the sources of
+/// `daemon`, `shm-ipc` and `control`, their manifests and the lock file).
+fn fresh(binary: &Path) -> bool {
+    let Ok(built) = std::fs::metadata(binary).and_then(|m| m.modified()) else {
+        return false;
+    };
+    let root = repo_root();
+    let mut newest = std::time::SystemTime::UNIX_EPOCH;
+    let mut stack: Vec<PathBuf> = [
+        "daemon/src",
+        "daemon/can",
+        "daemon/Cargo.toml",
+        "shm-ipc/src",
+        "shm-ipc/Cargo.toml",
+        "control/src",
+        "control/Cargo.toml",
+        "Cargo.toml",
+        "Cargo.lock",
+    ]
+    .iter()
+    .map(|p| root.join(p))
+    .collect();
+    while let Some(p) = stack.pop() {
+        let Ok(meta) = std::fs::metadata(&p) else {
+            continue;
+        };
+        if meta.is_dir() {
+            if let Ok(entries) = std::fs::read_dir(&p) {
+                stack.extend(entries.flatten().map(|e| e.path()));
+            }
+        } else if let Ok(m) = meta.modified() {
+            newest = newest.max(m);
+        }
+    }
+    built >= newest
 }
 
 /// Serializes the daemon tests of one test binary: on a 2-core machine, several daemons

@@ -126,10 +126,10 @@ pub fn goal(cli: &Cli, a: &GoalArgs) -> anyhow::Result<u8> {
         timeout: Duration::from_secs_f64(a.timeout),
         ..FollowOptions::default()
     };
-    let every = ticks_per_second(cli.tick_s());
+    let mut printer = ProgressPrinter::default();
     let end = follow(&sub, &mut tracker, &opts, |t, tr| {
-        if tr.status().is_final() || t.tick % every == 0 {
-            emit(&progress_line(t, tr, cli.tick_s()));
+        if let Some(line) = printer.line(t, tr, cli.tick_s()) {
+            emit(&line);
         }
     })?;
     if end == FollowEnd::Interrupted {
@@ -191,6 +191,38 @@ pub fn progress_line(t: &Telemetry, tracker: &GoalTracker, tick_s: f64) -> Strin
         s.v_f,
         t.solve_time_us / 1000.0
     )
+}
+
+/// Decides which samples get a progress line: one per simulated second while the machine
+/// moves, one every 5 s while it stands still (a stalled goal does not flood the screen),
+/// and the final one.
+#[derive(Debug, Clone, Default)]
+pub struct ProgressPrinter {
+    last: Option<(u64, f64, f64, f64)>,
+}
+
+impl ProgressPrinter {
+    /// The progress line for `t`, if it should be shown.
+    pub fn line(&mut self, t: &Telemetry, tracker: &GoalTracker, tick_s: f64) -> Option<String> {
+        let n = tracker.ticks_since_start(t.tick)?;
+        let every = ticks_per_second(tick_s);
+        let s = &t.state;
+        let show = tracker.status().is_final()
+            || match self.last {
+                None => true,
+                Some((last_n, x, y, th)) => {
+                    let moved =
+                        (s.x_f - x).hypot(s.y_f - y) > 0.01 || (s.theta_f - th).abs() > 0.004;
+                    let due = n.saturating_sub(last_n);
+                    n % every == 0 && (moved || due >= 5 * every)
+                }
+            };
+        if !show {
+            return None;
+        }
+        self.last = Some((n, s.x_f, s.y_f, s.theta_f));
+        Some(progress_line(t, tracker, tick_s))
+    }
 }
 
 /// Limits of [`follow`].

@@ -20,8 +20,8 @@ use crate::error::ClientError;
 use crate::msg::{GoalReply, Pose2};
 
 use super::commands::{
-    describe_reply, emit, follow, outcome_line, progress_line, ticks_per_second, FollowEnd,
-    FollowOptions,
+    describe_reply, emit, follow, outcome_line, ticks_per_second, FollowEnd, FollowOptions,
+    ProgressPrinter,
 };
 use super::daemon_process::{locate_wlnavd, unique_prefix, DaemonProcess};
 use super::follow::{GoalStatus, GoalTracker};
@@ -144,44 +144,59 @@ pub fn run(cli: &Cli, a: &DemoArgs) -> anyhow::Result<u8> {
         .unwrap_or_else(|| unique_prefix("wlnav-demo"));
     let log = std::env::temp_dir().join(format!("wlnav-demo-{}.log", std::process::id()));
     emit("wlnav demo: a loading cycle on the simulated machine, through shared memory");
-    let mut extra: Vec<OsString> = Vec::new();
-    if let Some(cost) = &a.cost {
-        extra.push("--cost".into());
-        extra.push(cost.into());
-    }
-    extra.extend(a.daemon_args.iter().cloned());
-    let mut daemon = DaemonProcess::spawn_sim(&binary, &prefix, a.time_scale, &extra, Some(&log))?;
-    emit(&format!(
-        "  daemon   {} --sim --prefix {}{}{} (pid {}, log {})",
-        binary.display(),
-        prefix,
-        a.time_scale
-            .map(|s| format!(" --time-scale {s}"))
-            .unwrap_or_default(),
-        extra
-            .iter()
-            .map(|x| format!(" {}", x.to_string_lossy()))
-            .collect::<String>(),
-        daemon.pid().unwrap_or(0),
-        log.display()
-    ));
-
     let config = IpcConfig::new(prefix.clone());
     let client = Client::new(&config).context("cannot open the shared-memory services")?;
     let sub = client.subscribe_telemetry()?;
     let started = Instant::now();
-    let first = match daemon.wait_ready(&sub, Duration::from_secs_f64(a.ready_timeout)) {
-        Ok(t) => t,
-        Err(e) => {
-            eprintln!("wlnav demo: {e:#}");
-            if a.cost.is_none() && daemon.log_tail(50).contains("weights file") {
-                eprintln!(
-                    "wlnav demo: hint: without trained weights in critic-weights/, \
-                     `wlnav demo --cost quadratic` runs the daemon with its bring-up cost"
-                );
-            }
-            return Ok(exit::ERROR);
+    let mut cost = a.cost.clone();
+    let (mut daemon, first) = loop {
+        let mut extra: Vec<OsString> = Vec::new();
+        if let Some(cost) = &cost {
+            extra.push("--cost".into());
+            extra.push(cost.into());
         }
+        extra.extend(a.daemon_args.iter().cloned());
+        let mut daemon =
+            DaemonProcess::spawn_sim(&binary, &prefix, a.time_scale, &extra, Some(&log))?;
+        emit(&format!(
+            "  daemon   {} --sim --prefix {}{}{} (pid {}, log {})",
+            binary.display(),
+            prefix,
+            a.time_scale
+                .map(|s| format!(" --time-scale {s}"))
+                .unwrap_or_default(),
+            extra
+                .iter()
+                .map(|x| format!(" {}", x.to_string_lossy()))
+                .collect::<String>(),
+            daemon.pid().unwrap_or(0),
+            log.display()
+        ));
+        match daemon.wait_ready(&sub, Duration::from_secs_f64(a.ready_timeout)) {
+            Ok(t) => break (daemon, t),
+            Err(e) => {
+                let tail = daemon.log_tail(50);
+                let no_weights = tail.contains("weights file") && tail.contains("cannot read");
+                if cost.is_none() && no_weights {
+                    // A fresh checkout before the trained critic is committed: say so
+                    // plainly and run with the bring-up cost rather than not at all.
+                    emit(
+                        "  NOTE     no trained weights in critic-weights/: the daemon cannot \
+                         use the critic. Running with the quadratic bring-up cost instead \
+                         (reaches goals ahead of the machine; manoeuvres need the critic).",
+                    );
+                    cost = Some("quadratic".into());
+                    continue;
+                }
+                eprintln!("wlnav demo: {e:#}");
+                return Ok(exit::ERROR);
+            }
+        }
+    };
+    let cost_text = match cost.as_deref() {
+        None | Some("critic") => "critic (trained weights from critic-weights/)",
+        Some("quadratic") => "quadratic bring-up cost (no trained weights)",
+        Some(other) => other,
     };
     let start = Pose2::new(first.state.x_f, first.state.y_f, first.state.theta_f);
     emit(&format!(
@@ -192,6 +207,7 @@ pub fn run(cli: &Cli, a: &DemoArgs) -> anyhow::Result<u8> {
         start.y,
         start.heading.to_degrees()
     ));
+    emit(&format!("  cost     {cost_text}"));
 
     // Optional recording on its own thread, with its own subscription.
     let rec_stop = Arc::new(AtomicBool::new(false));
@@ -258,6 +274,7 @@ pub fn run(cli: &Cli, a: &DemoArgs) -> anyhow::Result<u8> {
         if !reply.is_accepted() {
             tracker.fail(format!("rejected: {}", reply.reason_text()));
         } else {
+            let mut printer = ProgressPrinter::default();
             let end = follow(&sub, &mut tracker, &opts, |t, tr| {
                 if tr.first_tick.is_none() {
                     return;
@@ -269,8 +286,8 @@ pub fn run(cli: &Cli, a: &DemoArgs) -> anyhow::Result<u8> {
                         .horizons
                         .push(t.trajectory().iter().map(|s| (s.x_f, s.y_f)).collect());
                 }
-                if tr.status().is_final() || n % every == 0 {
-                    emit(&progress_line(t, tr, tick_s));
+                if let Some(line) = printer.line(t, tr, tick_s) {
+                    emit(&line);
                 }
             })?;
             if end == FollowEnd::Interrupted {
