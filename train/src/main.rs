@@ -56,6 +56,12 @@ enum Cmd {
         #[arg(long)]
         out: Option<PathBuf>,
     },
+    /// Measure gradient updates per second (batch from the config: critic +
+    /// penalty + actor + multipliers + Polyak) and environment steps per second.
+    Bench {
+        #[arg(long, default_value_t = 300)]
+        updates: u64,
+    },
     /// Copy a run's exported weights, config and learning curves to a
     /// directory (critic-weights/) and write its README with the figures.
     Publish {
@@ -184,7 +190,12 @@ fn main() -> Result<()> {
                 None => print!("{csv}"),
             }
         }
-        Cmd::Publish { run: run_dir, out, command } => publish(&run_dir, &out, &command)?,
+        Cmd::Publish {
+            run: run_dir,
+            out,
+            command,
+        } => publish(&run_dir, &out, &command)?,
+        Cmd::Bench { updates } => bench(updates)?,
         Cmd::Verify {
             actor,
             critic,
@@ -236,11 +247,18 @@ fn actor_on_paper_set(actor: &Actor, cfg: &TrainConfig, tolerance: f64) -> (usiz
 
 fn publish(run_dir: &std::path::Path, out: &std::path::Path, command: &str) -> Result<()> {
     fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    for name in ["critic.safetensors", "actor.safetensors", "learning_curves.svg", "log.csv", "eval.csv"] {
+    for name in [
+        "critic.safetensors",
+        "actor.safetensors",
+        "learning_curves.svg",
+        "log.csv",
+        "eval.csv",
+    ] {
         let src = run_dir.join(name);
         fs::copy(&src, out.join(name)).with_context(|| format!("copying {}", src.display()))?;
     }
-    fs::copy(run_dir.join(run::CONFIG), out.join("train-config.toml")).context("copying the run's config")?;
+    fs::copy(run_dir.join(run::CONFIG), out.join("train-config.toml"))
+        .context("copying the run's config")?;
     let actor = Actor::from_weights(load_net(&out.join("actor.safetensors"))?)?;
     let critic = Critic::from_weights(load_net(&out.join("critic.safetensors"))?)?;
     let meta = critic.metadata().clone();
@@ -252,7 +270,11 @@ fn publish(run_dir: &std::path::Path, out: &std::path::Path, command: &str) -> R
     let (ok01, t01) = actor_on_paper_set(&actor, &cfg, 0.1);
     let (ok03, t03) = actor_on_paper_set(&actor, &cfg, 0.3);
     let (_, log) = train::plot::read_csv(&run_dir.join("log.csv"))?;
-    let wall = log.last().and_then(|r| r.get(2)).copied().unwrap_or(f64::NAN);
+    let wall = log
+        .last()
+        .and_then(|r| r.get(2))
+        .copied()
+        .unwrap_or(f64::NAN);
     let readme = format!(
         "# Trained actor and critic\n\n\
          Produced by `{command}` (config: `train-config.toml`), then\n\
@@ -286,6 +308,52 @@ fn publish(run_dir: &std::path::Path, out: &std::path::Path, command: &str) -> R
         n = samples.len(),
     );
     fs::write(out.join("README.md"), readme).context("writing README.md")?;
-    println!("published update {} to {}: actor {ok01}/128 within 0.1, decrease met on {decrease:.1} %", meta.steps, out.display());
+    println!(
+        "published update {} to {}: actor {ok01}/128 within 0.1, decrease met on {decrease:.1} %",
+        meta.steps,
+        out.display()
+    );
+    Ok(())
+}
+
+fn bench(updates: u64) -> Result<()> {
+    use rand::{Rng, SeedableRng};
+    use std::time::Instant;
+    let cfg = TrainConfig::default();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
+    let mut env = train::env::VecEnv::new(&cfg, &mut rng);
+    let mut buffer = train::buffer::ReplayBuffer::new(cfg.buffer_size);
+    let steps = 2000;
+    let t = Instant::now();
+    for _ in 0..steps {
+        let actions: Vec<[f64; 2]> = (0..cfg.n_envs)
+            .map(|_| [rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0)])
+            .collect();
+        env.step(&cfg, &actions, &mut rng, |ep| buffer.push_episode(ep));
+    }
+    let env_rate = (steps * cfg.n_envs) as f64 / t.elapsed().as_secs_f64();
+    let encoder = control::Encoder::new(cfg.machine, cfg.pos_scale);
+    let mut agent = train::agent::Agent::new(&cfg)?;
+    let mut batch = train::buffer::Batch::default();
+    // Warm-up, then the timed updates.
+    for _ in 0..20 {
+        buffer.sample(&cfg, &encoder, cfg.batch_size, &mut rng, &mut batch);
+        agent.update(&batch)?;
+    }
+    let t = Instant::now();
+    for _ in 0..updates {
+        buffer.sample(&cfg, &encoder, cfg.batch_size, &mut rng, &mut batch);
+        agent.update(&batch)?;
+    }
+    let upd_rate = updates as f64 / t.elapsed().as_secs_f64();
+    let threads = std::env::var("RAYON_NUM_THREADS").unwrap_or_else(|_| "all".into());
+    println!(
+        "environment: {env_rate:.0} transitions/s (RK4 + clamp + episode bookkeeping, {} envs)",
+        cfg.n_envs
+    );
+    println!(
+        "training: {upd_rate:.1} updates/s (batch {}, critic + gradient penalty + actor + multipliers + Polyak; RAYON_NUM_THREADS={threads})",
+        cfg.batch_size
+    );
     Ok(())
 }
