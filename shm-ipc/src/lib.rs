@@ -10,6 +10,9 @@
 //!   stop, publish poses, [`Client::subscribe_telemetry`]).
 //! * [`GoalValidator`]: finite numbers, inside the workspace, ≤ 8 obstacles with positive
 //!   radius, goal not inside an obstacle; rejections carry a [`RejectReason`].
+//! * `cli` (default feature `cli`; the daemon uses `default-features = false`): the `wlnav`
+//!   command-line client (goal, cancel, stop, watch, record to MCAP, demo) as a library,
+//!   so tests reach it; `src/bin/wlnav.rs` only parses arguments.
 //!
 //! ```no_run
 //! use shm_ipc::{Client, IpcConfig, Pose2};

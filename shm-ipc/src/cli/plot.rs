@@ -72,7 +72,7 @@ fn layout(points: &[(f64, f64)]) -> ((f64, f64), (f64, f64), (u32, u32)) {
 }
 
 /// Writes the picture: each leg's driven path (thick), its planned horizons (thin, faint),
-/// its goal (circle and a heading tick 0.8 m long) and the start pose.
+/// its goal (dot and a heading tick 0.5 m long) and the start pose.
 pub fn write_svg(path: &Path, title: &str, start: Pose2, legs: &[LegTrace]) -> anyhow::Result<()> {
     let mut all: Vec<(f64, f64)> = vec![(start.x, start.y)];
     for leg in legs {
@@ -131,11 +131,11 @@ pub fn write_svg(path: &Path, title: &str, start: Pose2, legs: &[LegTrace]) -> a
                 PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(3))
             });
         let g = leg.goal;
-        let tip = (g.x + 0.8 * g.heading.cos(), g.y + 0.8 * g.heading.sin());
+        let tip = (g.x + 0.5 * g.heading.cos(), g.y + 0.5 * g.heading.sin());
         chart
             .draw_series([PathElement::new(
                 vec![(g.x, g.y), tip],
-                BLACK.stroke_width(2),
+                color.stroke_width(1),
             )])
             .map_err(err)?;
         chart
@@ -155,13 +155,13 @@ pub fn write_svg(path: &Path, title: &str, start: Pose2, legs: &[LegTrace]) -> a
     chart
         .draw_series([Rectangle::new(
             [
-                (start.x - 0.15, start.y - 0.15),
-                (start.x + 0.15, start.y + 0.15),
+                (start.x - 0.08, start.y - 0.08),
+                (start.x + 0.08, start.y + 0.08),
             ],
             BLACK.filled(),
         )])
         .map_err(err)?
-        .label("start; ticks: headings; faint lines: planned horizons")
+        .label("start (black); short ticks: goal headings; faint lines: planned horizons")
         .legend(|(x, y)| Rectangle::new([(x + 6, y - 4), (x + 14, y + 4)], BLACK.filled()));
     chart
         .configure_series_labels()
