@@ -32,7 +32,7 @@ fn exp_nonpositive(x: f64) -> f64 {
     const LN2_HI: f64 = 6.931_471_803_691_238_164_9e-1;
     const LN2_LO: f64 = 1.908_214_929_270_587_700_02e-10;
     const SHIFTER: f64 = 6_755_399_441_055_744.0; // 1.5·2⁵², rounds to nearest
-    // Below −708 the result (< 1e-307) is irrelevant next to 1 in softplus.
+                                                  // Below −708 the result (< 1e-307) is irrelevant next to 1 in softplus.
     let x = x.max(-708.0);
     let shifted = x * std::f64::consts::LOG2_E + SHIFTER;
     let n = shifted - SHIFTER;
@@ -139,7 +139,12 @@ pub fn affine(layer: &Layer, x: &[f64], out: &mut [f64]) {
     let chunks = n / 4;
     let mut i = 0;
     while i + 4 <= layer.n_out {
-        let rows = [layer.row(i), layer.row(i + 1), layer.row(i + 2), layer.row(i + 3)];
+        let rows = [
+            layer.row(i),
+            layer.row(i + 1),
+            layer.row(i + 2),
+            layer.row(i + 3),
+        ];
         let mut acc = [[0.0; 4]; 4];
         for c in 0..chunks {
             let xs = &x[4 * c..4 * c + 4];
@@ -363,12 +368,18 @@ mod tests {
         for (n_in, n_out) in [(9, 48), (37, 7), (3, 2), (144, 96)] {
             let weight: Vec<f64> = (0..n_in * n_out).map(|i| (i as f64 * 0.7).sin()).collect();
             let bias: Vec<f64> = (0..n_out).map(|i| i as f64 * 0.1).collect();
-            let layer = Layer { n_in, n_out, weight, bias };
+            let layer = Layer {
+                n_in,
+                n_out,
+                weight,
+                bias,
+            };
             let x: Vec<f64> = (0..n_in).map(|i| (i as f64).cos()).collect();
             let mut out = vec![0.0; n_out];
             affine(&layer, &x, &mut out);
             for i in 0..n_out {
-                let naive: f64 = layer.bias[i] + layer.row(i).iter().zip(&x).map(|(w, x)| w * x).sum::<f64>();
+                let naive: f64 =
+                    layer.bias[i] + layer.row(i).iter().zip(&x).map(|(w, x)| w * x).sum::<f64>();
                 assert!((out[i] - naive).abs() < 1e-12, "{n_in}x{n_out} row {i}");
             }
         }

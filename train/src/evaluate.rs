@@ -67,7 +67,12 @@ pub fn held_out_goals(cfg: &TrainConfig) -> Vec<(State, Goal)> {
         ..cfg.clone()
     };
     (0..cfg.eval_goals)
-        .map(|_| (sample_start(&far, &mut rng), sample_goal(&far, &mut rng, 1.0)))
+        .map(|_| {
+            (
+                sample_start(&far, &mut rng),
+                sample_goal(&far, &mut rng, 1.0),
+            )
+        })
         .collect()
 }
 
