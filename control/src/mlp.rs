@@ -309,11 +309,18 @@ impl Mlp {
             let h = &mut rest[0];
             let (d1, d2) = (&mut ws.d1[l], &mut ws.d2[l]);
             affine(layer, prev, h);
-            for i in 0..layer.n_out {
-                let (s, s1, s2) = softplus3(h[i]);
-                h[i] = s;
-                d1[i] = s1;
-                d2[i] = s2;
+            // Two simple passes (e = e^{−|z|}, then softplus and its derivatives)
+            // vectorise where one pass through `softplus3` stayed scalar.
+            for (e, z) in d2.iter_mut().zip(h.iter()) {
+                *e = exp_nonpositive(-z.abs());
+            }
+            for ((z, s1), s2) in h.iter_mut().zip(d1.iter_mut()).zip(d2.iter_mut()) {
+                let e = *s2;
+                let r = 1.0 / (1.0 + e);
+                let sig = if *z >= 0.0 { r } else { e * r };
+                *z = z.max(0.0) + ln_1p_unit(e);
+                *s1 = sig;
+                *s2 = sig * (1.0 - sig);
             }
         }
         let last = self.output_layer();
