@@ -94,6 +94,8 @@ pub struct CriticWorkspace {
     jz: Vec<Vec<[f64; NZ]>>,
     /// ∂Q/∂z.
     jq: Vec<[f64; NZ]>,
+    /// Post-activation Jacobian of the layer below, scratch for the sweep.
+    jh: Vec<[f64; NZ]>,
 }
 
 impl CriticWorkspace {
@@ -107,6 +109,7 @@ impl CriticWorkspace {
             adjoint: hidden.iter().map(|l| vec![0.0; l.n_out]).collect(),
             jz: hidden.iter().map(|l| vec![[0.0; NZ]; l.n_out]).collect(),
             jq: vec![[0.0; NZ]; critic.mlp.output_size()],
+            jh: vec![[0.0; NZ]; critic.mlp.widest()],
         }
     }
 }
@@ -121,35 +124,25 @@ fn add_outer(hess: &mut [[f64; NZ]; NZ], c: f64, r: &[f64; NZ]) {
     }
 }
 
-/// out[i] = Σ_k W[i,k] · scale[k] · prev[k] for rows of width 8. Four output
-/// rows at a time give eight independent FMA chains (two vector registers per
-/// row); one row alone would wait on its own accumulator's latency.
-fn jacobian_product(
-    layer: &Layer,
-    scale: Option<&[f64]>,
-    prev: &[[f64; NZ]],
-    out: &mut [[f64; NZ]],
-) {
+/// out[i] = Σ_k W[i,k] · prev[k] for rows of width 8. Four output rows at a time
+/// give independent FMA chains; one row alone would wait on its own
+/// accumulator's latency.
+fn jacobian_product(layer: &Layer, prev: &[[f64; NZ]], out: &mut [[f64; NZ]]) {
     let n_in = layer.n_in;
-    let coef = |w: &[f64], k: usize| match scale {
-        Some(s) => w[k] * s[k],
-        None => w[k],
-    };
     let mut i = 0;
     while i + 4 <= layer.n_out {
-        let (w0, w1, w2, w3) = (
+        let w = [
             layer.row(i),
             layer.row(i + 1),
             layer.row(i + 2),
             layer.row(i + 3),
-        );
+        ];
         let mut acc = [[0.0; NZ]; 4];
-        for k in 0..n_in {
-            let p = &prev[k];
-            let c = [coef(w0, k), coef(w1, k), coef(w2, k), coef(w3, k)];
+        for (k, p) in prev.iter().enumerate().take(n_in) {
             for r in 0..4 {
+                let c = w[r][k];
                 for j in 0..NZ {
-                    acc[r][j] = c[r].mul_add(p[j], acc[r][j]);
+                    acc[r][j] = c.mul_add(p[j], acc[r][j]);
                 }
             }
         }
@@ -160,9 +153,18 @@ fn jacobian_product(
         let w = layer.row(i);
         let mut acc = [0.0; NZ];
         for (k, p) in prev.iter().enumerate().take(n_in) {
-            axpy(coef(w, k), p, &mut acc);
+            axpy(w[k], p, &mut acc);
         }
         *row = acc;
+    }
+}
+
+/// jh[k] = σ'(z_k) · jz[k]: the post-activation Jacobian of a hidden layer.
+fn scale_rows(d1: &[f64], jz: &[[f64; NZ]], jh: &mut [[f64; NZ]]) {
+    for ((h, z), d) in jh.iter_mut().zip(jz).zip(d1) {
+        for j in 0..NZ {
+            h[j] = d * z[j];
+        }
     }
 }
 
@@ -269,16 +271,21 @@ impl Critic {
         for (l, layer) in hidden.iter().enumerate() {
             let (done, rest) = ws.jz.split_at_mut(l);
             if l == 0 {
-                jacobian_product(layer, None, &ws.enc_jac, &mut rest[0]);
+                jacobian_product(layer, &ws.enc_jac, &mut rest[0]);
             } else {
-                // ∂h_{l−1}/∂z = σ'(z_{l−1}) ⊙ ∂z_{l−1}/∂z, fused into the product.
-                jacobian_product(layer, Some(&ws.mlp.d1[l - 1]), &done[l - 1], &mut rest[0]);
+                let n = done[l - 1].len();
+                scale_rows(&ws.mlp.d1[l - 1], &done[l - 1], &mut ws.jh[..n]);
+                jacobian_product(layer, &ws.jh[..n], &mut rest[0]);
             }
         }
         let out = self.mlp.output_layer();
         match hidden.len() {
-            0 => jacobian_product(out, None, &ws.enc_jac, &mut ws.jq),
-            n => jacobian_product(out, Some(&ws.mlp.d1[n - 1]), &ws.jz[n - 1], &mut ws.jq),
+            0 => jacobian_product(out, &ws.enc_jac, &mut ws.jq),
+            n => {
+                let m = ws.jz[n - 1].len();
+                scale_rows(&ws.mlp.d1[n - 1], &ws.jz[n - 1], &mut ws.jh[..m]);
+                jacobian_product(out, &ws.jh[..m], &mut ws.jq);
+            }
         }
     }
 
