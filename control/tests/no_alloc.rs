@@ -2,34 +2,14 @@
 //! nothing after their workspaces are built. One test in this binary, so no
 //! other test thread allocates while we count.
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicUsize, Ordering};
-
 mod common;
 
 use control::encoder::NZ;
 use control::model::{rk4_step_with_jacobians, Control, Goal, MachineParams, State};
 use control::{ActorWorkspace, CriticWorkspace, Derivatives, HessianMode, TerminalDerivatives};
 
-struct Counting;
-static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
-
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
-
 #[global_allocator]
-static GLOBAL: Counting = Counting;
+static GLOBAL: common::CountingAllocator = common::CountingAllocator;
 
 #[test]
 fn kernels_do_not_allocate() {
@@ -43,7 +23,7 @@ fn kernels_do_not_allocate() {
     let p = MachineParams::default();
     let g = Goal::new(4.5, 4.5, 1.0);
 
-    let before = ALLOCATIONS.load(Ordering::SeqCst);
+    let before = common::allocations();
     let mut sink = 0.0;
     for k in 0..1000 {
         let x = State::new(0.01 * k as f64, 0.0, 0.2, 0.1, 0.0, 0.5);
@@ -57,7 +37,7 @@ fn kernels_do_not_allocate() {
         sink += actor.action(&mut aws, &x, &g)[0];
         sink += rk4_step_with_jacobians(&p, &x, &u, 0.2).1[(0, 2)];
     }
-    let after = ALLOCATIONS.load(Ordering::SeqCst);
+    let after = common::allocations();
     assert!(sink.is_finite());
     assert_eq!(
         after - before,
