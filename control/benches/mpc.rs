@@ -1,7 +1,7 @@
 //! One full MPC tick (delay compensation, critic derivatives, QP update and
-//! solve, output) at N = 10, 20, 40 with a random critic and actor of the
-//! paper's sizes (hidden layers 48-96-144-96-48, 8 critic outputs), for both
-//! Hessian modes, in closed loop on the simulated machine (0.2 s delay) with
+//! solve, output) at N = 10, 20, 40 with the committed critic and actor
+//! (`critic-weights/`; random networks of the paper's sizes when absent, said
+//! on stdout), for both Hessian modes, in closed loop on the simulated machine (0.2 s delay) with
 //! two obstacles. Besides criterion's estimates it prints the median and p99
 //! of 400 ticks per configuration.
 
@@ -10,12 +10,46 @@ use std::time::{Duration, Instant};
 use control::mlp::PAPER_HIDDEN;
 use control::model::{Goal, MachineParams, State};
 use control::mpc::{Mpc, MpcSettings, Obstacle};
-use control::weights::{random_network, NetworkMetadata, NetworkRole};
+use control::weights::{decode, random_network, NetworkMetadata, NetworkRole};
 use control::{Actor, Critic, HessianMode, Plant, PlantConfig};
 use criterion::{criterion_group, criterion_main, Criterion};
 
 const GOAL: Goal = Goal::new(6.0, 4.0, 1.2);
 const OBSTACLES: [Obstacle; 2] = [Obstacle::new(3.0, 1.0, 0.8), Obstacle::new(1.0, 4.0, 0.6)];
+
+/// The committed networks, or random ones of the paper's sizes.
+fn networks() -> (Critic, Actor) {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../critic-weights");
+    let load = |name: &str| {
+        let path = dir.join(name);
+        std::fs::read(&path)
+            .ok()
+            .map(|bytes| decode(&bytes, &path.display().to_string()).expect("valid weight file"))
+    };
+    match (load("critic.safetensors"), load("actor.safetensors")) {
+        (Some(c), Some(a)) => (
+            Critic::from_weights(c).expect("valid critic"),
+            Actor::from_weights(a).expect("valid actor"),
+        ),
+        _ => {
+            println!("no weights in {}: random networks", dir.display());
+            (
+                Critic::from_weights(random_network(
+                    NetworkMetadata::new(NetworkRole::Critic, 8),
+                    &PAPER_HIDDEN,
+                    1,
+                ))
+                .expect("valid critic"),
+                Actor::from_weights(random_network(
+                    NetworkMetadata::new(NetworkRole::Actor, 4),
+                    &PAPER_HIDDEN,
+                    2,
+                ))
+                .expect("valid actor"),
+            )
+        }
+    }
+}
 
 /// An MPC and the machine it drives; restarts from the origin every 150 ticks.
 struct Loop {
@@ -35,18 +69,7 @@ impl Loop {
 
     fn with(settings: MpcSettings) -> Self {
         let p = MachineParams::default();
-        let critic = Critic::from_weights(random_network(
-            NetworkMetadata::new(NetworkRole::Critic, 8),
-            &PAPER_HIDDEN,
-            1,
-        ))
-        .expect("valid critic");
-        let actor = Actor::from_weights(random_network(
-            NetworkMetadata::new(NetworkRole::Actor, 4),
-            &PAPER_HIDDEN,
-            2,
-        ))
-        .expect("valid actor");
+        let (critic, actor) = networks();
         let mpc = Mpc::new(p, critic, Some(actor), settings).expect("valid settings");
         let plant = Plant::new(p, PlantConfig::default(), State::zeros()).expect("valid plant");
         let mut l = Self {
@@ -103,12 +126,7 @@ fn probe() {
     {
         use control::mpc::cost::project_psd8;
         use control::{CriticWorkspace, Derivatives};
-        let critic = Critic::from_weights(random_network(
-            NetworkMetadata::new(NetworkRole::Critic, 8),
-            &PAPER_HIDDEN,
-            1,
-        ))
-        .unwrap();
+        let (critic, _) = networks();
         let mut ws = CriticWorkspace::new(&critic);
         let mut d = Derivatives::default();
         let x = State::new(1.0, 0.5, 0.3, 0.1, 0.05, 0.5);
