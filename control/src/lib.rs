@@ -15,7 +15,7 @@ pub mod scenario;
 pub mod weights;
 
 pub use actor::{Actor, ActorWorkspace};
-pub use cost::CostWeights;
+pub use cost::{CostForm, CostWeights};
 pub use critic::{Critic, CriticWorkspace, Derivatives, HessianMode, TerminalDerivatives};
 pub use encoder::Encoder;
 pub use model::{Control, Goal, MachineParams, State};

@@ -13,7 +13,7 @@ use rand_chacha::ChaCha8Rng;
 use safetensors::tensor::{Dtype, TensorView};
 use safetensors::SafeTensors;
 
-use crate::cost::CostWeights;
+use crate::cost::{CostForm, CostWeights};
 use crate::encoder::{Encoder, ACTOR_INPUTS, CRITIC_INPUTS, DEFAULT_POS_SCALE, ENCODER_ID};
 use crate::mlp::{Layer, Mlp, MlpError};
 use crate::model::MachineParams;
@@ -115,6 +115,7 @@ impl NetworkMetadata {
         put("dt", self.dt.to_string());
         put("cost.w", self.cost.w.map(|w| w.to_string()).join(","));
         put("cost.p", self.cost.p.to_string());
+        put("cost.form", self.cost.form.as_str().into());
         put("gamma", self.gamma.to_string());
         put("steps", self.steps.to_string());
         put("lambda_l", self.lambda_l.to_string());
@@ -209,6 +210,14 @@ impl NetworkMetadata {
             cost: CostWeights {
                 w,
                 p: num("cost.p", get("cost.p")?)?,
+                // Files written before the key existed used the quasi-norm.
+                form: match m.get("cost.form") {
+                    None => CostForm::QuasiNorm,
+                    Some(s) => CostForm::parse(s).ok_or_else(|| WeightsProblem::BadValue {
+                        key: "cost.form".into(),
+                        value: s.clone(),
+                    })?,
+                },
             },
             gamma: num("gamma", get("gamma")?)?,
             steps: num("steps", get("steps")?)?,

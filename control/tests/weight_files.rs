@@ -182,6 +182,16 @@ fn missing_or_bad_metadata() {
     });
     expect_error(&bytes, "`cost.w`");
     let bytes = rebuild(&good_bytes(), |_, m| {
+        m.insert("cost.form".into(), "l2".into());
+    });
+    expect_error(&bytes, "`cost.form` has an invalid value `l2`");
+    // Files from before the key existed load as the quasi-norm.
+    let bytes = rebuild(&good_bytes(), |_, m| {
+        m.remove("cost.form");
+    });
+    let w = decode(&bytes, "old.safetensors").expect("loads without cost.form");
+    assert_eq!(w.meta.cost.form, control::CostForm::QuasiNorm);
+    let bytes = rebuild(&good_bytes(), |_, m| {
         m.insert("output_size".into(), "3".into());
     });
     expect_error(&bytes, "3 outputs (metadata `output_size`)");

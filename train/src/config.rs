@@ -278,5 +278,22 @@ mod tests {
         assert!(e.to_string().contains("gama"), "{e}");
         let e = TrainConfig::from_toml("n_envs = \"many\"").unwrap_err();
         assert!(e.to_string().contains("n_envs"), "{e}");
+        let e = TrainConfig::from_toml("[cost]\nform = \"l2\"").unwrap_err();
+        assert!(e.to_string().contains("form"), "{e}");
+        let c = TrainConfig::from_toml("[cost]\nform = \"power-of-sum\"").unwrap();
+        assert_eq!(c.cost.form, control::CostForm::PowerOfSum);
+    }
+
+    #[test]
+    fn shipped_configs_are_valid() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs");
+        let mut n = 0;
+        for entry in std::fs::read_dir(&dir).unwrap() {
+            let path = entry.unwrap().path();
+            let text = std::fs::read_to_string(&path).unwrap();
+            TrainConfig::from_toml(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+            n += 1;
+        }
+        assert!(n >= 2, "configs in {}", dir.display());
     }
 }

@@ -284,7 +284,7 @@ fn publish(run_dir: &std::path::Path, out: &std::path::Path, command: &str) -> R
          | gradient updates | {steps} |\n\
          | wall time of the run | {wall:.0} s ({hours:.1} h, 2 CPU cores shared) |\n\
          | final λ_l | {lambda:.3} |\n\
-         | γ, cost W, p | {gamma}, {w:?}, {p} |\n\
+         | γ, cost W, p, form | {gamma}, {w:?}, {p}, {form} |\n\
          | critic outputs m | {m} |\n\n\
          ## Verify (`wlnav-train verify`, {n} states under the actor)\n\n\
          - decrease condition of the paper's eq. 4c met on {decrease:.1} % of states\n\
@@ -304,6 +304,7 @@ fn publish(run_dir: &std::path::Path, out: &std::path::Path, command: &str) -> R
         gamma = meta.gamma,
         w = meta.cost.w,
         p = meta.cost.p,
+        form = meta.cost.form.as_str(),
         m = meta.output_size,
         n = samples.len(),
     );
