@@ -17,3 +17,12 @@ if [ ${#need_apt[@]} -gt 0 ]; then
 fi
 
 cargo test --workspace --locked "$@"
+
+# The committed weights must open in Python's safetensors too (issue 3).
+if [ -f critic-weights/critic.safetensors ]; then
+  venv=target/python-check
+  [ -x "$venv/bin/python" ] || python3 -m venv "$venv"
+  "$venv/bin/python" -c "import safetensors, numpy" 2>/dev/null ||
+    "$venv/bin/pip" install -q safetensors numpy
+  "$venv/bin/python" scripts/check_weights_python.py critic-weights
+fi
