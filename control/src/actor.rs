@@ -4,7 +4,7 @@
 use crate::encoder::{Encoder, ACTOR_INPUTS};
 use crate::mlp::{Mlp, MlpWorkspace};
 use crate::model::{Control, Goal, State};
-use crate::weights::{NetworkMetadata, NetworkRole, NetworkWeights, WeightsError, WeightsProblem};
+use crate::weights::{NetworkMetadata, NetworkRole, NetworkWeights, WeightsError};
 
 #[derive(Debug, Clone)]
 pub struct Actor {
@@ -31,15 +31,7 @@ impl ActorWorkspace {
 
 impl Actor {
     pub fn from_weights(w: NetworkWeights) -> Result<Self, WeightsError> {
-        if w.meta.role != NetworkRole::Actor {
-            return Err(WeightsError::new(
-                &w.source,
-                WeightsProblem::WrongRole {
-                    expected: NetworkRole::Actor,
-                    found: w.meta.role,
-                },
-            ));
-        }
+        let w = w.require_role(NetworkRole::Actor)?;
         let encoder = w.meta.encoder();
         Ok(Self {
             mlp: w.mlp,

@@ -17,7 +17,7 @@
 use crate::encoder::{Encoder, CRITIC_INPUTS, NZ};
 use crate::mlp::{axpy, Layer, Mlp, MlpWorkspace};
 use crate::model::{Control, Goal, State, NX};
-use crate::weights::{NetworkMetadata, NetworkRole, NetworkWeights, WeightsError, WeightsProblem};
+use crate::weights::{NetworkMetadata, NetworkRole, NetworkWeights, WeightsError};
 
 /// Which Hessian of L to form.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -171,15 +171,7 @@ fn scale_rows(d1: &[f64], jz: &[[f64; NZ]], jh: &mut [[f64; NZ]]) {
 impl Critic {
     /// Builds the critic from validated weights (see [`crate::weights::decode`]).
     pub fn from_weights(w: NetworkWeights) -> Result<Self, WeightsError> {
-        if w.meta.role != NetworkRole::Critic {
-            return Err(WeightsError::new(
-                &w.source,
-                WeightsProblem::WrongRole {
-                    expected: NetworkRole::Critic,
-                    found: w.meta.role,
-                },
-            ));
-        }
+        let w = w.require_role(NetworkRole::Critic)?;
         let encoder = w.meta.encoder();
         Ok(Self {
             mlp: w.mlp,

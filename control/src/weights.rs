@@ -321,6 +321,22 @@ pub struct NetworkWeights {
     pub mlp: Mlp,
 }
 
+impl NetworkWeights {
+    /// These weights, if they are for a network of `role`.
+    pub fn require_role(self, role: NetworkRole) -> Result<Self, WeightsError> {
+        if self.meta.role != role {
+            return Err(WeightsError::new(
+                &self.source,
+                WeightsProblem::WrongRole {
+                    expected: role,
+                    found: self.meta.role,
+                },
+            ));
+        }
+        Ok(self)
+    }
+}
+
 /// Element type written to files.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum FileDtype {

@@ -18,7 +18,7 @@ use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::server::Server;
 use iceoryx2::port::subscriber::Subscriber;
-use iceoryx2::prelude::{ipc_threadsafe, EventId, FileDescriptorBased, ServiceName};
+use iceoryx2::prelude::{ipc_threadsafe, EventId, FileDescriptorBased, ServiceName, ZeroCopySend};
 use iceoryx2::service::port_factory::{event, publish_subscribe, request_response};
 use iceoryx2::signal_handling_mode::SignalHandlingMode;
 
@@ -127,6 +127,29 @@ fn service_name(name: &str) -> Result<ServiceName, IpcError> {
     })
 }
 
+/// A publish-subscribe service with the crate's buffer, history and overflow QoS.
+fn pubsub<T: std::fmt::Debug + ZeroCopySend>(
+    node: &Node<IpcService>,
+    name: &str,
+    max_publishers: usize,
+    max_subscribers: usize,
+) -> Result<publish_subscribe::PortFactory<IpcService, T, ()>, IpcError> {
+    node.service_builder(&service_name(name)?)
+        .publish_subscribe::<T>()
+        .max_publishers(max_publishers)
+        .max_subscribers(max_subscribers)
+        .subscriber_max_buffer_size(qos::SUBSCRIBER_BUFFER)
+        .history_size(qos::HISTORY)
+        .enable_safe_overflow(true)
+        .max_nodes(qos::MAX_NODES)
+        .open_or_create()
+        .map_err(|e| IpcError::Service {
+            service: name.to_owned(),
+            pattern: "publish-subscribe",
+            source: boxed(e),
+        })
+}
+
 impl Connection {
     fn open(config: &IpcConfig, node_name: &str) -> Result<Self, IpcError> {
         let names = config.service_names()?;
@@ -157,36 +180,18 @@ impl Connection {
                 pattern: "request-response",
                 source: boxed(e),
             })?;
-        let pose = node
-            .service_builder(&service_name(&names.pose)?)
-            .publish_subscribe::<PoseEstimate>()
-            .max_publishers(qos::POSE_MAX_PUBLISHERS)
-            .max_subscribers(qos::POSE_MAX_SUBSCRIBERS)
-            .subscriber_max_buffer_size(qos::SUBSCRIBER_BUFFER)
-            .history_size(qos::HISTORY)
-            .enable_safe_overflow(true)
-            .max_nodes(qos::MAX_NODES)
-            .open_or_create()
-            .map_err(|e| IpcError::Service {
-                service: names.pose.clone(),
-                pattern: "publish-subscribe",
-                source: boxed(e),
-            })?;
-        let telemetry = node
-            .service_builder(&service_name(&names.telemetry)?)
-            .publish_subscribe::<Telemetry>()
-            .max_publishers(qos::TELEMETRY_MAX_PUBLISHERS)
-            .max_subscribers(qos::TELEMETRY_MAX_SUBSCRIBERS)
-            .subscriber_max_buffer_size(qos::SUBSCRIBER_BUFFER)
-            .history_size(qos::HISTORY)
-            .enable_safe_overflow(true)
-            .max_nodes(qos::MAX_NODES)
-            .open_or_create()
-            .map_err(|e| IpcError::Service {
-                service: names.telemetry.clone(),
-                pattern: "publish-subscribe",
-                source: boxed(e),
-            })?;
+        let pose = pubsub::<PoseEstimate>(
+            &node,
+            &names.pose,
+            qos::POSE_MAX_PUBLISHERS,
+            qos::POSE_MAX_SUBSCRIBERS,
+        )?;
+        let telemetry = pubsub::<Telemetry>(
+            &node,
+            &names.telemetry,
+            qos::TELEMETRY_MAX_PUBLISHERS,
+            qos::TELEMETRY_MAX_SUBSCRIBERS,
+        )?;
         let event = |name: &str| -> Result<event::PortFactory<IpcService>, IpcError> {
             node.service_builder(&service_name(name)?)
                 .event()
