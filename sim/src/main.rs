@@ -3,6 +3,7 @@
 //! ```text
 //! wlnav-sim eval --scenarios sim/scenarios/paper128.csv --methods mpc,actor,baseline,min-time \
 //!     [--horizon 10] [--hessian exact|gauss-newton] [--obstacles distance|cbf] \
+//!     [--sqp-iterations 1] [--step-length 1] \
 //!     [--delay 0.2] [--lag 0.1] [--tolerance 0.1] [--weights critic-weights] --out out/eval
 //! wlnav-sim paper [--weights critic-weights] [--out docs]
 //! wlnav-sim scenarios --out sim/scenarios
@@ -74,6 +75,12 @@ enum Command {
         hessian: Hessian,
         #[arg(long, value_enum, default_value_t = Obstacles::Distance)]
         obstacles: Obstacles,
+        /// SQP iterations per tick (1 = real-time iteration).
+        #[arg(long, default_value_t = 1)]
+        sqp_iterations: usize,
+        /// Step length of every SQP iteration, in (0, 1].
+        #[arg(long, default_value_t = 1.0)]
+        step_length: f64,
         /// Plant input delay [s] (compensated by the MPC).
         #[arg(long, default_value_t = 0.0)]
         delay: f64,
@@ -147,6 +154,8 @@ fn main() -> Result<()> {
             horizon,
             hessian,
             obstacles,
+            sqp_iterations,
+            step_length,
             delay,
             lag,
             duration,
@@ -172,6 +181,8 @@ fn main() -> Result<()> {
                     Obstacles::Distance => ObstacleConstraint::Distance,
                     Obstacles::Cbf => ObstacleConstraint::Cbf,
                 },
+                sqp_iterations,
+                step_length,
                 ..cfg.mpc
             };
             cfg.mpc.validate()?;
@@ -184,7 +195,7 @@ fn main() -> Result<()> {
             cfg.plant.validate()?;
             let ev = eval::evaluate(&cfg, &nets, &set)?;
             let header = format!(
-                "# eval: {}\n\nmethods {methods}, N = {horizon}, delay {delay} s, lag {lag} s, tolerance {}, networks: {}\n",
+                "# eval: {}\n\nmethods {methods}, N = {horizon}, SQP iterations {sqp_iterations} × step {step_length}, delay {delay} s, lag {lag} s, tolerance {}, networks: {}\n",
                 scenarios.display(),
                 common.tolerance,
                 nets.source
