@@ -52,9 +52,14 @@ pub struct RunSummary {
     pub wall_s: f64,
 }
 
-/// Saves networks, Adam moments, multipliers and counters, atomically.
-pub fn save_checkpoint(agent: &Agent, dir: &Path) -> Result<()> {
-    let (tensors, meta) = agent.checkpoint_tensors();
+/// Checkpoint metadata key of the run's training wall time so far [s].
+const WALL_KEY: &str = "wall_s";
+
+/// Saves networks, Adam moments, multipliers, counters and the run's wall time
+/// so far (`wall_s`, so that a resumed run reports its total), atomically.
+pub fn save_checkpoint(agent: &Agent, dir: &Path, wall_s: f64) -> Result<()> {
+    let (tensors, mut meta) = agent.checkpoint_tensors();
+    meta.insert(WALL_KEY.into(), format!("{wall_s:.1}"));
     let data: Vec<(String, Vec<usize>, Vec<u8>)> = tensors
         .iter()
         .map(|(n, t)| {
@@ -77,8 +82,10 @@ pub fn save_checkpoint(agent: &Agent, dir: &Path) -> Result<()> {
     Ok(())
 }
 
-/// Loads a checkpoint written by [`save_checkpoint`] into `agent`.
-pub fn load_checkpoint(agent: &mut Agent, dir: &Path) -> Result<()> {
+/// Loads a checkpoint written by [`save_checkpoint`] into `agent`; returns the
+/// run's wall time at the checkpoint (`None` for checkpoints written before it
+/// was recorded).
+pub fn load_checkpoint(agent: &mut Agent, dir: &Path) -> Result<Option<f64>> {
     let path = dir.join(CHECKPOINT);
     let bytes = fs::read(&path).with_context(|| format!("reading {}", path.display()))?;
     let (_, header) = safetensors::SafeTensors::read_metadata(&bytes)
@@ -101,7 +108,20 @@ pub fn load_checkpoint(agent: &mut Agent, dir: &Path) -> Result<()> {
     }
     agent
         .restore(&tensors, &meta)
-        .with_context(|| format!("restoring {}", path.display()))
+        .with_context(|| format!("restoring {}", path.display()))?;
+    meta.get(WALL_KEY)
+        .map(|v| {
+            v.parse::<f64>()
+                .ok()
+                .filter(|w| w.is_finite() && *w >= 0.0)
+                .with_context(|| {
+                    format!(
+                        "{}: `{WALL_KEY}` = {v:?} is not a wall time",
+                        path.display()
+                    )
+                })
+        })
+        .transpose()
 }
 
 /// The deployed networks of the agent, as `control` loads them.
@@ -181,8 +201,13 @@ pub fn train(cfg: &TrainConfig, opts: &RunOptions) -> Result<RunSummary> {
     let dir = &opts.out_dir;
     fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let mut agent = Agent::new(cfg)?;
-    if opts.resume {
-        load_checkpoint(&mut agent, dir)?;
+    let wall_before = if opts.resume {
+        load_checkpoint(&mut agent, dir)?.unwrap_or_else(|| {
+            eprintln!(
+                "the checkpoint predates wall-time recording: wall time counts from this resume"
+            );
+            0.0
+        })
     } else {
         anyhow::ensure!(
             !dir.join(CHECKPOINT).exists(),
@@ -190,7 +215,8 @@ pub fn train(cfg: &TrainConfig, opts: &RunOptions) -> Result<RunSummary> {
             dir.display()
         );
         fs::write(dir.join(CONFIG), toml::to_string(cfg)?)?;
-    }
+        0.0
+    };
     let start_updates = agent.updates;
     let stop_at = opts.max_updates.map_or(cfg.total_updates, |m| {
         (start_updates + m).min(cfg.total_updates)
@@ -224,7 +250,9 @@ pub fn train(cfg: &TrainConfig, opts: &RunOptions) -> Result<RunSummary> {
         }
     };
 
+    // Wall time of the whole run, across resumes.
     let t0 = Instant::now();
+    let wall = || wall_before + t0.elapsed().as_secs_f64();
     let mut last_ckpt = Instant::now();
     let mut last_log = (Instant::now(), agent.updates);
     let mut mean = Mean::default();
@@ -283,7 +311,7 @@ pub fn train(cfg: &TrainConfig, opts: &RunOptions) -> Result<RunSummary> {
                         "{},{},{:.1},{:.1},{:.6e},{:.6e},{:.6e},{:.6},{:.6e},{:.4},{:.6e},{:.6e}",
                         agent.updates,
                         agent.env_steps,
-                        t0.elapsed().as_secs_f64(),
+                        wall(),
                         rate,
                         m[0],
                         m[1],
@@ -312,7 +340,7 @@ pub fn train(cfg: &TrainConfig, opts: &RunOptions) -> Result<RunSummary> {
                         "{},{},{:.1},{:.4},{:.4},{:.4}",
                         agent.updates,
                         agent.env_steps,
-                        t0.elapsed().as_secs_f64(),
+                        wall(),
                         s1,
                         s3,
                         d
@@ -328,7 +356,7 @@ pub fn train(cfg: &TrainConfig, opts: &RunOptions) -> Result<RunSummary> {
                 ));
             }
             if last_ckpt.elapsed().as_secs_f64() > cfg.checkpoint_minutes * 60.0 {
-                save_checkpoint(&agent, dir)?;
+                save_checkpoint(&agent, dir, wall())?;
                 export(&agent, dir, &opts.git_commit)?;
                 if let Err(e) = crate::plot::learning_curves(dir) {
                     say(format!("learning curves not drawn: {e:#}"));
@@ -341,7 +369,7 @@ pub fn train(cfg: &TrainConfig, opts: &RunOptions) -> Result<RunSummary> {
             }
         }
     }
-    save_checkpoint(&agent, dir)?;
+    save_checkpoint(&agent, dir, wall())?;
     export(&agent, dir, &opts.git_commit)?;
     if dir.join("log.csv").exists() {
         if let Err(e) = crate::plot::learning_curves(dir) {
@@ -355,6 +383,6 @@ pub fn train(cfg: &TrainConfig, opts: &RunOptions) -> Result<RunSummary> {
         first_critic_loss: first_loss,
         last_critic_loss: last_loss,
         lambda_l: agent.lambda_l(),
-        wall_s: t0.elapsed().as_secs_f64(),
+        wall_s: wall(),
     })
 }

@@ -79,4 +79,21 @@ fn smoke_run_learns_checkpoints_and_resumes() {
         (1..=8).map(|k| k * 50).collect::<Vec<_>>(),
         "resume continued from update 300"
     );
+    // The run's wall clock carries across the resume: the logged wall time never
+    // falls, and the resumed summary counts the first part too.
+    let walls: Vec<f64> = log
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').nth(2).unwrap().parse().unwrap())
+        .collect();
+    assert!(
+        walls.windows(2).all(|w| w[1] >= w[0]),
+        "wall time restarted on resume: {walls:?}"
+    );
+    assert!(
+        resumed.wall_s > walls[5],
+        "resumed run reports {} s, less than its first 300 updates took ({} s)",
+        resumed.wall_s,
+        walls[5]
+    );
 }
