@@ -37,6 +37,10 @@ enum Cmd {
         /// Stop after this many updates in this invocation.
         #[arg(long)]
         max_updates: Option<u64>,
+        /// Stop when the run's total training wall time (across resumes) reaches
+        /// this many hours.
+        #[arg(long)]
+        max_wall_hours: Option<f64>,
     },
     /// Write critic.safetensors and actor.safetensors from a run's checkpoint.
     Export {
@@ -126,6 +130,7 @@ fn main() -> Result<()> {
             out,
             resume,
             max_updates,
+            max_wall_hours,
         } => {
             let cfg = match (&config, resume) {
                 (_, true) => load_config(&out.join(run::CONFIG))?,
@@ -136,6 +141,7 @@ fn main() -> Result<()> {
                 out_dir: out.clone(),
                 resume,
                 max_updates,
+                max_wall_s: max_wall_hours.map(|h| h * 3600.0),
                 git_commit: git_commit(),
                 quiet: false,
             };

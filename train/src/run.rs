@@ -36,6 +36,8 @@ pub struct RunOptions {
     pub resume: bool,
     /// Stop after this many updates in this invocation (smoke runs, time-boxed sessions).
     pub max_updates: Option<u64>,
+    /// Stop when the run's total wall time (across resumes) reaches this [s].
+    pub max_wall_s: Option<f64>,
     /// Git commit written into exported metadata.
     pub git_commit: String,
     pub quiet: bool,
@@ -195,6 +197,29 @@ impl Mean {
     }
 }
 
+/// Removes the rows of a run's CSV log whose update count (first column) is past
+/// `updates`; a missing file is left missing.
+fn drop_rows_after(path: &Path, updates: u64) -> Result<()> {
+    let Ok(text) = fs::read_to_string(path) else {
+        return Ok(());
+    };
+    let mut lines = text.lines();
+    let mut kept: Vec<&str> = lines.next().into_iter().collect();
+    kept.extend(lines.filter(|l| {
+        l.split(',')
+            .next()
+            .and_then(|u| u.parse::<u64>().ok())
+            .is_some_and(|u| u <= updates)
+    }));
+    if kept.len() < text.lines().count() {
+        let tmp = path.with_extension("csv.tmp");
+        fs::write(&tmp, kept.join("\n") + "\n")
+            .with_context(|| format!("writing {}", tmp.display()))?;
+        fs::rename(&tmp, path).with_context(|| format!("replacing {}", path.display()))?;
+    }
+    Ok(())
+}
+
 /// Trains (or resumes) a run in `opts.out_dir`.
 pub fn train(cfg: &TrainConfig, opts: &RunOptions) -> Result<RunSummary> {
     cfg.validate()?;
@@ -202,12 +227,17 @@ pub fn train(cfg: &TrainConfig, opts: &RunOptions) -> Result<RunSummary> {
     fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let mut agent = Agent::new(cfg)?;
     let wall_before = if opts.resume {
-        load_checkpoint(&mut agent, dir)?.unwrap_or_else(|| {
+        let wall = load_checkpoint(&mut agent, dir)?.unwrap_or_else(|| {
             eprintln!(
                 "the checkpoint predates wall-time recording: wall time counts from this resume"
             );
             0.0
-        })
+        });
+        // Rows logged after the checkpoint belong to work the resume redoes.
+        for log in ["log.csv", "eval.csv"] {
+            drop_rows_after(&dir.join(log), agent.updates)?;
+        }
+        wall
     } else {
         anyhow::ensure!(
             !dir.join(CHECKPOINT).exists(),
@@ -258,7 +288,7 @@ pub fn train(cfg: &TrainConfig, opts: &RunOptions) -> Result<RunSummary> {
     let mut mean = Mean::default();
     let (mut first_loss, mut last_loss) = (f64::NAN, f64::NAN);
     let fresh = !opts.resume;
-    while agent.updates < stop_at {
+    'training: while agent.updates < stop_at {
         env.progress = match cfg.goal.curriculum_updates {
             0 => 1.0,
             n => agent.updates as f64 / n as f64,
@@ -364,8 +394,8 @@ pub fn train(cfg: &TrainConfig, opts: &RunOptions) -> Result<RunSummary> {
                 last_ckpt = Instant::now();
                 say(format!("checkpoint at update {}", agent.updates));
             }
-            if agent.updates >= stop_at {
-                break;
+            if agent.updates >= stop_at || opts.max_wall_s.is_some_and(|m| wall() >= m) {
+                break 'training;
             }
         }
     }

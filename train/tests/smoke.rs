@@ -29,6 +29,7 @@ fn smoke_run_learns_checkpoints_and_resumes() {
         out_dir: out.clone(),
         resume: false,
         max_updates: Some(300),
+        max_wall_s: None,
         git_commit: "test".into(),
         quiet: true,
     };
@@ -56,6 +57,11 @@ fn smoke_run_learns_checkpoints_and_resumes() {
         .unwrap_err()
         .to_string()
         .contains("--resume"));
+
+    // A run killed between checkpoints logged rows the resume will redo.
+    let mut log = std::fs::read_to_string(out.join("log.csv")).unwrap();
+    log.push_str("350,0,99.0,1,0,0,0,0,0,0,0,0\n");
+    std::fs::write(out.join("log.csv"), log).unwrap();
 
     // Resume: same step count, then on to the end.
     let resumed = train(
@@ -96,4 +102,20 @@ fn smoke_run_learns_checkpoints_and_resumes() {
         resumed.wall_s,
         walls[5]
     );
+
+    // A wall-time budget the run has already spent stops it after one update.
+    let budget = train(
+        &TrainConfig {
+            total_updates: 1000,
+            ..cfg.clone()
+        },
+        &RunOptions {
+            resume: true,
+            max_updates: None,
+            max_wall_s: Some(walls[7]),
+            ..opts.clone()
+        },
+    )
+    .unwrap();
+    assert_eq!(budget.updates, 401);
 }
