@@ -111,8 +111,15 @@ pub struct LyapunovSample {
     pub delta: f64,
 }
 
-/// Samples states along actor rollouts to random goals and evaluates the
-/// decrease condition (eq. 4c) and L ≥ c on each.
+/// Success tolerance of DESIGN §7: `verify` samples states outside this goal set.
+pub const VERIFY_TOLERANCE: f64 = 0.1;
+
+/// Samples states along actor rollouts to random goals, every tenth step from a
+/// random phase, and evaluates the decrease condition (eq. 4c) and L ≥ c on each.
+///
+/// An episode contributes states only until it first meets the success test: from
+/// there the machine rests at its goal, the equilibrium, where L′ = L and no
+/// function can decrease (Lyapunov decrease is asked for outside the target set).
 pub fn lyapunov_samples(
     actor: &Actor,
     critic: &Critic,
@@ -121,32 +128,151 @@ pub fn lyapunov_samples(
     seed: u64,
 ) -> Vec<LyapunovSample> {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let (mut aws, mut cws) = (ActorWorkspace::new(actor), CriticWorkspace::new(critic));
-    let lambda_l = critic.metadata().lambda_l.clamp(0.0, 1.0);
-    let (k, lam) = (1.0 - lambda_l, lambda_l.min(cfg.gamma));
+    let mut ws = (ActorWorkspace::new(actor), CriticWorkspace::new(critic));
     let mut out = Vec::new();
     for _ in 0..episodes {
-        let (mut x, g) = (sample_start(cfg, &mut rng), sample_goal(cfg, &mut rng, 1.0));
-        let steps = cfg.episode_steps();
-        let keep = rng.gen_range(0..steps);
-        for i in 0..steps {
-            let u = actor.action(&mut aws, &x, &g);
-            let next = env_step(&cfg.machine, &x, &u, cfg.dt);
-            if i % 10 == keep % 10 {
-                let u_next = actor.action(&mut aws, &next, &g);
-                let l = critic.value(&mut cws, &x, &u, &g);
-                let l_next = critic.value(&mut cws, &next, &u_next, &g);
-                let cost = cfg.cost.stage_cost(&next, &g);
-                out.push(LyapunovSample {
-                    distance: control::model::goal_distance(&x, &g),
-                    cost,
-                    l,
-                    l_next,
-                    delta: l_next - l + k * (l - lam * l_next),
-                });
-            }
-            x = next;
-        }
+        let (x, g) = (sample_start(cfg, &mut rng), sample_goal(cfg, &mut rng, 1.0));
+        let phase = rng.gen_range(0..10);
+        episode_samples(actor, critic, cfg, &mut ws, (x, g), phase, &mut out);
     }
     out
+}
+
+/// The samples of one episode from `start` to `goal`: every tenth step from
+/// `phase`, until the success test first holds.
+fn episode_samples(
+    actor: &Actor,
+    critic: &Critic,
+    cfg: &TrainConfig,
+    (aws, cws): &mut (ActorWorkspace, CriticWorkspace),
+    (mut x, g): (State, Goal),
+    phase: usize,
+    out: &mut Vec<LyapunovSample>,
+) {
+    let lambda_l = critic.metadata().lambda_l.clamp(0.0, 1.0);
+    let (k, lam) = (1.0 - lambda_l, lambda_l.min(cfg.gamma));
+    for i in 0..cfg.episode_steps() {
+        if converged(&x, &g, VERIFY_TOLERANCE) {
+            break;
+        }
+        let u = actor.action(aws, &x, &g);
+        let next = env_step(&cfg.machine, &x, &u, cfg.dt);
+        if i % 10 == phase {
+            let u_next = actor.action(aws, &next, &g);
+            let l = critic.value(cws, &x, &u, &g);
+            let l_next = critic.value(cws, &next, &u_next, &g);
+            out.push(LyapunovSample {
+                distance: control::model::goal_distance(&x, &g),
+                cost: cfg.cost.stage_cost(&next, &g),
+                l,
+                l_next,
+                delta: l_next - l + k * (l - lam * l_next),
+            });
+        }
+        x = next;
+    }
+}
+
+/// What `verify` reports about a set of samples.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct VerifySummary {
+    pub states: usize,
+    /// Share of states with ΔL ≤ 0 (the per-sample form of eq. 4c).
+    pub decrease_share: f64,
+    /// E[ΔL] over the states: eq. 4c itself is this expectation being ≤ 0.
+    pub mean_delta: f64,
+    /// Share of states with L ≥ c.
+    pub above_cost_share: f64,
+}
+
+impl VerifySummary {
+    pub fn of(samples: &[LyapunovSample]) -> Self {
+        let n = samples.len().max(1) as f64;
+        let share = |f: &dyn Fn(&LyapunovSample) -> bool| {
+            samples.iter().filter(|s| f(s)).count() as f64 / n
+        };
+        Self {
+            states: samples.len(),
+            decrease_share: share(&|s| s.delta <= 0.0),
+            mean_delta: samples.iter().map(|s| s.delta).sum::<f64>() / n,
+            above_cost_share: share(&|s| s.l >= s.cost),
+        }
+    }
+}
+
+/// The samples as CSV, one row per state.
+pub fn lyapunov_csv(samples: &[LyapunovSample]) -> String {
+    let mut csv = String::from("distance,cost,l,l_next,delta,decrease_met,l_ge_c\n");
+    for s in samples {
+        csv.push_str(&format!(
+            "{:.4},{:.6},{:.6},{:.6},{:.6},{},{}\n",
+            s.distance,
+            s.cost,
+            s.l,
+            s.l_next,
+            s.delta,
+            s.delta <= 0.0,
+            s.l >= s.cost
+        ));
+    }
+    csv
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn networks(cfg: &TrainConfig) -> (Actor, Critic) {
+        let agent = crate::agent::Agent::new(cfg).unwrap();
+        let (critic, actor) = crate::run::exported(&agent, "test").unwrap();
+        (
+            Actor::from_weights(actor).unwrap(),
+            Critic::from_weights(critic).unwrap(),
+        )
+    }
+
+    #[test]
+    fn verify_samples_only_outside_the_goal_set_with_the_paper_delta() {
+        let cfg = TrainConfig::default();
+        let (actor, critic) = networks(&cfg);
+        let mut ws = (ActorWorkspace::new(&actor), CriticWorkspace::new(&critic));
+        let goal = Goal::new(2.0, 1.0, 0.5);
+        let at_goal = State::new(2.0, 1.0, 0.5, 0.0, 0.0, 0.0);
+        let mut out = Vec::new();
+        episode_samples(&actor, &critic, &cfg, &mut ws, (at_goal, goal), 3, &mut out);
+        assert!(out.is_empty(), "sampled {} states at the goal", out.len());
+
+        let far = State::new(-6.0, 3.0, 2.0, 0.0, 0.0, 0.0);
+        episode_samples(&actor, &critic, &cfg, &mut ws, (far, goal), 3, &mut out);
+        assert!(!out.is_empty());
+        let lambda_l = critic.metadata().lambda_l;
+        let (k, lam) = (1.0 - lambda_l, lambda_l.min(cfg.gamma));
+        for s in &out {
+            assert!(s.distance >= VERIFY_TOLERANCE);
+            // Paper eq. 4c, per sample: L(s′) − L(s) + k (L(s) − λ L(s′)).
+            let expected = s.l_next - s.l + k * s.l - k * lam * s.l_next;
+            assert!((s.delta - expected).abs() <= 1e-12 * (1.0 + s.l.abs()));
+        }
+    }
+
+    #[test]
+    fn verify_summary_counts_shares_and_the_expectation() {
+        let sample = |l: f64, l_next: f64, cost: f64, delta: f64| LyapunovSample {
+            distance: 1.0,
+            cost,
+            l,
+            l_next,
+            delta,
+        };
+        let v = VerifySummary::of(&[
+            sample(2.0, 1.0, 1.0, -0.5),
+            sample(2.0, 2.5, 3.0, 0.3),
+            sample(1.0, 0.5, 0.5, 0.0),
+            sample(1.0, 0.9, 0.2, -0.2),
+        ]);
+        assert_eq!(v.states, 4);
+        assert_eq!(v.decrease_share, 0.75);
+        assert!((v.mean_delta - (-0.1)).abs() < 1e-12);
+        assert_eq!(v.above_cost_share, 0.75);
+    }
 }

@@ -10,6 +10,7 @@ use clap::{Parser, Subcommand};
 use control::weights::decode;
 use control::{Actor, Critic};
 use train::config::TrainConfig;
+use train::evaluate::VerifySummary;
 use train::run::{self, RunOptions};
 
 #[derive(Parser)]
@@ -212,29 +213,17 @@ fn main() -> Result<()> {
             let critic = Critic::from_weights(load_net(&critic)?)?;
             let cfg = config_from_metadata(critic.metadata());
             let samples = train::evaluate::lyapunov_samples(&actor, &critic, &cfg, episodes, 7);
-            let n = samples.len() as f64;
-            let decrease = samples.iter().filter(|s| s.delta <= 0.0).count() as f64 / n;
-            let above_cost = samples.iter().filter(|s| s.l >= s.cost).count() as f64 / n;
+            let v = VerifySummary::of(&samples);
             println!(
-                "{} states: decrease condition (eq. 4c) met on {:.1}%, L >= c on {:.1}% (lambda_l {:.3})",
-                samples.len(),
-                decrease * 100.0,
-                above_cost * 100.0,
+                "{} states outside the goal set: decrease condition (eq. 4c) met on {:.1}%, \
+                 E[delta L] = {:.3e}, L >= c on {:.1}% (lambda_l {:.3})",
+                v.states,
+                v.decrease_share * 100.0,
+                v.mean_delta,
+                v.above_cost_share * 100.0,
                 critic.metadata().lambda_l
             );
-            let mut csv = String::from("distance,cost,l,l_next,delta,decrease_met,l_ge_c\n");
-            for s in &samples {
-                csv.push_str(&format!(
-                    "{:.4},{:.6},{:.6},{:.6},{:.6},{},{}\n",
-                    s.distance,
-                    s.cost,
-                    s.l,
-                    s.l_next,
-                    s.delta,
-                    s.delta <= 0.0,
-                    s.l >= s.cost
-                ));
-            }
+            let csv = train::evaluate::lyapunov_csv(&samples);
             if let Some(p) = out {
                 fs::write(&p, csv).with_context(|| format!("writing {}", p.display()))?;
             }
@@ -269,10 +258,10 @@ fn publish(run_dir: &std::path::Path, out: &std::path::Path, command: &str) -> R
     let critic = Critic::from_weights(load_net(&out.join("critic.safetensors"))?)?;
     let meta = critic.metadata().clone();
     let cfg = config_from_metadata(&meta);
-    let samples = train::evaluate::lyapunov_samples(&actor, &critic, &cfg, 200, 7);
-    let n = samples.len() as f64;
-    let decrease = samples.iter().filter(|s| s.delta <= 0.0).count() as f64 / n * 100.0;
-    let above = samples.iter().filter(|s| s.l >= s.cost).count() as f64 / n * 100.0;
+    let v = VerifySummary::of(&train::evaluate::lyapunov_samples(
+        &actor, &critic, &cfg, 200, 7,
+    ));
+    let (decrease, above) = (v.decrease_share * 100.0, v.above_cost_share * 100.0);
     let (ok01, t01) = actor_on_paper_set(&actor, &cfg, 0.1);
     let (ok03, t03) = actor_on_paper_set(&actor, &cfg, 0.3);
     let (_, log) = train::plot::read_csv(&run_dir.join("log.csv"))?;
@@ -292,8 +281,9 @@ fn publish(run_dir: &std::path::Path, out: &std::path::Path, command: &str) -> R
          | final λ_l | {lambda:.3} |\n\
          | γ, cost W, p, form | {gamma}, {w:?}, {p}, {form} |\n\
          | critic outputs m | {m} |\n\n\
-         ## Verify (`wlnav-train verify`, {n} states under the actor)\n\n\
+         ## Verify (`wlnav-train verify`, {n} states under the actor, outside the goal set)\n\n\
          - decrease condition of the paper's eq. 4c met on {decrease:.1} % of states\n\
+         - its expectation form: E[ΔL] = {mean_delta:.3e}\n\
          - L ≥ c on {above:.1} %\n\n\
          ## The actor alone on the paper's 128 scenarios (ideal model)\n\n\
          - within 0.1: {ok01}/128 (mean time {t01:.2} s)\n\
@@ -312,7 +302,8 @@ fn publish(run_dir: &std::path::Path, out: &std::path::Path, command: &str) -> R
         p = meta.cost.p,
         form = meta.cost.form.as_str(),
         m = meta.output_size,
-        n = samples.len(),
+        n = v.states,
+        mean_delta = v.mean_delta,
     );
     fs::write(out.join("README.md"), readme).context("writing README.md")?;
     println!(
