@@ -139,6 +139,25 @@ impl ElementNlp {
         }
         vars.len()
     }
+
+    /// Evaluates element `e` at the global point `z`: returns its objective and
+    /// leaves its gradient in `self.grad`; its constraints and Jacobian go to `g`
+    /// and `jac` when given (else to scratch).
+    fn eval_element(
+        &mut self,
+        e: usize,
+        z: &[f64],
+        g: Option<&mut [f64]>,
+        jac: Option<&mut [f64]>,
+    ) -> f64 {
+        let nv = self.gather(e, z);
+        let nc = self.elements[e].n_cons();
+        let g = g.unwrap_or(&mut self.g[..nc]);
+        let jac = jac.unwrap_or(&mut self.jac[..nc * nv]);
+        let mut obj = 0.0;
+        self.elements[e].eval(&self.local_z[..nv], &mut obj, &mut self.grad[..nv], g, jac);
+        obj
+    }
 }
 
 impl Nlp for ElementNlp {
@@ -162,17 +181,7 @@ impl Nlp for ElementNlp {
     fn objective(&mut self, z: &[f64]) -> Option<f64> {
         let mut total = 0.0;
         for e in 0..self.elements.len() {
-            let nv = self.gather(e, z);
-            let nc = self.elements[e].n_cons();
-            let mut obj = 0.0;
-            self.elements[e].eval(
-                &self.local_z[..nv],
-                &mut obj,
-                &mut self.grad[..nv],
-                &mut self.g[..nc],
-                &mut self.jac[..nc * nv],
-            );
-            total += obj;
+            total += self.eval_element(e, z, None, None);
         }
         total.is_finite().then_some(total)
     }
@@ -180,16 +189,7 @@ impl Nlp for ElementNlp {
     fn gradient(&mut self, z: &[f64], grad: &mut [f64]) -> bool {
         grad.fill(0.0);
         for e in 0..self.elements.len() {
-            let nv = self.gather(e, z);
-            let nc = self.elements[e].n_cons();
-            let mut obj = 0.0;
-            self.elements[e].eval(
-                &self.local_z[..nv],
-                &mut obj,
-                &mut self.grad[..nv],
-                &mut self.g[..nc],
-                &mut self.jac[..nc * nv],
-            );
+            self.eval_element(e, z, None, None);
             for (k, &i) in self.elements[e].vars().iter().enumerate() {
                 grad[i] += self.grad[k];
             }
@@ -199,17 +199,8 @@ impl Nlp for ElementNlp {
 
     fn constraints(&mut self, z: &[f64], g: &mut [f64]) -> bool {
         for e in 0..self.elements.len() {
-            let nv = self.gather(e, z);
-            let nc = self.elements[e].n_cons();
-            let off = self.con_offset[e];
-            let mut obj = 0.0;
-            self.elements[e].eval(
-                &self.local_z[..nv],
-                &mut obj,
-                &mut self.grad[..nv],
-                &mut g[off..off + nc],
-                &mut self.jac[..nc * nv],
-            );
+            let (off, nc) = (self.con_offset[e], self.elements[e].n_cons());
+            self.eval_element(e, z, Some(&mut g[off..off + nc]), None);
         }
         g.iter().all(|v| v.is_finite())
     }
@@ -230,17 +221,9 @@ impl Nlp for ElementNlp {
     fn jacobian(&mut self, z: &[f64], values: &mut [f64]) -> bool {
         let mut pos = 0;
         for e in 0..self.elements.len() {
-            let nv = self.gather(e, z);
-            let nc = self.elements[e].n_cons();
-            let mut obj = 0.0;
-            self.elements[e].eval(
-                &self.local_z[..nv],
-                &mut obj,
-                &mut self.grad[..nv],
-                &mut self.g[..nc],
-                &mut values[pos..pos + nc * nv],
-            );
-            pos += nc * nv;
+            let len = self.elements[e].n_cons() * self.elements[e].vars().len();
+            self.eval_element(e, z, None, Some(&mut values[pos..pos + len]));
+            pos += len;
         }
         values.iter().all(|v| v.is_finite())
     }
