@@ -245,13 +245,13 @@ fn publish(run_dir: &std::path::Path, out: &std::path::Path, command: &str) -> R
     for name in [
         "critic.safetensors",
         "actor.safetensors",
-        "learning_curves.svg",
         "log.csv",
         "eval.csv",
     ] {
         let src = run_dir.join(name);
         fs::copy(&src, out.join(name)).with_context(|| format!("copying {}", src.display()))?;
     }
+    train::plot::learning_curves(out).context("drawing the learning curves")?;
     fs::copy(run_dir.join(run::CONFIG), out.join("train-config.toml"))
         .context("copying the run's config")?;
     let actor = Actor::from_weights(load_net(&out.join("actor.safetensors"))?)?;
@@ -289,6 +289,10 @@ fn publish(run_dir: &std::path::Path, out: &std::path::Path, command: &str) -> R
          - within 0.1: {ok01}/128 (mean time {t01:.2} s)\n\
          - within 0.3: {ok03}/128 (mean time {t03:.2} s)\n\n\
          The MPC with this critic is evaluated in `docs/results.md`.\n\n\
+         The Python check (DESIGN §4: a PyTorch/NumPy user opens both files): `scripts/test.sh` runs\n\
+         `scripts/check_weights_python.py critic-weights` in a venv with `safetensors` and `numpy`\n\
+         (`safetensors.numpy.load_file`: same tensor names `layers.{{i}}.weight|bias`, chained\n\
+         shapes, metadata keys).\n\n\
          ## Learning curves\n\n![learning curves](learning_curves.svg)\n\n\
          `log.csv` and `eval.csv` are the run's logs.\n",
         run = run_dir.display(),
