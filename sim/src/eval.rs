@@ -11,7 +11,7 @@ use control::scenario::Scenario;
 
 use crate::plots::{self, method_color, Track};
 use crate::results::{self, MethodSummary, ResultRow};
-use crate::runner::{run_all, EvalConfig, Networks, ScenarioRuns};
+use crate::runner::{run_all, EvalConfig, Method, Networks, ScenarioRuns};
 
 /// The outcome of an evaluation.
 pub struct Evaluation {
@@ -32,31 +32,7 @@ pub fn evaluate(cfg: &EvalConfig, nets: &Networks, scenarios: &[Scenario]) -> Re
         .iter()
         .flat_map(|s| s.runs.iter().map(|(_, r)| r.row.clone()))
         .collect();
-    let methods: Vec<String> = cfg.methods.iter().map(|m| m.name().to_string()).collect();
-    let samples: Vec<Vec<f64>> = cfg
-        .methods
-        .iter()
-        .map(|m| {
-            runs.iter()
-                .flat_map(|s| {
-                    s.runs
-                        .iter()
-                        .filter(|(k, _)| k == m)
-                        .flat_map(|(_, r)| r.solve_ms.iter().cloned())
-                })
-                .collect()
-        })
-        .collect();
-    let wall: Vec<f64> = cfg
-        .methods
-        .iter()
-        .map(|m| {
-            runs.iter()
-                .flat_map(|s| s.runs.iter().filter(|(k, _)| k == m).map(|(_, r)| r.wall_s))
-                .sum()
-        })
-        .collect();
-    let summaries = results::summarize(&rows, &methods, &samples, &wall);
+    let summaries = summarize_runs(&cfg.methods, &runs, &rows);
     Ok(Evaluation {
         runs,
         rows,
@@ -64,6 +40,34 @@ pub fn evaluate(cfg: &EvalConfig, nets: &Networks, scenarios: &[Scenario]) -> Re
         wall_s,
         jobs: cfg.jobs,
     })
+}
+
+/// Summaries of `methods` over `runs`; `rows` may hold more methods' rows (the
+/// baseline and min-time of another evaluation of the same scenarios) to compare
+/// against.
+pub fn summarize_runs(
+    methods: &[Method],
+    runs: &[ScenarioRuns],
+    rows: &[ResultRow],
+) -> Vec<MethodSummary> {
+    let names: Vec<String> = methods.iter().map(|m| m.name().to_string()).collect();
+    let of_method = |m: Method| {
+        runs.iter()
+            .flat_map(move |s| s.runs.iter().filter(move |(k, _)| *k == m).map(|(_, r)| r))
+    };
+    let samples: Vec<Vec<f64>> = methods
+        .iter()
+        .map(|&m| {
+            of_method(m)
+                .flat_map(|r| r.solve_ms.iter().copied())
+                .collect()
+        })
+        .collect();
+    let wall: Vec<f64> = methods
+        .iter()
+        .map(|&m| of_method(m).map(|r| r.wall_s).sum())
+        .collect();
+    results::summarize(rows, &names, &samples, &wall)
 }
 
 /// Timing lines for the speed targets (issue 5: 128 scenarios with the MPC at
