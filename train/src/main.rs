@@ -133,6 +133,12 @@ fn main() -> Result<()> {
             max_updates,
             max_wall_hours,
         } => {
+            if let Some(h) = max_wall_hours {
+                anyhow::ensure!(
+                    h.is_finite() && h > 0.0,
+                    "--max-wall-hours must be a positive number of hours, got {h}"
+                );
+            }
             let cfg = match (&config, resume) {
                 (_, true) => load_config(&out.join(run::CONFIG))?,
                 (Some(p), false) => load_config(p)?,
