@@ -192,9 +192,49 @@ pub fn paper_scenarios() -> Vec<Scenario> {
     out
 }
 
+/// A selection set for choosing among trained checkpoints without looking at
+/// the paper's 128 (the acceptance set): `n` goals from the same start, at a
+/// uniform radius in [4.5, 9] m, bearing and heading, drawn from `seed`.
+pub fn selection_scenarios(n: usize, seed: u64) -> Vec<Scenario> {
+    use rand::{Rng, SeedableRng};
+    use std::f64::consts::PI;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    (0..n)
+        .map(|i| {
+            let r = rng.gen_range(4.5..=9.0);
+            let bearing = rng.gen_range(0.0..2.0 * PI);
+            let heading = crate::model::wrap_angle(rng.gen_range(-PI..PI));
+            Scenario {
+                name: format!("sel{i}"),
+                start: State::zeros(),
+                goal: Goal::new(r * bearing.cos(), r * bearing.sin(), heading),
+                obstacles: Vec::new(),
+            }
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn selection_set_is_seeded_in_range_and_apart_from_the_paper_set() {
+        let set = selection_scenarios(64, 1);
+        assert_eq!(set, selection_scenarios(64, 1));
+        assert_ne!(set, selection_scenarios(64, 2));
+        let paper = paper_scenarios();
+        for s in &set {
+            let r = s.goal.x.hypot(s.goal.y);
+            assert!((4.5..=9.0).contains(&r), "{}: radius {r}", s.name);
+            assert!(s.goal.theta.abs() <= std::f64::consts::PI);
+            assert!(paper
+                .iter()
+                .all(|p| (p.goal.x - s.goal.x).hypot(p.goal.y - s.goal.y) > 1e-6));
+        }
+        let back = parse(&to_csv(&set), "selection.csv").unwrap();
+        assert_eq!(back, set);
+    }
 
     #[test]
     fn paper_set_round_trips() {

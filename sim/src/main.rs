@@ -109,7 +109,8 @@ enum Command {
         #[arg(long, default_value = "docs")]
         out: PathBuf,
     },
-    /// Writes the paper's 128 scenarios to OUT/paper128.csv.
+    /// Writes the paper's 128 scenarios to OUT/paper128.csv and a seeded selection set of 64
+    /// (for choosing among trained checkpoints without the paper set) to OUT/selection64.csv.
     Scenarios {
         #[arg(long, default_value = "sim/scenarios")]
         out: PathBuf,
@@ -220,9 +221,14 @@ fn main() -> Result<()> {
         }
         Command::Scenarios { out } => {
             std::fs::create_dir_all(&out)?;
-            let path = out.join("paper128.csv");
-            std::fs::write(&path, scenario::to_csv(&scenario::paper_scenarios()))?;
-            println!("wrote {}", path.display());
+            for (name, set) in [
+                ("paper128.csv", scenario::paper_scenarios()),
+                ("selection64.csv", scenario::selection_scenarios(64, 1)),
+            ] {
+                let path = out.join(name);
+                std::fs::write(&path, scenario::to_csv(&set))?;
+                println!("wrote {}", path.display());
+            }
         }
     }
     Ok(())
