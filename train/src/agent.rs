@@ -182,48 +182,8 @@ impl Agent {
         Ok(a.into_iter().map(|r| [r[0] as f64, r[1] as f64]).collect())
     }
 
-    /// The critic loss of paper eq. 13–16 on a batch: ½(L − target)² + ρ·GP.
-    /// Returns the loss, the penalty, and L(s, a) (detached, reused by the actor step).
-    pub fn critic_loss(&mut self, batch: &Batch) -> Result<(Tensor, f64, Tensor)> {
+    fn batch_tensors(&self, batch: &Batch) -> Result<BatchTensors> {
         let n = batch.len;
-        let s = f32_tensor(&batch.state, n, ACTOR_INPUTS, &self.device)?;
-        let a = f32_tensor(&batch.action, n, 2, &self.device)?;
-        let s2 = f32_tensor(&batch.next_state, n, ACTOR_INPUTS, &self.device)?;
-        let c = Tensor::from_slice(&batch.cost, n, &self.device)?;
-        let eps = self.normal(n)?;
-        // Target: c + γ L̄(s′, a′ ∼ π(s′)); the time limit is a truncation, never terminal.
-        let a2 = actor_sample(&self.actor, &s2, &eps)?.action.detach();
-        let (l_next, _) = critic_value(&self.critic_target, &Tensor::cat(&[&s2, &a2], 1)?)?;
-        let target = (c + (l_next * self.cfg.gamma)?)?.detach();
-        let (l, fwd) = critic_value(&self.critic, &Tensor::cat(&[&s, &a], 1)?)?;
-        let mse = ((&l - &target)?.sqr()?.mean_all()? * 0.5)?;
-        if self.cfg.gradient_penalty > 0.0 {
-            let gp = gradient_penalty(&self.critic, &fwd)?;
-            let gp_value = gp.to_scalar::<f32>()? as f64;
-            Ok((
-                (mse + (gp * self.cfg.gradient_penalty)?)?,
-                gp_value,
-                l.detach(),
-            ))
-        } else {
-            Ok((mse, 0.0, l.detach()))
-        }
-    }
-
-    /// One ALAC update: critic, actor, multipliers, Polyak target.
-    pub fn update(&mut self, batch: &Batch) -> Result<UpdateStats> {
-        let n = batch.len;
-        let (critic_loss, penalty, l_sa) = self.critic_loss(batch)?;
-        let grads = critic_loss.backward()?;
-        self.critic_opt.step(&grads)?;
-
-        // Actor: λ_e (log π(s) + H) + λ_l ΔL with
-        // ΔL = L(s′, π(s′)) − L(s, a) + k (L(s, a) − λ L(s′, π(s′))), k = 1 − λ_l, λ = min(λ_l, γ).
-        // L(s, a) is the value from the critic step (it does not depend on the actor);
-        // s and s′ go through the actor as one batch.
-        let (lambda_e, lambda_l) = (self.lambda_e(), self.lambda_l());
-        let k = 1.0 - lambda_l;
-        let lam = lambda_l.min(self.cfg.gamma);
         let both: Vec<f32> = batch
             .state
             .iter()
@@ -231,22 +191,98 @@ impl Agent {
             .copied()
             .collect();
         let both = f32_tensor(&both, 2 * n, ACTOR_INPUTS, &self.device)?;
-        let eps = self.normal(2 * n)?;
-        let pi = actor_sample(&self.actor, &both, &eps)?;
-        let log_prob_s = pi.log_prob.narrow(0, 0, n)?;
-        let a_s2 = pi.action.narrow(0, n, n)?;
-        let s2 = both.narrow(0, n, n)?;
-        let (l_s2, _) = critic_value(&self.critic, &Tensor::cat(&[&s2, &a_s2], 1)?)?;
-        let delta_l = ((&l_s2 - &l_sa)? + ((&l_sa - (&l_s2 * lam)?)? * k)?)?;
-        let entropy_term = log_prob_s.affine(1.0, self.cfg.target_entropy)?;
-        let actor_loss =
-            ((entropy_term.mean_all()? * lambda_e)? + (delta_l.mean_all()? * lambda_l)?)?;
-        let grads = actor_loss.backward()?;
-        self.actor_opt.step(&grads)?;
+        Ok(BatchTensors {
+            s: both.narrow(0, 0, n)?,
+            s2: both.narrow(0, n, n)?,
+            both,
+            a: f32_tensor(&batch.action, n, 2, &self.device)?,
+            c: Tensor::from_slice(&batch.cost, n, &self.device)?,
+        })
+    }
+
+    /// One ALAC update: critic, actor, multipliers, Polyak target. With
+    /// `two_threads` each step's gradient is computed on the two halves of the
+    /// batch at once and averaged: the same update (the losses are batch means),
+    /// on both cores.
+    pub fn update(&mut self, batch: &Batch) -> Result<UpdateStats> {
+        let n = batch.len;
+        let t = self.batch_tensors(batch)?;
+        let (eps_critic, eps_actor) = (self.normal(n)?, self.normal(2 * n)?);
+        // Next actions a′ ∼ π(s′) of the critic target, drawn before the actor moves.
+        let a2 = actor_sample(&self.actor, &t.s2, &eps_critic)?
+            .action
+            .detach();
+        let multipliers = (self.lambda_e(), self.lambda_l());
+        let cfg = &self.cfg;
+        let ((critic_loss, penalty, l_sa), actor) = if cfg.two_threads {
+            let halves = [t.rows(0, n / 2)?, t.rows(n / 2, n - n / 2)?];
+            let ranges = [(0, n / 2), (n / 2, n - n / 2)];
+            let (critic, target) = (&self.critic, &self.critic_target);
+            let [c0, c1] = on_two_threads(|i| {
+                let a2 = a2.narrow(0, ranges[i].0, ranges[i].1)?;
+                let out = critic_objective(critic, target, cfg, &halves[i], &a2)?;
+                let grads = out.0.backward()?;
+                Ok((out, grads))
+            })?;
+            self.critic_opt
+                .step(&mean_grads(&self.critic_opt.vars, c0.1, &c1.1)?)?;
+            let critic_out = (
+                ((&c0.0 .0 + &c1.0 .0)? * 0.5)?,
+                0.5 * (c0.0 .1 + c1.0 .1),
+                Tensor::cat(&[&c0.0 .2, &c1.0 .2], 0)?,
+            );
+            let (actor, critic) = (&self.actor, &self.critic);
+            let l_sa = &critic_out.2;
+            let [a0, a1] = on_two_threads(|i| {
+                let (start, len) = ranges[i];
+                // The actor noise of a row of s and of s′ sits at i and n + i.
+                let eps = Tensor::cat(
+                    &[
+                        &eps_actor.narrow(0, start, len)?,
+                        &eps_actor.narrow(0, n + start, len)?,
+                    ],
+                    0,
+                )?;
+                let out = actor_objective(
+                    actor,
+                    critic,
+                    cfg,
+                    &halves[i],
+                    &eps,
+                    &l_sa.narrow(0, start, len)?,
+                    multipliers,
+                )?;
+                let grads = out.loss.backward()?;
+                Ok((out, grads))
+            })?;
+            self.actor_opt
+                .step(&mean_grads(&self.actor_opt.vars, a0.1, &a1.1)?)?;
+            let actor_out = ActorObjective {
+                loss: ((&a0.0.loss + &a1.0.loss)? * 0.5)?,
+                entropy_term: Tensor::cat(&[&a0.0.entropy_term, &a1.0.entropy_term], 0)?,
+                delta_l: Tensor::cat(&[&a0.0.delta_l, &a1.0.delta_l], 0)?,
+            };
+            (critic_out, actor_out)
+        } else {
+            let out = critic_objective(&self.critic, &self.critic_target, cfg, &t, &a2)?;
+            self.critic_opt.step(&out.0.backward()?)?;
+            // L(s, a) is the value from the critic step (it does not depend on the actor).
+            let actor = actor_objective(
+                &self.actor,
+                &self.critic,
+                cfg,
+                &t,
+                &eps_actor,
+                &out.2,
+                multipliers,
+            )?;
+            self.actor_opt.step(&actor.loss.backward()?)?;
+            (out, actor)
+        };
 
         // Multipliers by gradient ascent on J(λ) in log space.
-        let mean_entropy_term = entropy_term.mean_all()?.to_scalar::<f32>()? as f64;
-        let mean_delta = delta_l.mean_all()?.to_scalar::<f32>()? as f64;
+        let mean_entropy_term = actor.entropy_term.mean_all()?.to_scalar::<f32>()? as f64;
+        let mean_delta = actor.delta_l.mean_all()?.to_scalar::<f32>()? as f64;
         let lr = self.cfg.multiplier_lr;
         self.lambda_e_opt
             .ascend(&mut self.log_lambda_e, mean_entropy_term, lr);
@@ -260,7 +296,7 @@ impl Agent {
         Ok(UpdateStats {
             critic_loss: critic_loss.to_scalar::<f32>()? as f64,
             penalty,
-            actor_loss: actor_loss.to_scalar::<f32>()? as f64,
+            actor_loss: actor.loss.to_scalar::<f32>()? as f64,
             lambda_l: self.lambda_l(),
             lambda_e: self.lambda_e(),
             entropy: -(mean_entropy_term - self.cfg.target_entropy),
@@ -418,6 +454,114 @@ impl Agent {
         );
         Ok(())
     }
+}
+
+/// A batch as tensors; `both` stacks s over s′ (one actor pass for the two).
+struct BatchTensors {
+    s: Tensor,
+    s2: Tensor,
+    both: Tensor,
+    a: Tensor,
+    c: Tensor,
+}
+
+impl BatchTensors {
+    /// Rows `start..start + len`.
+    fn rows(&self, start: usize, len: usize) -> Result<Self> {
+        let (s, s2) = (
+            self.s.narrow(0, start, len)?,
+            self.s2.narrow(0, start, len)?,
+        );
+        Ok(Self {
+            both: Tensor::cat(&[&s, &s2], 0)?,
+            s,
+            s2,
+            a: self.a.narrow(0, start, len)?,
+            c: self.c.narrow(0, start, len)?,
+        })
+    }
+}
+
+/// `f(1)` on a second thread and `f(0)` on this one.
+fn on_two_threads<T: Send>(f: impl Fn(usize) -> Result<T> + Sync) -> Result<[T; 2]> {
+    std::thread::scope(|scope| {
+        let second = scope.spawn(|| f(1));
+        let first = f(0);
+        let second = second
+            .join()
+            .map_err(|_| candle_core::Error::Msg("a training thread panicked".into()))?;
+        Ok([first?, second?])
+    })
+}
+
+/// ½(g_a + g_b) for each of `vars`: the gradient of a mean over two equal halves.
+fn mean_grads(vars: &[Var], mut a: GradStore, b: &GradStore) -> Result<GradStore> {
+    for v in vars {
+        if let (Some(ga), Some(gb)) = (a.remove(v.as_tensor()), b.get(v.as_tensor())) {
+            a.insert(v.as_tensor(), ((ga + gb)? * 0.5)?);
+        }
+    }
+    Ok(a)
+}
+
+/// ½(L − target)² + ρ·GP (paper eq. 13–16) with target c + γ L̄(s′, a′); the
+/// time limit is a truncation, never terminal. Returns the loss, the penalty and
+/// L(s, a) detached.
+fn critic_objective(
+    critic: &Mlp,
+    target: &Mlp,
+    cfg: &TrainConfig,
+    t: &BatchTensors,
+    a2: &Tensor,
+) -> Result<(Tensor, f64, Tensor)> {
+    let (l_next, _) = critic_value(target, &Tensor::cat(&[&t.s2, a2], 1)?)?;
+    let y = (&t.c + (l_next * cfg.gamma)?)?.detach();
+    let (l, fwd) = critic_value(critic, &Tensor::cat(&[&t.s, &t.a], 1)?)?;
+    let mse = ((&l - &y)?.sqr()?.mean_all()? * 0.5)?;
+    if cfg.gradient_penalty > 0.0 {
+        let gp = gradient_penalty(critic, &fwd)?;
+        let gp_value = gp.to_scalar::<f32>()? as f64;
+        Ok(((mse + (gp * cfg.gradient_penalty)?)?, gp_value, l.detach()))
+    } else {
+        Ok((mse, 0.0, l.detach()))
+    }
+}
+
+/// The actor loss and its parts.
+struct ActorObjective {
+    loss: Tensor,
+    /// log π(s) + H per row.
+    entropy_term: Tensor,
+    /// ΔL per row.
+    delta_l: Tensor,
+}
+
+/// Actor loss (paper eq. 14–15): λ_e (log π(s) + H) + λ_l ΔL with
+/// ΔL = L(s′, π(s′)) − L(s, a) + k (L(s, a) − λ L(s′, π(s′))), k = 1 − λ_l,
+/// λ = min(λ_l, γ); s and s′ go through the actor as one batch.
+fn actor_objective(
+    actor: &Mlp,
+    critic: &Mlp,
+    cfg: &TrainConfig,
+    t: &BatchTensors,
+    eps: &Tensor,
+    l_sa: &Tensor,
+    (lambda_e, lambda_l): (f64, f64),
+) -> Result<ActorObjective> {
+    let n = l_sa.dim(0)?;
+    let (k, lam) = (1.0 - lambda_l, lambda_l.min(cfg.gamma));
+    let pi = actor_sample(actor, &t.both, eps)?;
+    let log_prob_s = pi.log_prob.narrow(0, 0, n)?;
+    let a_s2 = pi.action.narrow(0, n, n)?;
+    let (l_s2, _) = critic_value(critic, &Tensor::cat(&[&t.s2, &a_s2], 1)?)?;
+    let delta_l = ((&l_s2 - l_sa)? + ((l_sa - (&l_s2 * lam)?)? * k)?)?;
+    let entropy_term = log_prob_s.affine(1.0, cfg.target_entropy)?;
+    let loss = ((entropy_term.mean_all()? * lambda_e)? + (delta_l.mean_all()? * lambda_l)?)?;
+    Ok(ActorObjective {
+        loss,
+        entropy_term,
+        delta_l,
+    })
 }
 
 fn parse_key<T: std::str::FromStr>(meta: &HashMap<String, String>, key: &str) -> anyhow::Result<T> {

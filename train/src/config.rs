@@ -45,6 +45,9 @@ pub struct TrainConfig {
     /// Fraction of sampled transitions whose goal is replaced by a pose reached
     /// later in the same episode (hindsight relabelling).
     pub her_ratio: f64,
+    /// Run the critic and the actor step of each update on two threads (the
+    /// actor against the critic before the update): one run on both cores.
+    pub two_threads: bool,
     /// Minutes between checkpoints.
     pub checkpoint_minutes: f64,
     /// Updates between evaluations of the actor on held-out goals.
@@ -114,6 +117,7 @@ impl Default for TrainConfig {
             episode_seconds: 30.0,
             goal: GoalSampling::default(),
             her_ratio: 0.5,
+            two_threads: false,
             checkpoint_minutes: 5.0,
             eval_every: 10_000,
             eval_goals: 64,
@@ -179,6 +183,12 @@ impl TrainConfig {
             if v == 0 {
                 return Err(err(k, "must be > 0"));
             }
+        }
+        if self.two_threads && self.batch_size % 2 != 0 {
+            return Err(err(
+                "batch_size",
+                "must be even with two_threads (two equal halves)",
+            ));
         }
         if self.batch_size > self.buffer_size {
             return Err(err("batch_size", "must not exceed buffer_size"));
@@ -269,6 +279,7 @@ mod tests {
             ("[machine]\nv_max = -1.0", "machine"),
             ("[cost]\np = 0.0", "cost"),
             ("her_ratio = 2.0", "her_ratio"),
+            ("two_threads = true\nbatch_size = 255", "batch_size"),
         ];
         for (text, key) in cases {
             let e = TrainConfig::from_toml(text).unwrap_err();

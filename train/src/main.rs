@@ -341,27 +341,38 @@ fn bench(updates: u64) -> Result<()> {
     }
     let env_rate = (steps * cfg.n_envs) as f64 / t.elapsed().as_secs_f64();
     let encoder = control::Encoder::new(cfg.machine, cfg.pos_scale);
-    let mut agent = train::agent::Agent::new(&cfg)?;
-    let mut batch = train::buffer::Batch::default();
-    // Warm-up, then the timed updates.
-    for _ in 0..20 {
-        buffer.sample(&cfg, &encoder, cfg.batch_size, &mut rng, &mut batch);
-        agent.update(&batch)?;
-    }
-    let t = Instant::now();
-    for _ in 0..updates {
-        buffer.sample(&cfg, &encoder, cfg.batch_size, &mut rng, &mut batch);
-        agent.update(&batch)?;
-    }
-    let upd_rate = updates as f64 / t.elapsed().as_secs_f64();
     let threads = std::env::var("RAYON_NUM_THREADS").unwrap_or_else(|_| "all".into());
     println!(
         "environment: {env_rate:.0} transitions/s (RK4 + clamp + episode bookkeeping, {} envs)",
         cfg.n_envs
     );
-    println!(
-        "training: {upd_rate:.1} updates/s (batch {}, critic + gradient penalty + actor + multipliers + Polyak; RAYON_NUM_THREADS={threads})",
-        cfg.batch_size
-    );
+    // Both update schedules in the same run, so their ratio is robust to a shared machine.
+    let mut rates = Vec::new();
+    for two_threads in [false, true] {
+        let cfg = TrainConfig {
+            two_threads,
+            ..cfg.clone()
+        };
+        let mut agent = train::agent::Agent::new(&cfg)?;
+        let mut batch = train::buffer::Batch::default();
+        // Warm-up, then the timed updates.
+        for _ in 0..20 {
+            buffer.sample(&cfg, &encoder, cfg.batch_size, &mut rng, &mut batch);
+            agent.update(&batch)?;
+        }
+        let t = Instant::now();
+        for _ in 0..updates {
+            buffer.sample(&cfg, &encoder, cfg.batch_size, &mut rng, &mut batch);
+            agent.update(&batch)?;
+        }
+        let rate = updates as f64 / t.elapsed().as_secs_f64();
+        println!(
+            "training: {rate:.1} updates/s with {} (batch {}, critic + gradient penalty + actor + multipliers + Polyak; RAYON_NUM_THREADS={threads})",
+            if two_threads { "two threads (each gradient on half the batch)" } else { "one thread" },
+            cfg.batch_size
+        );
+        rates.push(rate);
+    }
+    println!("two_threads / one thread: {:.2}", rates[1] / rates[0]);
     Ok(())
 }
