@@ -215,21 +215,21 @@ impl Agent {
         let multipliers = (self.lambda_e(), self.lambda_l());
         let cfg = &self.cfg;
         let ((critic_loss, penalty, l_sa), actor) = if cfg.two_threads {
-            let halves = [t.rows(0, n / 2)?, t.rows(n / 2, n - n / 2)?];
             let ranges = [(0, n / 2), (n / 2, n - n / 2)];
+            let halves = [t.rows(0, n / 2)?, t.rows(n / 2, n - n / 2)?];
             let (critic, target) = (&self.critic, &self.critic_target);
-            let [c0, c1] = on_two_threads(|i| {
+            let [((loss0, gp0, l0), grads0), ((loss1, gp1, l1), grads1)] = on_two_threads(|i| {
                 let a2 = a2.narrow(0, ranges[i].0, ranges[i].1)?;
                 let out = critic_objective(critic, target, cfg, &halves[i], &a2)?;
                 let grads = out.0.backward()?;
                 Ok((out, grads))
             })?;
             self.critic_opt
-                .step(&mean_grads(&self.critic_opt.vars, c0.1, &c1.1)?)?;
+                .step(&mean_grads(&self.critic_opt.vars, grads0, &grads1)?)?;
             let critic_out = (
-                ((&c0.0 .0 + &c1.0 .0)? * 0.5)?,
-                0.5 * (c0.0 .1 + c1.0 .1),
-                Tensor::cat(&[&c0.0 .2, &c1.0 .2], 0)?,
+                ((loss0 + loss1)? * 0.5)?,
+                0.5 * (gp0 + gp1),
+                Tensor::cat(&[&l0, &l1], 0)?,
             );
             let (actor, critic) = (&self.actor, &self.critic);
             let l_sa = &critic_out.2;
