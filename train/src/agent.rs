@@ -216,7 +216,10 @@ impl Agent {
         let cfg = &self.cfg;
         let ((critic_loss, penalty, l_sa), actor) = if cfg.two_threads {
             let ranges = [(0, n / 2), (n / 2, n - n / 2)];
-            let halves = [t.rows(0, n / 2)?, t.rows(n / 2, n - n / 2)?];
+            let halves = [
+                t.rows(ranges[0].0, ranges[0].1)?,
+                t.rows(ranges[1].0, ranges[1].1)?,
+            ];
             let (critic, target) = (&self.critic, &self.critic_target);
             let [((loss0, gp0, l0), grads0), ((loss1, gp1, l1), grads1)] = on_two_threads(|i| {
                 let a2 = a2.narrow(0, ranges[i].0, ranges[i].1)?;
