@@ -66,6 +66,13 @@ pub struct GoalSampling {
     /// Share of episodes whose goal lies between `near_r_min` and `r_min`.
     pub near_fraction: f64,
     pub near_r_min: f64,
+    /// Share of episodes whose goal lies beside the start pose: sideways by up
+    /// to `offset_max` (m), along the heading and turned by up to a quarter of
+    /// it (m, rad). A sideways offset of a few centimetres is where an actor
+    /// stalls (moving sideways needs a manoeuvre that first raises the cost),
+    /// and random goals rarely ask for one.
+    pub offset_fraction: f64,
+    pub offset_max: f64,
     /// Start β uniform in ±this share of β_max, v_f likewise of v_max.
     pub start_jitter: f64,
     /// Curriculum: over this many updates the far band's upper radius grows
@@ -82,6 +89,8 @@ impl Default for GoalSampling {
             r_max: 10.0,
             near_fraction: 0.2,
             near_r_min: 0.2,
+            offset_fraction: 0.0,
+            offset_max: 0.5,
             start_jitter: 0.1,
             curriculum_updates: 0,
         }
@@ -212,6 +221,14 @@ impl TrainConfig {
         unit("her_ratio", self.her_ratio, false)?;
         unit("goal.near_fraction", self.goal.near_fraction, false)?;
         unit("goal.start_jitter", self.goal.start_jitter, false)?;
+        unit("goal.offset_fraction", self.goal.offset_fraction, false)?;
+        if self.goal.near_fraction + self.goal.offset_fraction > 1.0 {
+            return Err(err(
+                "goal.offset_fraction",
+                "goal.near_fraction + goal.offset_fraction must be <= 1",
+            ));
+        }
+        positive("goal.offset_max", self.goal.offset_max)?;
         unit("init_lambda_l", self.init_lambda_l, true)?;
         positive("init_lambda_e", self.init_lambda_e)?;
         positive("critic_lr", self.critic_lr)?;
@@ -279,6 +296,11 @@ mod tests {
             ("[machine]\nv_max = -1.0", "machine"),
             ("[cost]\np = 0.0", "cost"),
             ("her_ratio = 2.0", "her_ratio"),
+            (
+                "[goal]\nnear_fraction = 0.5\noffset_fraction = 0.6",
+                "goal.offset_fraction",
+            ),
+            ("[goal]\noffset_max = 0.0", "goal.offset_max"),
             ("two_threads = true\nbatch_size = 255", "batch_size"),
         ];
         for (text, key) in cases {

@@ -26,11 +26,22 @@ pub fn transition_cost(cfg: &TrainConfig, next: &State, a: &[f64; 2], g: &Goal) 
 }
 
 /// A goal at distance r ∈ [r_min, r_max] (or the near band), uniform bearing and
-/// heading; `progress` ∈ [0, 1] is the curriculum's position (1 = full band).
+/// heading, or beside the start pose (the offset share); `progress` ∈ [0, 1] is
+/// the curriculum's position (1 = full band).
 pub fn sample_goal(cfg: &TrainConfig, rng: &mut ChaCha8Rng, progress: f64) -> Goal {
     let g = &cfg.goal;
     let far_hi = g.r_min + (g.r_max - g.r_min) * progress.clamp(0.0, 1.0);
-    let (lo, hi) = if rng.gen::<f64>() < g.near_fraction {
+    let band = rng.gen::<f64>();
+    if band < g.offset_fraction {
+        // Beside the start pose (the origin, heading 0).
+        let along = g.offset_max / 4.0;
+        return Goal::new(
+            rng.gen_range(-along..=along),
+            rng.gen_range(-g.offset_max..=g.offset_max),
+            rng.gen_range(-along..=along),
+        );
+    }
+    let (lo, hi) = if band < g.offset_fraction + g.near_fraction {
         (g.near_r_min, g.r_min)
     } else {
         (g.r_min, far_hi)
@@ -159,5 +170,32 @@ mod tests {
             }
             assert!(ep.iter().all(|t| t.next[ix::V] <= cfg.machine.v_max));
         }
+    }
+
+    #[test]
+    fn offset_goals_lie_beside_the_start_in_their_share() {
+        let mut cfg = TrainConfig::default();
+        cfg.goal.offset_max = 0.4;
+        let in_box = |g: &Goal| g.x.abs() <= 0.1 && g.y.abs() <= 0.4 && g.theta.abs() <= 0.1;
+        let mut rng = ChaCha8Rng::seed_from_u64(4);
+        cfg.goal.offset_fraction = 1.0 - cfg.goal.near_fraction;
+        let goals: Vec<Goal> = (0..2000)
+            .map(|_| sample_goal(&cfg, &mut rng, 1.0))
+            .collect();
+        let beside: Vec<&Goal> = goals.iter().filter(|g| in_box(g)).collect();
+        // Sideways offsets of both signs, out to the band's edge.
+        assert!(beside.iter().any(|g| g.y > 0.3) && beside.iter().any(|g| g.y < -0.3));
+        assert!(beside
+            .iter()
+            .any(|g| g.x.abs() > 0.08 && g.theta.abs() > 0.08));
+
+        // The share: near/far goals almost never fall in this box.
+        cfg.goal.offset_fraction = 0.3;
+        let n = 4000;
+        let share = (0..n)
+            .filter(|_| in_box(&sample_goal(&cfg, &mut rng, 1.0)))
+            .count() as f64
+            / n as f64;
+        assert!((share - 0.3).abs() < 0.03, "share {share}");
     }
 }

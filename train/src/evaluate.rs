@@ -61,6 +61,7 @@ pub fn held_out_goals(cfg: &TrainConfig) -> Vec<(State, Goal)> {
     let far = TrainConfig {
         goal: crate::config::GoalSampling {
             near_fraction: 0.0,
+            offset_fraction: 0.0,
             start_jitter: 0.0,
             ..cfg.goal.clone()
         },
