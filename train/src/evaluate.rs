@@ -110,6 +110,8 @@ pub struct LyapunovSample {
     pub l_next: f64,
     /// ΔL of paper eq. 4c with the exported k = 1 − λ_l, λ = min(λ_l, γ); ≤ 0 is met.
     pub delta: f64,
+    /// Whether the sample's episode reaches the goal set within the episode.
+    pub episode_reached: bool,
 }
 
 /// Success tolerance of DESIGN §7: `verify` samples states outside this goal set.
@@ -152,8 +154,11 @@ fn episode_samples(
 ) {
     let lambda_l = critic.metadata().lambda_l.clamp(0.0, 1.0);
     let (k, lam) = (1.0 - lambda_l, lambda_l.min(cfg.gamma));
+    let first = out.len();
+    let mut reached = false;
     for i in 0..cfg.episode_steps() {
         if converged(&x, &g, VERIFY_TOLERANCE) {
+            reached = true;
             break;
         }
         let u = actor.action(aws, &x, &g);
@@ -168,9 +173,14 @@ fn episode_samples(
                 l,
                 l_next,
                 delta: l_next - l + k * (l - lam * l_next),
+                episode_reached: false,
             });
         }
         x = next;
+    }
+    reached |= converged(&x, &g, VERIFY_TOLERANCE);
+    for s in &mut out[first..] {
+        s.episode_reached = reached;
     }
 }
 
@@ -180,6 +190,10 @@ pub struct VerifySummary {
     pub states: usize,
     /// Share of states with ΔL ≤ 0 (the per-sample form of eq. 4c).
     pub decrease_share: f64,
+    /// The same share among states of episodes that reach the goal set, and
+    /// among those of episodes that stop short of it (NaN without such states).
+    pub decrease_share_reaching: f64,
+    pub decrease_share_stopping: f64,
     /// E[ΔL] over the states: eq. 4c itself is this expectation being ≤ 0.
     pub mean_delta: f64,
     /// Share of states with L ≥ c.
@@ -192,9 +206,18 @@ impl VerifySummary {
         let share = |f: &dyn Fn(&LyapunovSample) -> bool| {
             samples.iter().filter(|s| f(s)).count() as f64 / n
         };
+        let share_where = |reached: bool| {
+            let of: Vec<_> = samples
+                .iter()
+                .filter(|s| s.episode_reached == reached)
+                .collect();
+            of.iter().filter(|s| s.delta <= 0.0).count() as f64 / of.len() as f64
+        };
         Self {
             states: samples.len(),
             decrease_share: share(&|s| s.delta <= 0.0),
+            decrease_share_reaching: share_where(true),
+            decrease_share_stopping: share_where(false),
             mean_delta: samples.iter().map(|s| s.delta).sum::<f64>() / n,
             above_cost_share: share(&|s| s.l >= s.cost),
         }
@@ -203,17 +226,19 @@ impl VerifySummary {
 
 /// The samples as CSV, one row per state.
 pub fn lyapunov_csv(samples: &[LyapunovSample]) -> String {
-    let mut csv = String::from("distance,cost,l,l_next,delta,decrease_met,l_ge_c\n");
+    let mut csv =
+        String::from("distance,cost,l,l_next,delta,decrease_met,l_ge_c,episode_reached\n");
     for s in samples {
         csv.push_str(&format!(
-            "{:.4},{:.6},{:.6},{:.6},{:.6},{},{}\n",
+            "{:.4},{:.6},{:.6},{:.6},{:.6},{},{},{}\n",
             s.distance,
             s.cost,
             s.l,
             s.l_next,
             s.delta,
             s.delta <= 0.0,
-            s.l >= s.cost
+            s.l >= s.cost,
+            s.episode_reached
         ));
     }
     csv
@@ -253,7 +278,25 @@ mod tests {
             // Paper eq. 4c, per sample: L(s′) − L(s) + k (L(s) − λ L(s′)).
             let expected = s.l_next - s.l + k * s.l - k * lam * s.l_next;
             assert!((s.delta - expected).abs() <= 1e-12 * (1.0 + s.l.abs()));
+            // An untrained actor does not get from 8 m away into the goal set.
+            assert!(!s.episode_reached);
         }
+
+        // 0.12 m behind the goal at 1 m/s: inside the goal set after one step,
+        // whatever the actor does, and the one sample is marked as reaching.
+        out.clear();
+        let (s, c) = goal.theta.sin_cos();
+        let rolling = State::new(
+            goal.x - 0.12 * c,
+            goal.y - 0.12 * s,
+            goal.theta,
+            0.0,
+            0.0,
+            1.0,
+        );
+        episode_samples(&actor, &critic, &cfg, &mut ws, (rolling, goal), 0, &mut out);
+        assert_eq!(out.len(), 1);
+        assert!(out[0].episode_reached);
     }
 
     #[test]
@@ -264,6 +307,7 @@ mod tests {
             l,
             l_next,
             delta,
+            episode_reached: l_next < 2.0,
         };
         let v = VerifySummary::of(&[
             sample(2.0, 1.0, 1.0, -0.5),
@@ -273,6 +317,8 @@ mod tests {
         ]);
         assert_eq!(v.states, 4);
         assert_eq!(v.decrease_share, 0.75);
+        assert_eq!(v.decrease_share_reaching, 1.0);
+        assert_eq!(v.decrease_share_stopping, 0.0);
         assert!((v.mean_delta - (-0.1)).abs() < 1e-12);
         assert_eq!(v.above_cost_share, 0.75);
     }

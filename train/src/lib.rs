@@ -10,3 +10,4 @@ pub mod evaluate;
 pub mod nets;
 pub mod plot;
 pub mod run;
+pub mod stalls;

@@ -89,6 +89,22 @@ enum Cmd {
         #[arg(long)]
         out: Option<PathBuf>,
     },
+    /// Where the actor stops outside the goal set (verify's goals), and whether
+    /// a manoeuvre from there is cheaper than standing still under each γ.
+    Stalls {
+        #[arg(long)]
+        actor: PathBuf,
+        #[arg(long, default_value_t = 200)]
+        episodes: usize,
+        /// Discount factors to test (comma-separated; default: the actor's own).
+        #[arg(long, value_delimiter = ',')]
+        gamma: Vec<f64>,
+        /// Test at most this many stalls (the search takes a few seconds each).
+        #[arg(long, default_value_t = 12)]
+        max_stalls: usize,
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
 }
 
 fn git_commit() -> String {
@@ -209,6 +225,25 @@ fn main() -> Result<()> {
             command,
         } => publish(&run_dir, &out, &command)?,
         Cmd::Bench { updates } => bench(updates)?,
+        Cmd::Stalls {
+            actor,
+            episodes,
+            gamma,
+            max_stalls,
+            out,
+        } => {
+            let actor = Actor::from_weights(load_net(&actor)?)?;
+            let cfg = config_from_metadata(actor.metadata());
+            let gammas = if gamma.is_empty() {
+                vec![cfg.gamma]
+            } else {
+                gamma
+            };
+            if let Some(g) = gammas.iter().find(|g| !(**g > 0.0 && **g < 1.0)) {
+                anyhow::bail!("--gamma {g}: a discount factor must lie in (0, 1)");
+            }
+            stalls(&actor, &cfg, episodes, &gammas, max_stalls, out.as_deref())?;
+        }
         Cmd::Verify {
             actor,
             critic,
@@ -229,11 +264,83 @@ fn main() -> Result<()> {
                 v.above_cost_share * 100.0,
                 critic.metadata().lambda_l
             );
+            println!(
+                "decrease condition in episodes that reach the goal set: {:.1}%, \
+                 in those that stop short of it: {:.1}% (see `wlnav-train stalls`)",
+                v.decrease_share_reaching * 100.0,
+                v.decrease_share_stopping * 100.0
+            );
             let csv = train::evaluate::lyapunov_csv(&samples);
             if let Some(p) = out {
                 fs::write(&p, csv).with_context(|| format!("writing {}", p.display()))?;
             }
         }
+    }
+    Ok(())
+}
+
+/// Prints (and writes as CSV) the actor's stalls and, per γ, the manoeuvre search's result.
+fn stalls(
+    actor: &Actor,
+    cfg: &TrainConfig,
+    episodes: usize,
+    gammas: &[f64],
+    max_stalls: usize,
+    out: Option<&std::path::Path>,
+) -> Result<()> {
+    use train::stalls::{best_manoeuvre, find_stalls, ManoeuvreSearch};
+    let stalls = find_stalls(actor, cfg, episodes, 7);
+    println!(
+        "{} of {episodes} episodes end outside the goal set ({}); testing {}",
+        stalls.len(),
+        train::evaluate::VERIFY_TOLERANCE,
+        stalls.len().min(max_stalls)
+    );
+    let search = ManoeuvreSearch::default();
+    let mut csv = String::from(
+        "distance,along,sideways,heading,gamma,stay,best_manoeuvre,change_pct,end_distance\n",
+    );
+    let mut cheaper = vec![(0usize, 0usize); gammas.len()];
+    for (i, s) in stalls.iter().take(max_stalls).enumerate() {
+        let (along, sideways) = s.along_sideways();
+        let e = control::model::pose_error(&s.state, &s.goal);
+        for (j, &gamma) in gammas.iter().enumerate() {
+            let r = best_manoeuvre(cfg, &search, &s.state, &s.goal, gamma, i as u64);
+            let change = 100.0 * (r.best / r.stay - 1.0);
+            println!(
+                "distance {:.3} (along {along:+.3}, sideways {sideways:+.3}, heading {:+.3}) \
+                 gamma {gamma}: standing {:.2}, best manoeuvre {:.2} ({change:+.1} %), ends at {:.3}",
+                e[0].hypot(e[1]),
+                e[1],
+                r.stay,
+                r.best,
+                r.end_distance
+            );
+            if r.best < r.stay {
+                cheaper[j].0 += 1;
+                if r.end_distance < train::evaluate::VERIFY_TOLERANCE {
+                    cheaper[j].1 += 1;
+                }
+            }
+            csv.push_str(&format!(
+                "{:.4},{along:.4},{sideways:.4},{:.4},{gamma},{:.4},{:.4},{change:.2},{:.4}\n",
+                e[0].hypot(e[1]),
+                e[1],
+                r.stay,
+                r.best,
+                r.end_distance
+            ));
+        }
+    }
+    let tested = stalls.len().min(max_stalls);
+    for (g, (c, inside)) in gammas.iter().zip(cheaper) {
+        println!(
+            "gamma {g}: a manoeuvre cheaper than standing still from {c} of {tested} stops \
+             ({inside} ending inside the goal set)"
+        );
+    }
+    if let Some(p) = out {
+        fs::write(p, csv).with_context(|| format!("writing {}", p.display()))?;
     }
     Ok(())
 }
@@ -268,6 +375,10 @@ fn publish(run_dir: &std::path::Path, out: &std::path::Path, command: &str) -> R
         &actor, &critic, &cfg, 200, 7,
     ));
     let (decrease, above) = (v.decrease_share * 100.0, v.above_cost_share * 100.0);
+    let (reaching, stopping) = (
+        v.decrease_share_reaching * 100.0,
+        v.decrease_share_stopping * 100.0,
+    );
     let (ok01, t01) = actor_on_paper_set(&actor, &cfg, 0.1);
     let (ok03, t03) = actor_on_paper_set(&actor, &cfg, 0.3);
     let (_, log) = train::plot::read_csv(&run_dir.join("log.csv"))?;
@@ -288,7 +399,9 @@ fn publish(run_dir: &std::path::Path, out: &std::path::Path, command: &str) -> R
          | γ, cost W, p, form | {gamma}, {w:?}, {p}, {form} |\n\
          | critic outputs m | {m} |\n\n\
          ## Verify (`wlnav-train verify`, {n} states under the actor, outside the goal set)\n\n\
-         - decrease condition of the paper's eq. 4c met on {decrease:.1} % of states\n\
+         - decrease condition of the paper's eq. 4c met on {decrease:.1} % of states \
+         ({reaching:.1} % in episodes that reach the goal set, {stopping:.1} % in those that \
+         stop short of it: `wlnav-train stalls`)\n\
          - its expectation form: E[ΔL] = {mean_delta:.3e}\n\
          - L ≥ c on {above:.1} %\n\n\
          ## The actor alone on the paper's 128 scenarios (ideal model)\n\n\
