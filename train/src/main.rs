@@ -303,18 +303,16 @@ fn stalls(
     let mut cheaper = vec![(0usize, 0usize); gammas.len()];
     for (i, s) in stalls.iter().take(max_stalls).enumerate() {
         let (along, sideways) = s.along_sideways();
-        let e = control::model::pose_error(&s.state, &s.goal);
+        let heading = control::model::pose_error(&s.state, &s.goal)[1];
+        let distance = control::model::goal_distance(&s.state, &s.goal);
         for (j, &gamma) in gammas.iter().enumerate() {
             let r = best_manoeuvre(cfg, &search, &s.state, &s.goal, gamma, i as u64);
             let change = 100.0 * (r.best / r.stay - 1.0);
             println!(
-                "distance {:.3} (along {along:+.3}, sideways {sideways:+.3}, heading {:+.3}) \
-                 gamma {gamma}: standing {:.2}, best manoeuvre {:.2} ({change:+.1} %), ends at {:.3}",
-                e[0].hypot(e[1]),
-                e[1],
-                r.stay,
-                r.best,
-                r.end_distance
+                "distance {distance:.3} (along {along:+.3}, sideways {sideways:+.3}, \
+                 heading {heading:+.3}) gamma {gamma}: standing {:.2}, best manoeuvre {:.2} \
+                 ({change:+.1} %), ends at {:.3}",
+                r.stay, r.best, r.end_distance
             );
             if r.best < r.stay {
                 cheaper[j].0 += 1;
@@ -323,9 +321,7 @@ fn stalls(
                 }
             }
             csv.push_str(&format!(
-                "{:.4},{along:.4},{sideways:.4},{:.4},{gamma},{:.4},{:.4},{change:.2},{:.4}\n",
-                e[0].hypot(e[1]),
-                e[1],
+                "{distance:.4},{along:.4},{sideways:.4},{heading:.4},{gamma},{:.4},{:.4},{change:.2},{:.4}\n",
                 r.stay,
                 r.best,
                 r.end_distance
