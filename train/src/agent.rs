@@ -197,6 +197,7 @@ impl Agent {
             both,
             a: f32_tensor(&batch.action, n, 2, &self.device)?,
             c: Tensor::from_slice(&batch.cost, n, &self.device)?,
+            not_done: Tensor::from_slice(&batch.not_done, n, &self.device)?,
         })
     }
 
@@ -466,6 +467,8 @@ struct BatchTensors {
     both: Tensor,
     a: Tensor,
     c: Tensor,
+    /// 1 − done per row.
+    not_done: Tensor,
 }
 
 impl BatchTensors {
@@ -481,6 +484,7 @@ impl BatchTensors {
             s2,
             a: self.a.narrow(0, start, len)?,
             c: self.c.narrow(0, start, len)?,
+            not_done: self.not_done.narrow(0, start, len)?,
         })
     }
 }
@@ -507,8 +511,8 @@ fn mean_grads(vars: &[Var], mut a: GradStore, b: &GradStore) -> Result<GradStore
     Ok(a)
 }
 
-/// ½(L − target)² + ρ·GP (paper eq. 13–16) with target c + γ L̄(s′, a′); the
-/// time limit is a truncation, never terminal. Returns the loss, the penalty and
+/// ½(L − target)² + ρ·GP (paper eq. 13–16) with target c + γ(1 − done) L̄(s′, a′)
+/// (DESIGN §4): done only in the terminal set; the time limit is a truncation. Returns the loss, the penalty and
 /// L(s, a) detached.
 fn critic_objective(
     critic: &Mlp,
@@ -518,7 +522,7 @@ fn critic_objective(
     a2: &Tensor,
 ) -> Result<(Tensor, f64, Tensor)> {
     let (l_next, _) = critic_value(target, &Tensor::cat(&[&t.s2, a2], 1)?)?;
-    let y = (&t.c + (l_next * cfg.gamma)?)?.detach();
+    let y = (&t.c + ((l_next * &t.not_done)? * cfg.gamma)?)?.detach();
     let (l, fwd) = critic_value(critic, &Tensor::cat(&[&t.s, &t.a], 1)?)?;
     let mse = ((&l - &y)?.sqr()?.mean_all()? * 0.5)?;
     if cfg.gradient_penalty > 0.0 {
@@ -541,7 +545,8 @@ struct ActorObjective {
 
 /// Actor loss (paper eq. 14–15): λ_e (log π(s) + H) + λ_l ΔL with
 /// ΔL = L(s′, π(s′)) − L(s, a) + k (L(s, a) − λ L(s′, π(s′))), k = 1 − λ_l,
-/// λ = min(λ_l, γ); s and s′ go through the actor as one batch.
+/// λ = min(λ_l, γ); s and s′ go through the actor as one batch. Beyond a
+/// terminal transition L(s′, ·) = 0, as in the critic's target.
 fn actor_objective(
     actor: &Mlp,
     critic: &Mlp,
@@ -557,6 +562,7 @@ fn actor_objective(
     let log_prob_s = pi.log_prob.narrow(0, 0, n)?;
     let a_s2 = pi.action.narrow(0, n, n)?;
     let (l_s2, _) = critic_value(critic, &Tensor::cat(&[&t.s2, &a_s2], 1)?)?;
+    let l_s2 = (l_s2 * &t.not_done)?;
     let delta_l = ((&l_s2 - l_sa)? + ((l_sa - (&l_s2 * lam)?)? * k)?)?;
     let entropy_term = log_prob_s.affine(1.0, cfg.target_entropy)?;
     let loss = ((entropy_term.mean_all()? * lambda_e)? + (delta_l.mean_all()? * lambda_l)?)?;
@@ -573,4 +579,92 @@ fn parse_key<T: std::str::FromStr>(meta: &HashMap<String, String>, key: &str) ->
         .ok_or_else(|| anyhow::anyhow!("checkpoint metadata has no `{key}`"))?;
     text.parse()
         .map_err(|_| anyhow::anyhow!("checkpoint metadata `{key}` = `{text}` is not valid"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A batch of random rows; `not_done` 0 on every third row.
+    fn batch(n: usize) -> Batch {
+        let mut rng = ChaCha8Rng::seed_from_u64(9);
+        let mut v = |k: usize| -> Vec<f32> {
+            (0..k)
+                .map(|_| rand::Rng::gen_range(&mut rng, -1.0..1.0))
+                .collect()
+        };
+        Batch {
+            len: n,
+            state: v(n * ACTOR_INPUTS),
+            action: v(n * 2),
+            cost: v(n).iter().map(|c| c.abs()).collect(),
+            next_state: v(n * ACTOR_INPUTS),
+            not_done: (0..n).map(|i| if i % 3 == 0 { 0.0 } else { 1.0 }).collect(),
+        }
+    }
+
+    #[test]
+    fn terminal_rows_drop_the_value_beyond_them() {
+        let cfg = TrainConfig {
+            gradient_penalty: 0.0,
+            ..Default::default()
+        };
+        let mut agent = Agent::new(&cfg).unwrap();
+        let n = 12;
+        let b = batch(n);
+        let t = agent.batch_tensors(&b).unwrap();
+        let a2 = agent.act(&b.next_state, n).unwrap();
+        let a2: Vec<f32> = a2.iter().flat_map(|a| a.map(|v| v as f32)).collect();
+        let a2 = f32_tensor(&a2, n, 2, &agent.device).unwrap();
+
+        // Critic: target c + γ(1 − done) L̄(s′, a′), rebuilt row by row.
+        let value = |net: &Mlp, s: &Tensor, a: &Tensor| -> Vec<f32> {
+            let (l, _) = critic_value(net, &Tensor::cat(&[s, a], 1).unwrap()).unwrap();
+            l.to_vec1().unwrap()
+        };
+        let l = value(&agent.critic, &t.s, &t.a);
+        let l_target = value(&agent.critic_target, &t.s2, &a2);
+        let expected = (0..n)
+            .map(|i| {
+                let y = b.cost[i] as f64 + cfg.gamma * (b.not_done[i] * l_target[i]) as f64;
+                0.5 * (l[i] as f64 - y).powi(2)
+            })
+            .sum::<f64>()
+            / n as f64;
+        let (loss, _, _) =
+            critic_objective(&agent.critic, &agent.critic_target, &cfg, &t, &a2).unwrap();
+        let loss = loss.to_scalar::<f32>().unwrap() as f64;
+        assert!(
+            (loss - expected).abs() < 1e-5 * expected.max(1.0),
+            "{loss} vs {expected}"
+        );
+
+        // Actor: on a terminal row L(s′, ·) = 0, so ΔL = −L + k L = −λ_l L.
+        let lambda_l = 0.7;
+        let eps = agent.normal(2 * n).unwrap();
+        let l_sa = Tensor::from_slice(&l, n, &agent.device).unwrap();
+        let obj = actor_objective(
+            &agent.actor,
+            &agent.critic,
+            &cfg,
+            &t,
+            &eps,
+            &l_sa,
+            (1.0, lambda_l),
+        )
+        .unwrap();
+        let delta: Vec<f32> = obj.delta_l.to_vec1().unwrap();
+        for i in (0..n).step_by(3) {
+            let want = -lambda_l * l[i] as f64;
+            assert!(
+                (delta[i] as f64 - want).abs() < 1e-5,
+                "row {i}: {} vs {want}",
+                delta[i]
+            );
+        }
+        // ... and on the others it depends on L(s′, π(s′)).
+        assert!((1..n)
+            .filter(|i| i % 3 != 0)
+            .any(|i| (delta[i] as f64 + lambda_l * l[i] as f64).abs() > 1e-3));
+    }
 }

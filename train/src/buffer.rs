@@ -7,7 +7,7 @@ use control::encoder::{Encoder, ACTOR_INPUTS};
 use control::model::{ix, Goal};
 
 use crate::config::TrainConfig;
-use crate::env::{transition_cost, Transition};
+use crate::env::{is_terminal, transition_cost, Transition};
 
 /// A ring of transitions; each remembers (as absolute insertion counts) where
 /// its episode ends, so a later pose of the same episode can stand in as goal.
@@ -30,6 +30,8 @@ pub struct Batch {
     pub cost: Vec<f32>,
     /// Actor features of s′ [len × 7].
     pub next_state: Vec<f32>,
+    /// 1 − done: 0 where s′ lies in the (possibly relabelled) goal's terminal set.
+    pub not_done: Vec<f32>,
 }
 
 impl ReplayBuffer {
@@ -80,6 +82,7 @@ impl ReplayBuffer {
         out.action.clear();
         out.cost.clear();
         out.next_state.clear();
+        out.not_done.clear();
         let oldest = self.inserted.saturating_sub(self.slots.len() as u64);
         let mut f = [0.0; ACTOR_INPUTS];
         for _ in 0..n {
@@ -100,6 +103,12 @@ impl ReplayBuffer {
             out.action.extend(t.a.iter().map(|v| *v as f32));
             out.cost
                 .push(transition_cost(cfg, &t.next, &t.a, &goal) as f32);
+            // Recomputed for the goal used: a relabelled goal has its own terminal set.
+            out.not_done.push(if is_terminal(cfg, &t.next, &goal) {
+                0.0
+            } else {
+                1.0
+            });
         }
     }
 }
@@ -159,5 +168,44 @@ mod tests {
         for i in 0..b.len {
             assert!(b.state[i * 7] >= 1.0 - 1e-6);
         }
+    }
+
+    #[test]
+    fn done_is_recomputed_for_the_goal_the_sample_uses() {
+        // An episode standing still at x = 5: every relabelled goal is its own
+        // resting pose (done); the original goal at x = −1 is not reached.
+        let resting: Vec<Transition> = (0..4)
+            .map(|_| {
+                let x = State::new(5.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+                Transition {
+                    x,
+                    a: [0.0, 0.0],
+                    next: x,
+                    goal: Goal::new(-1.0, 0.0, 0.0),
+                }
+            })
+            .collect();
+        let mut buf = ReplayBuffer::new(10);
+        buf.push_episode(&resting);
+        let mut rng = ChaCha8Rng::seed_from_u64(2);
+        let mut b = Batch::default();
+        let not_done = |her_ratio: f64, distance: f64, rng: &mut ChaCha8Rng, b: &mut Batch| {
+            let mut cfg = TrainConfig {
+                her_ratio,
+                ..Default::default()
+            };
+            cfg.terminal.distance = distance;
+            let enc = Encoder::new(cfg.machine, cfg.pos_scale);
+            buf.sample(&cfg, &enc, 50, rng, b);
+            assert_eq!(b.not_done.len(), 50);
+            b.not_done.iter().sum::<f32>()
+        };
+        assert_eq!(not_done(1.0, 0.08, &mut rng, &mut b), 0.0);
+        assert_eq!(not_done(0.0, 0.08, &mut rng, &mut b), 50.0);
+        assert_eq!(
+            not_done(1.0, 0.0, &mut rng, &mut b),
+            50.0,
+            "termination off"
+        );
     }
 }

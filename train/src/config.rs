@@ -45,6 +45,8 @@ pub struct TrainConfig {
     /// Fraction of sampled transitions whose goal is replaced by a pose reached
     /// later in the same episode (hindsight relabelling).
     pub her_ratio: f64,
+    /// Where an episode ends (`[terminal]`); off by default.
+    pub terminal: Termination,
     /// Run the critic and the actor step of each update on two threads (the
     /// actor against the critic before the update): one run on both cores.
     pub two_threads: bool,
@@ -55,6 +57,37 @@ pub struct TrainConfig {
     pub eval_goals: usize,
     /// Updates between rows of the CSV log.
     pub log_every: u64,
+}
+
+/// The terminal set of the goal (DESIGN §4's `done`): the machine at rest
+/// with its pose within `distance` of the goal ([`control::model::goal_distance`]).
+/// A transition into it is terminal: the critic's target is c alone and L = 0
+/// beyond, so reaching the goal set and stopping there ends all further cost.
+/// Without it, standing still beside the goal costs c/(1 − γ), and for the few
+/// centimetres sideways an articulated machine can only fix by a manoeuvre that
+/// first raises the cost, standing still is the cheaper choice at γ = 0.99
+/// (`wlnav-train stalls`). The authors' recipe ends episodes at c < 0.55 for
+/// the same reason.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Termination {
+    /// Pose-error radius of the set; 0 turns termination off (the time limit
+    /// alone ends episodes, as a truncation).
+    pub distance: f64,
+    /// At rest: |v_f| below this [m/s] ...
+    pub speed: f64,
+    /// ... and |β̇| below this [rad/s].
+    pub beta_rate: f64,
+}
+
+impl Default for Termination {
+    fn default() -> Self {
+        Self {
+            distance: 0.0,
+            speed: 0.05,
+            beta_rate: 0.05,
+        }
+    }
 }
 
 /// How episode goals are drawn (DESIGN §4), with a near-goal share for precision.
@@ -126,6 +159,7 @@ impl Default for TrainConfig {
             episode_seconds: 30.0,
             goal: GoalSampling::default(),
             her_ratio: 0.5,
+            terminal: Termination::default(),
             two_threads: false,
             checkpoint_minutes: 5.0,
             eval_every: 10_000,
@@ -229,6 +263,11 @@ impl TrainConfig {
             ));
         }
         positive("goal.offset_max", self.goal.offset_max)?;
+        if !(self.terminal.distance.is_finite() && self.terminal.distance >= 0.0) {
+            return Err(err("terminal.distance", "must be >= 0 (0 = off)"));
+        }
+        positive("terminal.speed", self.terminal.speed)?;
+        positive("terminal.beta_rate", self.terminal.beta_rate)?;
         unit("init_lambda_l", self.init_lambda_l, true)?;
         positive("init_lambda_e", self.init_lambda_e)?;
         positive("critic_lr", self.critic_lr)?;
@@ -302,6 +341,9 @@ mod tests {
             ),
             ("[goal]\noffset_max = 0.0", "goal.offset_max"),
             ("two_threads = true\nbatch_size = 255", "batch_size"),
+            ("[terminal]\ndistance = -0.1", "terminal.distance"),
+            ("[terminal]\nspeed = 0.0", "terminal.speed"),
+            ("[terminal]\nbeta_rate = nan", "terminal.beta_rate"),
         ];
         for (text, key) in cases {
             let e = TrainConfig::from_toml(text).unwrap_err();

@@ -4,7 +4,7 @@
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 
-use control::model::{env_step, ix, Control, Goal, State};
+use control::model::{env_step, goal_distance, ix, Control, Goal, State};
 
 use crate::config::TrainConfig;
 
@@ -23,6 +23,16 @@ pub struct Transition {
 /// state the action leads to, so L(s, a) sees the action's effect at once).
 pub fn transition_cost(cfg: &TrainConfig, next: &State, a: &[f64; 2], g: &Goal) -> f64 {
     cfg.cost.stage_cost(next, g) + cfg.action_cost * (a[0] * a[0] + a[1] * a[1])
+}
+
+/// Whether `x` lies in the goal's terminal set (config `[terminal]`): at rest,
+/// pose within `terminal.distance`. Never with termination off.
+pub fn is_terminal(cfg: &TrainConfig, x: &State, g: &Goal) -> bool {
+    let t = &cfg.terminal;
+    t.distance > 0.0
+        && x[ix::V].abs() < t.speed
+        && x[ix::BETA_DOT].abs() < t.beta_rate
+        && goal_distance(x, g) < t.distance
 }
 
 /// A goal at distance r ∈ [r_min, r_max] (or the near band), uniform bearing and
@@ -101,7 +111,8 @@ impl VecEnv {
     }
 
     /// Steps every environment with its scaled action; calls `finished` with
-    /// each episode that ended (30 s time limit: a truncation, not a terminal).
+    /// each episode that ended: in the terminal set ([`is_terminal`]) or at the
+    /// 30 s time limit (a truncation, not a terminal).
     pub fn step(
         &mut self,
         cfg: &TrainConfig,
@@ -125,7 +136,7 @@ impl VecEnv {
             });
             self.states[i] = next;
             self.steps[i] += 1;
-            if self.steps[i] >= cfg.episode_steps() {
+            if self.steps[i] >= cfg.episode_steps() || is_terminal(cfg, &next, &self.goals[i]) {
                 finished(&self.episodes[i]);
                 self.reset(cfg, i, rng);
             }
@@ -197,5 +208,39 @@ mod tests {
             .count() as f64
             / n as f64;
         assert!((share - 0.3).abs() < 0.03, "share {share}");
+    }
+
+    #[test]
+    fn an_episode_ends_at_rest_in_the_terminal_set_only_with_termination_on() {
+        let mut cfg = TrainConfig {
+            n_envs: 2,
+            ..Default::default()
+        };
+        cfg.goal.start_jitter = 0.0;
+        let lengths = |cfg: &TrainConfig, speed: f64| {
+            let mut rng = ChaCha8Rng::seed_from_u64(5);
+            let mut env = VecEnv::new(cfg, &mut rng);
+            // Env 0's goal 0.05 m ahead of the start, env 1's far away.
+            env.goals[0] = Goal::new(0.05, 0.0, 0.0);
+            env.goals[1] = Goal::new(8.0, 0.0, 0.0);
+            env.states[0][ix::V] = speed;
+            let mut ended = Vec::new();
+            env.step(cfg, &[[0.0, 0.0]; 2], &mut rng, |ep| ended.push(ep.len()));
+            ended
+        };
+        assert!(
+            lengths(&cfg, 0.0).is_empty(),
+            "termination is off by default"
+        );
+        cfg.terminal.distance = 0.1;
+        assert_eq!(lengths(&cfg, 0.0), vec![1], "at rest inside: ends");
+        // Rolling at 0.3 m/s with zero acceleration: inside, but not at rest.
+        assert!(lengths(&cfg, 0.3).is_empty());
+        let x = State::new(0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+        assert!(is_terminal(&cfg, &x, &Goal::new(0.05, 0.0, 0.0)));
+        assert!(!is_terminal(&cfg, &x, &Goal::new(0.0, 0.12, 0.0)));
+        let mut turning = x;
+        turning[ix::BETA_DOT] = 0.2;
+        assert!(!is_terminal(&cfg, &turning, &Goal::new(0.05, 0.0, 0.0)));
     }
 }

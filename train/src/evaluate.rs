@@ -9,7 +9,7 @@ use control::scenario::Scenario;
 use control::{Actor, ActorWorkspace, Critic, CriticWorkspace};
 
 use crate::config::TrainConfig;
-use crate::env::{sample_goal, sample_start};
+use crate::env::{is_terminal, sample_goal, sample_start};
 
 /// How one actor rollout went.
 #[derive(Debug, Clone, PartialEq)]
@@ -166,7 +166,12 @@ fn episode_samples(
         if i % 10 == phase {
             let u_next = actor.action(aws, &next, &g);
             let l = critic.value(cws, &x, &u, &g);
-            let l_next = critic.value(cws, &next, &u_next, &g);
+            // L = 0 beyond a terminal transition (the critic's training target).
+            let l_next = if is_terminal(cfg, &next, &g) {
+                0.0
+            } else {
+                critic.value(cws, &next, &u_next, &g)
+            };
             out.push(LyapunovSample {
                 distance: control::model::goal_distance(&x, &g),
                 cost: cfg.cost.stage_cost(&next, &g),
@@ -321,5 +326,23 @@ mod tests {
         assert_eq!(v.decrease_share_stopping, 0.0);
         assert!((v.mean_delta - (-0.1)).abs() < 1e-12);
         assert_eq!(v.above_cost_share, 0.75);
+    }
+
+    #[test]
+    fn verify_takes_the_value_beyond_a_terminal_transition_as_zero() {
+        // A terminal set so large every state is in it: L(s′) = 0 on every sample,
+        // and ΔL = −L + k L.
+        let mut cfg = TrainConfig::default();
+        let (actor, critic) = networks(&cfg);
+        cfg.terminal.distance = 1e3;
+        cfg.terminal.speed = 1e3;
+        cfg.terminal.beta_rate = 1e3;
+        let samples = lyapunov_samples(&actor, &critic, &cfg, 10, 1);
+        assert!(!samples.is_empty());
+        let k = 1.0 - critic.metadata().lambda_l;
+        for s in &samples {
+            assert_eq!(s.l_next, 0.0);
+            assert!((s.delta - (k - 1.0) * s.l).abs() <= 1e-12 * (1.0 + s.l));
+        }
     }
 }

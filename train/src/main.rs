@@ -86,6 +86,10 @@ enum Cmd {
         critic: PathBuf,
         #[arg(long, default_value_t = 200)]
         episodes: usize,
+        /// A training config whose `[terminal]` set the critic was trained with
+        /// (e.g. critic-weights/train-config.toml); default: no terminal set.
+        #[arg(long)]
+        terminal_from: Option<PathBuf>,
         #[arg(long)]
         out: Option<PathBuf>,
     },
@@ -102,6 +106,10 @@ enum Cmd {
         /// Test at most this many stalls (the search takes a few seconds each).
         #[arg(long, default_value_t = 12)]
         max_stalls: usize,
+        /// A training config whose `[terminal]` set the critic was trained with
+        /// (e.g. critic-weights/train-config.toml); default: no terminal set.
+        #[arg(long)]
+        terminal_from: Option<PathBuf>,
         #[arg(long)]
         out: Option<PathBuf>,
     },
@@ -137,6 +145,17 @@ fn config_from_metadata(meta: &control::weights::NetworkMetadata) -> TrainConfig
         pos_scale: meta.pos_scale,
         ..Default::default()
     }
+}
+
+/// `cfg` with the `[terminal]` set of the training config at `path`, if any.
+fn with_terminal(cfg: TrainConfig, path: &Option<PathBuf>) -> Result<TrainConfig> {
+    Ok(match path {
+        Some(p) => TrainConfig {
+            terminal: load_config(p)?.terminal,
+            ..cfg
+        },
+        None => cfg,
+    })
 }
 
 fn main() -> Result<()> {
@@ -230,10 +249,11 @@ fn main() -> Result<()> {
             episodes,
             gamma,
             max_stalls,
+            terminal_from,
             out,
         } => {
             let actor = Actor::from_weights(load_net(&actor)?)?;
-            let cfg = config_from_metadata(actor.metadata());
+            let cfg = with_terminal(config_from_metadata(actor.metadata()), &terminal_from)?;
             let gammas = if gamma.is_empty() {
                 vec![cfg.gamma]
             } else {
@@ -248,11 +268,12 @@ fn main() -> Result<()> {
             actor,
             critic,
             episodes,
+            terminal_from,
             out,
         } => {
             let actor = Actor::from_weights(load_net(&actor)?)?;
             let critic = Critic::from_weights(load_net(&critic)?)?;
-            let cfg = config_from_metadata(critic.metadata());
+            let cfg = with_terminal(config_from_metadata(critic.metadata()), &terminal_from)?;
             let samples = train::evaluate::lyapunov_samples(&actor, &critic, &cfg, episodes, 7);
             let v = VerifySummary::of(&samples);
             println!(
@@ -366,7 +387,10 @@ fn publish(run_dir: &std::path::Path, out: &std::path::Path, command: &str) -> R
     let actor = Actor::from_weights(load_net(&out.join("actor.safetensors"))?)?;
     let critic = Critic::from_weights(load_net(&out.join("critic.safetensors"))?)?;
     let meta = critic.metadata().clone();
-    let cfg = config_from_metadata(&meta);
+    let cfg = with_terminal(
+        config_from_metadata(&meta),
+        &Some(out.join("train-config.toml")),
+    )?;
     let v = VerifySummary::of(&train::evaluate::lyapunov_samples(
         &actor, &critic, &cfg, 200, 7,
     ));

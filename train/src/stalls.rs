@@ -17,7 +17,7 @@ use control::model::{converged, env_step, goal_distance, ix, Control, Goal, Stat
 use control::{Actor, ActorWorkspace};
 
 use crate::config::TrainConfig;
-use crate::env::{sample_goal, sample_start, transition_cost};
+use crate::env::{is_terminal, sample_goal, sample_start, transition_cost};
 use crate::evaluate::VERIFY_TOLERANCE;
 
 /// An episode the actor ended outside the goal set: its last state and goal.
@@ -105,6 +105,7 @@ pub struct ManoeuvreResult {
 
 /// Runs `actions` (scaled, one per piece) from `x0`, then brakes β̇ and v to zero;
 /// returns Σ γᵗ c over the transitions plus the resting tail, and the end state.
+/// A transition into the terminal set (config `[terminal]`) ends the sum there.
 fn discounted_cost(
     cfg: &TrainConfig,
     search: &ManoeuvreSearch,
@@ -132,6 +133,9 @@ fn discounted_cost(
             cfg.dt,
         );
         sum += discount * transition_cost(cfg, &next, &a, goal);
+        if is_terminal(cfg, &next, goal) {
+            return (sum, next);
+        }
         discount *= gamma;
         x = next;
     }
@@ -269,5 +273,23 @@ mod tests {
         };
         let (along, sideways) = behind.along_sideways();
         assert!((along + 0.5).abs() < 1e-12 && (sideways + 0.2).abs() < 1e-12);
+    }
+
+    #[test]
+    fn standing_in_the_terminal_set_costs_one_transition() {
+        // At rest 0.05 m beside the goal: without a terminal set standing still
+        // costs c/(1 − γ) (the geometric tail), with one only the first transition.
+        let mut cfg = TrainConfig::default();
+        let goal = Goal::new(0.0, 0.05, 0.0);
+        let x = State::zeros();
+        let still = vec![[0.0; 2]; 10];
+        let c = transition_cost(&cfg, &x, &[0.0; 2], &goal);
+        assert!(c > 0.0);
+        let (open, _) = discounted_cost(&cfg, &small_search(), &x, &goal, &still, 0.99);
+        assert!((open - c / (1.0 - 0.99)).abs() < 1e-9 * open, "{open}");
+        cfg.terminal.distance = 0.1;
+        let (ended, end) = discounted_cost(&cfg, &small_search(), &x, &goal, &still, 0.99);
+        assert_eq!(ended, c);
+        assert_eq!(end, x);
     }
 }

@@ -15,6 +15,7 @@ fn batch(n: usize, seed: u64) -> Batch {
         action: v(n * 2, -1.0, 1.0),
         cost: v(n, 0.0, 1.0),
         next_state: v(n * 7, -1.0, 1.0),
+        not_done: (0..n).map(|i| if i % 5 == 0 { 0.0 } else { 1.0 }).collect(),
     }
 }
 
