@@ -18,6 +18,7 @@ pub struct Rollout {
     /// First time within tolerance, if any.
     pub t_converge: Option<f64>,
     pub final_distance: f64,
+    pub final_state: State,
     pub path_length: f64,
 }
 
@@ -51,6 +52,7 @@ pub fn rollout(
         name: name.to_string(),
         t_converge,
         final_distance: control::model::goal_distance(&x, &goal),
+        final_state: x,
         path_length: path,
     }
 }
@@ -212,11 +214,13 @@ impl VerifySummary {
             samples.iter().filter(|s| f(s)).count() as f64 / n
         };
         let share_where = |reached: bool| {
-            let of: Vec<_> = samples
+            let (met, of) = samples
                 .iter()
                 .filter(|s| s.episode_reached == reached)
-                .collect();
-            of.iter().filter(|s| s.delta <= 0.0).count() as f64 / of.len() as f64
+                .fold((0, 0), |(met, of), s| {
+                    (met + (s.delta <= 0.0) as usize, of + 1)
+                });
+            met as f64 / of as f64
         };
         Self {
             states: samples.len(),

@@ -13,12 +13,12 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 
-use control::model::{converged, env_step, goal_distance, ix, Control, Goal, State};
-use control::{Actor, ActorWorkspace};
+use control::model::{env_step, goal_distance, ix, Control, Goal, State};
+use control::Actor;
 
 use crate::config::TrainConfig;
 use crate::env::{is_terminal, sample_goal, sample_start, transition_cost};
-use crate::evaluate::VERIFY_TOLERANCE;
+use crate::evaluate::{rollout, VERIFY_TOLERANCE};
 
 /// An episode the actor ended outside the goal set: its last state and goal.
 #[derive(Debug, Clone, Copy)]
@@ -43,24 +43,16 @@ impl Stall {
 /// deterministic actor never meets the success test within the episode.
 pub fn find_stalls(actor: &Actor, cfg: &TrainConfig, episodes: usize, seed: u64) -> Vec<Stall> {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let mut ws = ActorWorkspace::new(actor);
-    let mut out = Vec::new();
-    for _ in 0..episodes {
-        let (mut x, goal) = (sample_start(cfg, &mut rng), sample_goal(cfg, &mut rng, 1.0));
-        let mut reached = converged(&x, &goal, VERIFY_TOLERANCE);
-        for _ in 0..cfg.episode_steps() {
-            if reached {
-                break;
-            }
-            let u = actor.action(&mut ws, &x, &goal);
-            x = env_step(&cfg.machine, &x, &u, cfg.dt);
-            reached = converged(&x, &goal, VERIFY_TOLERANCE);
-        }
-        if !reached {
-            out.push(Stall { state: x, goal });
-        }
-    }
-    out
+    (0..episodes)
+        .filter_map(|_| {
+            let (x, goal) = (sample_start(cfg, &mut rng), sample_goal(cfg, &mut rng, 1.0));
+            let r = rollout(actor, cfg, "", x, goal, VERIFY_TOLERANCE);
+            r.t_converge.is_none().then_some(Stall {
+                state: r.final_state,
+                goal,
+            })
+        })
+        .collect()
 }
 
 /// The manoeuvre search: piecewise-constant scaled actions, then braking to rest.
@@ -156,12 +148,12 @@ pub fn best_manoeuvre(
 ) -> ManoeuvreResult {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let still = vec![[0.0; 2]; search.pieces];
-    let (stay, _) = discounted_cost(cfg, search, x0, goal, &still, gamma);
-    let mut best = (stay, still);
+    let (stay, x_stay) = discounted_cost(cfg, search, x0, goal, &still, gamma);
+    let mut best = (stay, x_stay);
     let mut mean = vec![[0.0f64; 2]; search.pieces];
     let mut sd = vec![[0.6f64; 2]; search.pieces];
     for _ in 0..search.iterations {
-        let mut population: Vec<(f64, Vec<[f64; 2]>)> = (0..search.population)
+        let mut population: Vec<(f64, State, Vec<[f64; 2]>)> = (0..search.population)
             .map(|_| {
                 let actions: Vec<[f64; 2]> = mean
                     .iter()
@@ -173,39 +165,37 @@ pub fn best_manoeuvre(
                         })
                     })
                     .collect();
-                (
-                    discounted_cost(cfg, search, x0, goal, &actions, gamma).0,
-                    actions,
-                )
+                let (cost, end) = discounted_cost(cfg, search, x0, goal, &actions, gamma);
+                (cost, end, actions)
             })
             .collect();
         population.sort_by(|a, b| a.0.total_cmp(&b.0));
         if population[0].0 < best.0 {
-            best = population[0].clone();
+            best = (population[0].0, population[0].1);
         }
         let elites = &population[..search.elites.min(population.len())];
         let n = elites.len() as f64;
         for p in 0..search.pieces {
             for i in 0..2 {
-                let m = elites.iter().map(|e| e.1[p][i]).sum::<f64>() / n;
-                let var = elites.iter().map(|e| (e.1[p][i] - m).powi(2)).sum::<f64>() / n;
+                let m = elites.iter().map(|e| e.2[p][i]).sum::<f64>() / n;
+                let var = elites.iter().map(|e| (e.2[p][i] - m).powi(2)).sum::<f64>() / n;
                 mean[p][i] = m;
                 // A floor keeps the search from collapsing onto one manoeuvre early.
                 sd[p][i] = var.sqrt().max(0.02);
             }
         }
     }
-    let (_, end) = discounted_cost(cfg, search, x0, goal, &best.1, gamma);
     ManoeuvreResult {
         stay,
         best: best.0,
-        end_distance: goal_distance(&end, goal),
+        end_distance: goal_distance(&best.1, goal),
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use control::model::converged;
 
     fn small_search() -> ManoeuvreSearch {
         // 10 s of manoeuvre, 20 s summed.
