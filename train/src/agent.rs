@@ -286,7 +286,11 @@ impl Agent {
 
         // Multipliers by gradient ascent on J(λ) in log space.
         let mean_entropy_term = actor.entropy_term.mean_all()?.to_scalar::<f32>()? as f64;
-        let mean_delta = actor.delta_l.mean_all()?.to_scalar::<f32>()? as f64;
+        let mean_delta = multiplier_delta(
+            &actor.delta_l.to_vec1::<f32>()?,
+            &batch.own_goal,
+            self.cfg.multiplier_own_goals,
+        );
         let lr = self.cfg.multiplier_lr;
         self.lambda_e_opt
             .ascend(&mut self.log_lambda_e, mean_entropy_term, lr);
@@ -573,6 +577,23 @@ fn actor_objective(
     })
 }
 
+/// The E[ΔL] λ_l ascends on: the batch mean, or with `own_goals` the mean over
+/// rows whose weight is 1 (the batch mean when there are none).
+fn multiplier_delta(delta: &[f32], own_goal: &[f32], own_goals: bool) -> f64 {
+    let weighted = |w: &dyn Fn(usize) -> f64| {
+        let (sum, n) = (0..delta.len()).fold((0.0, 0.0), |(s, n), i| {
+            (s + w(i) * delta[i] as f64, n + w(i))
+        });
+        (n > 0.0).then(|| sum / n)
+    };
+    let all = weighted(&|_| 1.0).unwrap_or(0.0);
+    if own_goals {
+        weighted(&|i| own_goal[i] as f64).unwrap_or(all)
+    } else {
+        all
+    }
+}
+
 fn parse_key<T: std::str::FromStr>(meta: &HashMap<String, String>, key: &str) -> anyhow::Result<T> {
     let text = meta
         .get(key)
@@ -600,6 +621,7 @@ mod tests {
             cost: v(n).iter().map(|c| c.abs()).collect(),
             next_state: v(n * ACTOR_INPUTS),
             not_done: (0..n).map(|i| if i % 3 == 0 { 0.0 } else { 1.0 }).collect(),
+            own_goal: vec![1.0; n],
         }
     }
 
@@ -666,5 +688,18 @@ mod tests {
         assert!((1..n)
             .filter(|i| i % 3 != 0)
             .any(|i| (delta[i] as f64 + lambda_l * l[i] as f64).abs() > 1e-3));
+    }
+
+    #[test]
+    fn the_multiplier_sees_own_goal_rows_when_asked() {
+        let delta = [1.0, -3.0, 2.0, 4.0];
+        let own = [1.0, 0.0, 1.0, 0.0];
+        assert_eq!(multiplier_delta(&delta, &own, false), 1.0);
+        assert_eq!(multiplier_delta(&delta, &own, true), 1.5);
+        assert_eq!(
+            multiplier_delta(&delta, &[0.0; 4], true),
+            1.0,
+            "no own rows"
+        );
     }
 }

@@ -32,6 +32,8 @@ pub struct Batch {
     pub next_state: Vec<f32>,
     /// 1 − done: 0 where s′ lies in the (possibly relabelled) goal's terminal set.
     pub not_done: Vec<f32>,
+    /// 1 where the row keeps its episode's own goal, 0 where relabelled.
+    pub own_goal: Vec<f32>,
 }
 
 impl ReplayBuffer {
@@ -83,6 +85,7 @@ impl ReplayBuffer {
         out.cost.clear();
         out.next_state.clear();
         out.not_done.clear();
+        out.own_goal.clear();
         let oldest = self.inserted.saturating_sub(self.slots.len() as u64);
         let mut f = [0.0; ACTOR_INPUTS];
         for _ in 0..n {
@@ -90,7 +93,9 @@ impl ReplayBuffer {
             let slot = (abs % self.capacity as u64) as usize;
             let t = &self.slots[slot];
             let mut goal = t.goal;
-            if rng.gen::<f64>() < cfg.her_ratio {
+            let relabel = rng.gen::<f64>() < cfg.her_ratio;
+            out.own_goal.push(if relabel { 0.0 } else { 1.0 });
+            if relabel {
                 let end = self.episode_end[slot];
                 let future = rng.gen_range(abs..end);
                 let reached = &self.slots[(future % self.capacity as u64) as usize].next;
@@ -201,7 +206,9 @@ mod tests {
             b.not_done.iter().sum::<f32>()
         };
         assert_eq!(not_done(1.0, 0.08, &mut rng, &mut b), 0.0);
+        assert!(b.own_goal.iter().all(|w| *w == 0.0), "all relabelled");
         assert_eq!(not_done(0.0, 0.08, &mut rng, &mut b), 50.0);
+        assert!(b.own_goal.iter().all(|w| *w == 1.0), "none relabelled");
         assert_eq!(
             not_done(1.0, 0.0, &mut rng, &mut b),
             50.0,

@@ -45,6 +45,10 @@ pub struct TrainConfig {
     /// Fraction of sampled transitions whose goal is replaced by a pose reached
     /// later in the same episode (hindsight relabelling).
     pub her_ratio: f64,
+    /// Ascend λ_l on E[ΔL] over the rows that keep their episode's own goal
+    /// only (eq. 4c's expectation is over the states the policy visits on its
+    /// way to its goals, S_π); false: over the whole batch, relabelled rows too.
+    pub multiplier_own_goals: bool,
     /// Where an episode ends (`[terminal]`); off by default.
     pub terminal: Termination,
     /// Run the critic and the actor step of each update on two threads (the
@@ -159,6 +163,7 @@ impl Default for TrainConfig {
             episode_seconds: 30.0,
             goal: GoalSampling::default(),
             her_ratio: 0.5,
+            multiplier_own_goals: false,
             terminal: Termination::default(),
             two_threads: false,
             checkpoint_minutes: 5.0,

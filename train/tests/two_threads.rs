@@ -16,6 +16,7 @@ fn batch(n: usize, seed: u64) -> Batch {
         cost: v(n, 0.0, 1.0),
         next_state: v(n * 7, -1.0, 1.0),
         not_done: (0..n).map(|i| if i % 5 == 0 { 0.0 } else { 1.0 }).collect(),
+        own_goal: (0..n).map(|i| if i % 4 == 0 { 1.0 } else { 0.0 }).collect(),
     }
 }
 
