@@ -270,7 +270,11 @@ pub fn goal_distance(x: &State, g: &Goal) -> f64 {
     e[0].hypot(e[1])
 }
 
-/// Convergence test of DESIGN §7: [`goal_distance`] below `tolerance` (0.1 in the paper).
+/// The paper's success tolerance (DESIGN §7): [`goal_distance`] below it counts
+/// as converged in every evaluation, `verify` and the daemon's default.
+pub const SUCCESS_TOLERANCE: f64 = 0.1;
+
+/// Convergence test of DESIGN §7: [`goal_distance`] below `tolerance` ([`SUCCESS_TOLERANCE`] in the paper).
 pub fn converged(x: &State, g: &Goal, tolerance: f64) -> bool {
     goal_distance(x, g) < tolerance
 }

@@ -192,7 +192,7 @@ impl Default for LoopConfig {
             fallback_ticks: 2,
             can_bad_frames_stop: 5,
             can_max_lost: 2,
-            reach_tolerance: 0.1,
+            reach_tolerance: control::model::SUCCESS_TOLERANCE,
             reach_speed: 0.05,
             plausibility_margin: 0.2,
             shutdown_timeout: 5.0,

@@ -55,7 +55,7 @@ struct Common {
     #[arg(long)]
     jobs: Option<usize>,
     /// Success-test tolerance (DESIGN §7).
-    #[arg(long, default_value_t = 0.1)]
+    #[arg(long, default_value_t = control::model::SUCCESS_TOLERANCE)]
     tolerance: f64,
 }
 

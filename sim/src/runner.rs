@@ -22,7 +22,7 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use control::delay::DelayCompensator;
 use control::mlp::PAPER_HIDDEN;
-use control::model::{converged, env_step, ix, Control, MachineParams, State};
+use control::model::{converged, env_step, ix, Control, MachineParams, State, SUCCESS_TOLERANCE};
 use control::mpc::{Mpc, MpcSettings, Obstacle as MpcObstacle};
 use control::plant::{Plant, PlantConfig, VelocityCommand};
 use control::scenario::Scenario;
@@ -165,7 +165,7 @@ impl Default for EvalConfig {
                 ..Default::default()
             },
             plant: PlantConfig::ideal(),
-            tolerance: 0.1,
+            tolerance: SUCCESS_TOLERANCE,
             duration: 30.0,
             baseline: BaselineSettings::default(),
             min_time: MinTimeSettings::default(),

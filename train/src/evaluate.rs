@@ -4,7 +4,7 @@
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use control::model::{converged, env_step, Goal, State};
+use control::model::{converged, env_step, Goal, State, SUCCESS_TOLERANCE};
 use control::scenario::Scenario;
 use control::{Actor, ActorWorkspace, Critic, CriticWorkspace};
 
@@ -116,9 +116,6 @@ pub struct LyapunovSample {
     pub episode_reached: bool,
 }
 
-/// Success tolerance of DESIGN §7: `verify` samples states outside this goal set.
-pub const VERIFY_TOLERANCE: f64 = 0.1;
-
 /// Samples states along actor rollouts to random goals, every tenth step from a
 /// random phase, and evaluates the decrease condition (eq. 4c) and L ≥ c on each.
 ///
@@ -159,7 +156,7 @@ fn episode_samples(
     let first = out.len();
     let mut reached = false;
     for i in 0..cfg.episode_steps() {
-        if converged(&x, &g, VERIFY_TOLERANCE) {
+        if converged(&x, &g, SUCCESS_TOLERANCE) {
             reached = true;
             break;
         }
@@ -185,7 +182,7 @@ fn episode_samples(
         }
         x = next;
     }
-    reached |= converged(&x, &g, VERIFY_TOLERANCE);
+    reached |= converged(&x, &g, SUCCESS_TOLERANCE);
     for s in &mut out[first..] {
         s.episode_reached = reached;
     }
@@ -283,7 +280,7 @@ mod tests {
         let lambda_l = critic.metadata().lambda_l;
         let (k, lam) = (1.0 - lambda_l, lambda_l.min(cfg.gamma));
         for s in &out {
-            assert!(s.distance >= VERIFY_TOLERANCE);
+            assert!(s.distance >= SUCCESS_TOLERANCE);
             // Paper eq. 4c, per sample: L(s′) − L(s) + k (L(s) − λ L(s′)).
             let expected = s.l_next - s.l + k * s.l - k * lam * s.l_next;
             assert!((s.delta - expected).abs() <= 1e-12 * (1.0 + s.l.abs()));

@@ -56,7 +56,7 @@ enum Cmd {
         actor: PathBuf,
         #[arg(long)]
         scenarios: PathBuf,
-        #[arg(long, default_value_t = 0.1)]
+        #[arg(long, default_value_t = control::model::SUCCESS_TOLERANCE)]
         tolerance: f64,
         #[arg(long)]
         out: Option<PathBuf>,
@@ -314,7 +314,7 @@ fn stalls(
     println!(
         "{} of {episodes} episodes end outside the goal set ({}); testing {}",
         stalls.len(),
-        train::evaluate::VERIFY_TOLERANCE,
+        control::model::SUCCESS_TOLERANCE,
         stalls.len().min(max_stalls)
     );
     let search = ManoeuvreSearch::default();
@@ -337,7 +337,7 @@ fn stalls(
             );
             if r.best < r.stay {
                 cheaper[j].0 += 1;
-                if r.end_distance < train::evaluate::VERIFY_TOLERANCE {
+                if r.end_distance < control::model::SUCCESS_TOLERANCE {
                     cheaper[j].1 += 1;
                 }
             }

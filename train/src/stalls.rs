@@ -13,12 +13,12 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 
-use control::model::{env_step, goal_distance, ix, Control, Goal, State};
+use control::model::{env_step, goal_distance, ix, Control, Goal, State, SUCCESS_TOLERANCE};
 use control::Actor;
 
 use crate::config::TrainConfig;
 use crate::env::{is_terminal, sample_goal, sample_start, transition_cost};
-use crate::evaluate::{rollout, VERIFY_TOLERANCE};
+use crate::evaluate::rollout;
 
 /// An episode the actor ended outside the goal set: its last state and goal.
 #[derive(Debug, Clone, Copy)]
@@ -46,7 +46,7 @@ pub fn find_stalls(actor: &Actor, cfg: &TrainConfig, episodes: usize, seed: u64)
     (0..episodes)
         .filter_map(|_| {
             let (x, goal) = (sample_start(cfg, &mut rng), sample_goal(cfg, &mut rng, 1.0));
-            let r = rollout(actor, cfg, "", x, goal, VERIFY_TOLERANCE);
+            let r = rollout(actor, cfg, "", x, goal, SUCCESS_TOLERANCE);
             r.t_converge.is_none().then_some(Stall {
                 state: r.final_state,
                 goal,
@@ -252,7 +252,7 @@ mod tests {
         let stalls = find_stalls(&actor, &cfg, 20, 3);
         assert!(stalls.len() >= 15, "{} stalls", stalls.len());
         for s in &stalls {
-            assert!(!converged(&s.state, &s.goal, VERIFY_TOLERANCE));
+            assert!(!converged(&s.state, &s.goal, SUCCESS_TOLERANCE));
             let (along, sideways) = s.along_sideways();
             let e = control::model::pose_error(&s.state, &s.goal);
             assert!((along.hypot(sideways) - e[0]).abs() < 1e-9);
