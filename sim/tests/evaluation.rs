@@ -1,5 +1,6 @@
 //! Scenario files, scoring, the results CSV and the runner end to end (with
-//! random networks, which do not reach goals: only the plumbing is tested).
+//! random networks, which do not reach goals: only the plumbing is tested), and
+//! one behaviour of the committed critic.
 
 use control::model::{Goal, State};
 use control::scenario::{self, Obstacle, Scenario};
@@ -211,4 +212,27 @@ fn runner_runs_every_method_in_parallel_and_writes_outputs() {
         assert!(text.len() > 100, "{f}");
     }
     std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The committed critic (critic-weights/) moves the MPC from rest beside its goal:
+/// `scenarios/beside16.csv` starts 0.12–0.3 m sideways, where a critic trained
+/// without a terminal set holds the machine still (README, training the critic).
+#[test]
+fn committed_critic_drives_from_beside_the_goal_into_it() {
+    let nets = Networks::load(&manifest("../critic-weights")).unwrap();
+    let path = manifest("scenarios/beside16.csv");
+    let set = scenario::parse(&std::fs::read_to_string(&path).unwrap(), "beside16.csv").unwrap();
+    assert_eq!(set.len(), 16);
+    let cfg = EvalConfig {
+        methods: vec![Method::Mpc],
+        jobs: 2,
+        progress: false,
+        ..Default::default()
+    };
+    let ev = sim::eval::evaluate(&cfg, &nets, &set).unwrap();
+    let reached = ev.rows.iter().filter(|r| r.success).count();
+    assert!(
+        reached >= 12,
+        "the MPC reached {reached} of 16 goals beside its start"
+    );
 }
