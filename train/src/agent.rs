@@ -516,8 +516,8 @@ fn mean_grads(vars: &[Var], mut a: GradStore, b: &GradStore) -> Result<GradStore
 }
 
 /// ½(L − target)² + ρ·GP (paper eq. 13–16) with target c + γ(1 − done) L̄(s′, a′)
-/// (DESIGN §4): done only in the terminal set; the time limit is a truncation. Returns the loss, the penalty and
-/// L(s, a) detached.
+/// (DESIGN §4): done only in the terminal set; the time limit is a truncation.
+/// Returns the loss, the penalty and L(s, a) detached.
 fn critic_objective(
     critic: &Mlp,
     target: &Mlp,
@@ -578,17 +578,16 @@ fn actor_objective(
 }
 
 /// The E[ΔL] λ_l ascends on: the batch mean, or with `own_goals` the mean over
-/// rows whose weight is 1 (the batch mean when there are none).
+/// rows whose `own_goal` is 1 (the batch mean when there are none).
 fn multiplier_delta(delta: &[f32], own_goal: &[f32], own_goals: bool) -> f64 {
-    let weighted = |w: &dyn Fn(usize) -> f64| {
-        let (sum, n) = (0..delta.len()).fold((0.0, 0.0), |(s, n), i| {
-            (s + w(i) * delta[i] as f64, n + w(i))
-        });
-        (n > 0.0).then(|| sum / n)
-    };
-    let all = weighted(&|_| 1.0).unwrap_or(0.0);
-    if own_goals {
-        weighted(&|i| own_goal[i] as f64).unwrap_or(all)
+    let all = delta.iter().map(|d| *d as f64).sum::<f64>() / delta.len().max(1) as f64;
+    let (sum, n) = delta
+        .iter()
+        .zip(own_goal)
+        .filter(|(_, w)| **w > 0.0)
+        .fold((0.0, 0usize), |(s, n), (d, _)| (s + *d as f64, n + 1));
+    if own_goals && n > 0 {
+        sum / n as f64
     } else {
         all
     }
