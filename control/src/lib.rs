@@ -10,7 +10,9 @@ pub mod encoder;
 pub mod mlp;
 pub mod model;
 pub mod mpc;
+pub mod obstacle;
 pub mod plant;
+pub mod progress;
 pub mod scenario;
 pub mod weights;
 
@@ -19,4 +21,5 @@ pub use cost::{CostForm, CostWeights};
 pub use critic::{Critic, CriticWorkspace, Derivatives, HessianMode, TerminalDerivatives};
 pub use encoder::Encoder;
 pub use model::{Control, Goal, MachineParams, State};
+pub use obstacle::Obstacle;
 pub use plant::{Plant, PlantConfig, VelocityCommand};

@@ -3,17 +3,10 @@
 //! text (callers read the file); errors name the source, line and column.
 
 use crate::model::{Goal, State};
+pub use crate::obstacle::Obstacle;
 
 /// The header every scenario file starts with.
 pub const HEADER: &str = "name,x0,y0,theta0,beta0,beta_dot0,v0,x_goal,y_goal,theta_goal,obstacles";
-
-/// A circular obstacle, radius already inflated by the machine's.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Obstacle {
-    pub x: f64,
-    pub y: f64,
-    pub r: f64,
-}
 
 #[derive(Debug, Clone, PartialEq)]
 pub struct Scenario {
@@ -113,7 +106,7 @@ pub fn parse(text: &str, source: &str) -> Result<Vec<Scenario>, ScenarioError> {
                     })
                     .flatten();
                 match parsed.as_deref() {
-                    Some(&[x, y, r]) if r > 0.0 => obstacles.push(Obstacle { x, y, r }),
+                    Some(&[x, y, r]) if r > 0.0 => obstacles.push(Obstacle::new(x, y, r)),
                     Some(&[_, _, r]) => {
                         return Err(fail(
                             line_no,
@@ -151,7 +144,7 @@ pub fn to_csv(scenarios: &[Scenario]) -> String {
         let obs: Vec<String> = sc
             .obstacles
             .iter()
-            .map(|o| format!("{}:{}:{}", o.x, o.y, o.r))
+            .map(|o| format!("{}:{}:{}", o.x, o.y, o.radius))
             .collect();
         s.push_str(&format!(
             "{},{},{},{},{},{},{},{},{},{},{}\n",
@@ -255,16 +248,8 @@ mod tests {
         assert_eq!(
             s[0].obstacles,
             vec![
-                Obstacle {
-                    x: 3.0,
-                    y: 0.2,
-                    r: 1.0
-                },
-                Obstacle {
-                    x: 6.0,
-                    y: -1.0,
-                    r: 0.8
-                }
+                Obstacle::new(3.0, 0.2, 1.0),
+                Obstacle::new(6.0, -1.0, 0.8)
             ]
         );
     }

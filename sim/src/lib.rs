@@ -11,6 +11,7 @@
 //! Scenario files are parsed by [`control::scenario`]; the committed ones are
 //! in `sim/scenarios/`.
 
+pub mod clearance;
 pub mod collocation;
 pub mod eval;
 pub mod ipopt;

@@ -189,7 +189,7 @@ impl Element for NodeObstacles {
 
     fn con_bounds(&self, lower: &mut [f64], upper: &mut [f64]) {
         for (i, o) in self.obstacles.iter().enumerate() {
-            lower[i] = o.r * o.r;
+            lower[i] = o.radius * o.radius;
             upper[i] = INF;
         }
     }

@@ -69,8 +69,8 @@ pub fn trajectory_svg(
         xs.extend([sc.start[0], sc.goal.x]);
         ys.extend([sc.start[1], sc.goal.y]);
         for o in &sc.obstacles {
-            xs.extend([o.x - o.r, o.x + o.r]);
-            ys.extend([o.y - o.r, o.y + o.r]);
+            xs.extend([o.x - o.radius, o.x + o.radius]);
+            ys.extend([o.y - o.radius, o.y + o.radius]);
         }
     }
     for t in tracks {
@@ -127,7 +127,7 @@ pub fn trajectory_svg(
         for o in &sc.obstacles {
             chart
                 .draw_series(std::iter::once(Polygon::new(
-                    circle(o.x, o.y, o.r),
+                    circle(o.x, o.y, o.radius),
                     RGBColor(160, 160, 160).mix(0.5).filled(),
                 )))
                 .map_err(err)?;

@@ -23,13 +23,14 @@ use anyhow::{bail, Context, Result};
 use control::delay::DelayCompensator;
 use control::mlp::PAPER_HIDDEN;
 use control::model::{converged, env_step, ix, Control, MachineParams, State, SUCCESS_TOLERANCE};
-use control::mpc::{Mpc, MpcSettings, Obstacle as MpcObstacle};
+use control::mpc::{Mpc, MpcSettings};
 use control::plant::{Plant, PlantConfig, VelocityCommand};
 use control::scenario::Scenario;
 use control::weights::{decode, random_network, NetworkMetadata, NetworkRole};
 use control::{Actor, ActorWorkspace, Critic};
 use indicatif::{ProgressBar, ProgressStyle};
 
+use crate::clearance::ClearanceMeter;
 use crate::ocp::{self, BaselineSettings, Guess, MinTimeSettings};
 use crate::results::ResultRow;
 
@@ -195,7 +196,8 @@ pub struct ScenarioRuns {
     pub runs: Vec<(Method, Run)>,
 }
 
-/// Scores a trajectory sampled every `dt` (DESIGN §7).
+/// Scores a trajectory sampled every `dt` (DESIGN §7); `min_clearance` is
+/// measured by the caller between the samples ([`ClearanceMeter`]).
 pub fn score(
     sc: &Scenario,
     method: &str,
@@ -203,6 +205,7 @@ pub fn score(
     dt: f64,
     tolerance: f64,
     solve_ms: &[f64],
+    min_clearance: Option<f64>,
 ) -> ResultRow {
     let inside = |x: &State| converged(x, &sc.goal, tolerance);
     let first = states.iter().position(inside);
@@ -222,16 +225,6 @@ pub fn score(
         .windows(2)
         .map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]))
         .sum();
-    let min_clearance = (!sc.obstacles.is_empty()).then(|| {
-        states
-            .iter()
-            .flat_map(|x| {
-                sc.obstacles
-                    .iter()
-                    .map(move |o| (x[0] - o.x).hypot(x[1] - o.y) - o.r)
-            })
-            .fold(f64::INFINITY, f64::min)
-    });
     let (median, max) = if solve_ms.is_empty() {
         (0.0, 0.0)
     } else {
@@ -253,13 +246,6 @@ pub fn score(
     }
 }
 
-fn mpc_obstacles(sc: &Scenario) -> Vec<MpcObstacle> {
-    sc.obstacles
-        .iter()
-        .map(|o| MpcObstacle::new(o.x, o.y, o.r))
-        .collect()
-}
-
 /// The MPC in closed loop with the plant.
 pub fn run_mpc(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run> {
     let start = Instant::now();
@@ -273,11 +259,13 @@ pub fn run_mpc(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run> 
         Some(nets.actor.clone()),
         settings,
     )?;
-    mpc.set_goal(sc.goal, &mpc_obstacles(sc))?;
+    mpc.set_goal(sc.goal, &sc.obstacles)?;
     let mut plant = Plant::new(cfg.params, cfg.plant, sc.start)?;
     let steps = (cfg.duration / settings.dt).round() as usize;
     let mut states = Vec::with_capacity(steps + 1);
     let mut solve_ms = Vec::with_capacity(steps);
+    let mut clearance = ClearanceMeter::new(cfg.params, &sc.obstacles);
+    clearance.observe(&plant.state());
     for k in 0..=steps {
         let x = plant.measure();
         states.push(plant.state());
@@ -287,7 +275,7 @@ pub fn run_mpc(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run> 
         let sol = mpc.step(&x)?;
         solve_ms.push(sol.solve_time.as_secs_f64() * 1e3);
         plant.command(sol.command)?;
-        plant.advance(settings.dt);
+        plant.advance_observed(settings.dt, |x| clearance.observe(x));
     }
     let row = score(
         sc,
@@ -296,6 +284,7 @@ pub fn run_mpc(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run> 
         settings.dt,
         cfg.tolerance,
         &solve_ms,
+        clearance.finish(),
     );
     Ok(Run {
         row,
@@ -316,6 +305,8 @@ pub fn run_actor(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run
     let steps = (cfg.duration / dt).round() as usize;
     let mut states = Vec::with_capacity(steps + 1);
     let mut solve_ms = Vec::with_capacity(steps);
+    let mut clearance = ClearanceMeter::new(cfg.params, &sc.obstacles);
+    clearance.observe(&plant.state());
     for k in 0..=steps {
         let x = plant.measure();
         states.push(plant.state());
@@ -334,7 +325,7 @@ pub fn run_actor(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run
         delay.record(now, cmd);
         solve_ms.push(t0.elapsed().as_secs_f64() * 1e3);
         plant.command(cmd)?;
-        plant.advance(dt);
+        plant.advance_observed(dt, |x| clearance.observe(x));
     }
     let row = score(
         sc,
@@ -343,6 +334,7 @@ pub fn run_actor(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run
         dt,
         cfg.tolerance,
         &solve_ms,
+        clearance.finish(),
     );
     Ok(Run {
         row,
@@ -372,6 +364,7 @@ pub fn run_baseline(cfg: &EvalConfig, sc: &Scenario) -> Result<(Run, ocp::Plan)>
         plan.dt,
         cfg.tolerance,
         &solve_ms,
+        plan_clearance(cfg, sc, &states, &plan.controls, plan.dt),
     );
     if !plan.status.success() {
         // A failed solve's controls may still converge; keep the replay's verdict
@@ -393,6 +386,26 @@ pub fn run_baseline(cfg: &EvalConfig, sc: &Scenario) -> Result<(Run, ocp::Plan)>
         },
         plan,
     ))
+}
+
+/// Footprint clearance of an open-loop plan (states every `dt` under
+/// piecewise-constant `controls`), each interval sub-divided; past the
+/// controls' end (the machine braking at its goal) the samples alone.
+fn plan_clearance(
+    cfg: &EvalConfig,
+    sc: &Scenario,
+    states: &[State],
+    controls: &[Control],
+    dt: f64,
+) -> Option<f64> {
+    let mut meter = ClearanceMeter::new(cfg.params, &sc.obstacles);
+    for (k, x) in states.iter().enumerate() {
+        match controls.get(k) {
+            Some(u) if k + 1 < states.len() => meter.observe_interval(x, u, dt),
+            _ => meter.observe(x),
+        }
+    }
+    meter.finish()
 }
 
 fn tracing_note(msg: &str) {
@@ -437,6 +450,7 @@ pub fn run_min_time(cfg: &EvalConfig, sc: &Scenario, others: &[(Method, Run)]) -
         Some(p) => (p.states.clone(), p.dt),
         None => (vec![sc.start], cfg.mpc.dt),
     };
+    let controls = r.plan.as_ref().map_or(&[][..], |p| &p.controls[..]);
     let mut row = score(
         sc,
         Method::MinTime.name(),
@@ -444,6 +458,7 @@ pub fn run_min_time(cfg: &EvalConfig, sc: &Scenario, others: &[(Method, Run)]) -
         dt,
         cfg.tolerance,
         &solve_ms,
+        plan_clearance(cfg, sc, &states, controls, dt),
     );
     // The bound is T*, reached at the last node (the test is held at 0.999 × tol).
     row.success = r.plan.is_some();

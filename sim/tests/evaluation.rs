@@ -98,11 +98,7 @@ fn scoring_follows_design_section_7() {
         name: "s".into(),
         start: State::zeros(),
         goal: Goal::new(1.0, 0.0, 0.0),
-        obstacles: vec![Obstacle {
-            x: 0.5,
-            y: 1.0,
-            r: 0.5,
-        }],
+        obstacles: vec![Obstacle::new(0.5, 1.0, 0.5)],
     };
     // Approach at 0.5 m/s, pass inside at 1.8 s while still moving, stop at 2.4 s.
     let xs: Vec<f64> = vec![
@@ -116,13 +112,13 @@ fn scoring_follows_design_section_7() {
         .zip(&vs)
         .map(|(&x, &v)| State::new(x, 0.0, 0.0, 0.0, 0.0, v))
         .collect();
-    let r = runner::score(&sc, "m", &states, 0.2, 0.1, &[1.0, 3.0, 2.0]);
+    let r = runner::score(&sc, "m", &states, 0.2, 0.1, &[1.0, 3.0, 2.0], Some(0.25));
     assert!(r.success);
     // x = 0.92 (distance 0.08) at k = 6; |v| < 0.05 from k = 10 on.
     assert!((r.t_converge.unwrap() - 1.2).abs() < 1e-12, "{r:?}");
     assert!((r.t_settle.unwrap() - 2.0).abs() < 1e-12, "{r:?}");
-    // Closest samples: x = 0.4 and 0.6, √(0.1² + 1) − 0.5.
-    assert!((r.min_clearance.unwrap() - (1.01f64.sqrt() - 0.5)).abs() < 1e-12);
+    // The clearance is the caller's (measured between the samples).
+    assert_eq!(r.min_clearance, Some(0.25));
     assert_eq!((r.solve_ms_median, r.solve_ms_max), (2.0, 3.0));
     // Path length up to convergence.
     assert!((r.path_length - 0.92).abs() < 1e-12);
@@ -164,11 +160,7 @@ fn runner_runs_every_method_in_parallel_and_writes_outputs() {
             name: "obs".into(),
             start: State::zeros(),
             goal: Goal::new(4.0, 0.3, 0.0),
-            obstacles: vec![Obstacle {
-                x: 2.0,
-                y: 0.0,
-                r: 0.6,
-            }],
+            obstacles: vec![Obstacle::new(2.0, 0.0, 0.6)],
         },
     ];
     let cfg = EvalConfig {

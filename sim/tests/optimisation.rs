@@ -27,11 +27,7 @@ fn baseline_and_min_time_gradients_match_finite_differences() {
     let p = MachineParams::default();
     let sc = scenario(
         Goal::new(3.0, 1.0, 2.5),
-        vec![Obstacle {
-            x: 1.0,
-            y: 0.2,
-            r: 0.4,
-        }],
+        vec![Obstacle::new(1.0, 0.2, 0.4)],
     );
     let s = BaselineSettings {
         horizon: 2.0,

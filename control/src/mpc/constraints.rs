@@ -1,63 +1,19 @@
 //! Constraint rows of the QP (paper eq. 17–18 and the control bounds of §IV-E):
 //! hard control bounds, soft state bounds on n = 1..N, soft circular obstacles
-//! (linearised distance, or the discrete-time CBF form), all linearised at
-//! the linearisation point (x̄, ū). Rows and entries are those of
-//! [`super::layout::QpLayout`].
+//! on both axle points (linearised distance, or the discrete-time CBF form),
+//! all linearised at the linearisation point (x̄, ū). Rows and entries are
+//! those of [`super::layout::QpLayout`].
 
-use serde::{Deserialize, Serialize};
+pub use crate::obstacle::Obstacle;
+use crate::obstacle::AxlePoint;
 
-use crate::model::{ix, Control, MachineParams, State};
+use crate::model::{Control, MachineParams, State};
 
-use super::layout::{QpLayout, SOFT_STATES};
-use super::settings::{MpcError, ObstacleConstraint};
+use super::layout::{QpLayout, OBS_STATES, SOFT_STATES};
+use super::settings::ObstacleConstraint;
 
 /// Most obstacles one goal can carry (DESIGN §6).
 pub const MAX_OBSTACLES: usize = 8;
-
-/// A circular obstacle around (x, y) that the front axle must stay out of; the
-/// radius already includes the machine's own (DESIGN §5).
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
-pub struct Obstacle {
-    pub x: f64,
-    pub y: f64,
-    pub radius: f64,
-}
-
-impl Obstacle {
-    pub const fn new(x: f64, y: f64, radius: f64) -> Self {
-        Self { x, y, radius }
-    }
-
-    /// h(x) = ‖p_f − o‖ − R (metres outside the circle; negative inside) and
-    /// ∂h/∂(x_f, y_f). At the centre, where the gradient is undefined, the
-    /// direction +x is used.
-    pub fn clearance(&self, x: &State) -> (f64, [f64; 2]) {
-        let (dx, dy) = (x[ix::X] - self.x, x[ix::Y] - self.y);
-        let d = dx.hypot(dy);
-        if d > 1e-9 {
-            (d - self.radius, [dx / d, dy / d])
-        } else {
-            (d - self.radius, [1.0, 0.0])
-        }
-    }
-
-    /// Finite centre and radius > 0.
-    pub fn validate(&self, index: usize) -> Result<(), MpcError> {
-        if !(self.x.is_finite() && self.y.is_finite()) {
-            return Err(MpcError::BadObstacle {
-                index,
-                reason: "centre must be finite",
-            });
-        }
-        if !(self.radius.is_finite() && self.radius > 0.0) {
-            return Err(MpcError::BadObstacle {
-                index,
-                reason: "radius must be finite and > 0",
-            });
-        }
-        Ok(())
-    }
-}
 
 /// Right-hand sides of the control and state bounds:
 /// ±(ū + Δu) ≤ u_max and ±(x̄_c + Δx_c) − s ≤ max_c.
@@ -86,47 +42,55 @@ pub fn fill_bounds(
     }
 }
 
-/// Obstacle rows: for each row k = 0..N−1 and slot j,
+/// Obstacle rows: for each row k = 0..N−1, slot j and axle point a,
 ///
-/// * distance form: h(x̄_{k+1}) + ∇h·Δp_{k+1} + s ≥ 0,
-/// * CBF form: h(x̄_{k+1}) + ∇h_{k+1}·Δp_{k+1} − (1 − γ)(h(x̄_k) + ∇h_k·Δp_k) + s ≥ 0,
+/// * distance form: h(x̄_{k+1}) + ∇h·Δx_{k+1} + s ≥ 0,
+/// * CBF form: h(x̄_{k+1}) + ∇h_{k+1}·Δx_{k+1} − (1 − γ)(h(x̄_k) + ∇h_k·Δx_k) + s ≥ 0,
 ///
-/// written as A w ≤ b. Empty slots get zero coefficients and b = 1 (always
-/// satisfied with a zero slack).
+/// with h the clearance of the axle point and ∇h over (x_f, y_f, θ, β),
+/// written as A w ≤ b. `margin` tightens every circle (h − margin ≥ 0).
+/// Empty slots get zero coefficients and b = 1 (always satisfied with a zero
+/// slack).
+#[allow(clippy::too_many_arguments)]
 pub fn fill_obstacles(
     layout: &QpLayout,
+    params: &MachineParams,
     form: ObstacleConstraint,
     gamma: f64,
+    margin: f64,
     obstacles: &[Obstacle],
     xbar: &[State],
     a: &mut [f64],
     b: &mut [f64],
 ) {
     let cbf = form == ObstacleConstraint::Cbf;
+    let m = OBS_STATES.len();
     for k in 0..layout.horizon {
         for j in 0..layout.n_obs {
-            let e = &layout.a_obs[k * layout.n_obs + j];
-            let r = layout.row_obstacle(k, j);
-            let Some(o) = obstacles.get(j) else {
-                a[e[0]] = 0.0;
-                a[e[1]] = 0.0;
-                if cbf {
-                    a[e[2]] = 0.0;
-                    a[e[3]] = 0.0;
+            for (ai, &point) in AxlePoint::ALL.iter().enumerate() {
+                let e = &layout.a_obs[layout.obstacle_entry(k, j, ai)];
+                let r = layout.row_obstacle(k, j, ai);
+                let Some(o) = obstacles.get(j) else {
+                    let used = if cbf { 2 * m } else { m };
+                    for &pos in &e[..used] {
+                        a[pos] = 0.0;
+                    }
+                    b[r] = 1.0;
+                    continue;
+                };
+                let (h1, g1) = o.point_clearance(params, point, &xbar[k + 1]);
+                for c in 0..m {
+                    a[e[c]] = -g1[c];
                 }
-                b[r] = 1.0;
-                continue;
-            };
-            let (h1, g1) = o.clearance(&xbar[k + 1]);
-            a[e[0]] = -g1[0];
-            a[e[1]] = -g1[1];
-            b[r] = h1;
-            if cbf {
-                let (h0, g0) = o.clearance(&xbar[k]);
-                let keep = 1.0 - gamma;
-                a[e[2]] = keep * g0[0];
-                a[e[3]] = keep * g0[1];
-                b[r] -= keep * h0;
+                b[r] = h1 - margin;
+                if cbf {
+                    let (h0, g0) = o.point_clearance(params, point, &xbar[k]);
+                    let keep = 1.0 - gamma;
+                    for c in 0..m {
+                        a[e[m + c]] = keep * g0[c];
+                    }
+                    b[r] -= keep * (h0 - margin);
+                }
             }
         }
     }
@@ -135,20 +99,33 @@ pub fn fill_obstacles(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::mpc::layout::AXLE_POINTS;
 
+    /// The rear-axle row carries the clearance's θ and β derivatives; an
+    /// obstacle only the rear axle is near gives the smaller right-hand side.
     #[test]
-    fn clearance_and_gradient() {
-        let o = Obstacle::new(1.0, 2.0, 0.5);
-        let (h, g) = o.clearance(&State::new(4.0, 6.0, 0.0, 0.0, 0.0, 0.0));
-        assert!((h - 4.5).abs() < 1e-15);
-        assert!((g[0] - 0.6).abs() < 1e-15 && (g[1] - 0.8).abs() < 1e-15);
-        let (h, g) = o.clearance(&State::new(1.0, 2.0, 0.0, 0.0, 0.0, 0.0));
-        assert_eq!((h, g), (-0.5, [1.0, 0.0]));
-        assert!(Obstacle::new(0.0, 0.0, 0.0)
-            .validate(3)
-            .unwrap_err()
-            .to_string()
-            .contains("obstacle 3"));
-        assert!(Obstacle::new(f64::NAN, 0.0, 1.0).validate(0).is_err());
+    fn rear_axle_rows_are_filled() {
+        let p = MachineParams::default();
+        let layout = QpLayout::new(2, 1, ObstacleConstraint::Distance);
+        let xbar = vec![State::new(0.0, 0.0, 0.3, 0.2, 0.0, 0.0); 3];
+        let o = [Obstacle::new(-1.5, -0.3, 0.2)];
+        let mut a = layout.a_constant.clone();
+        let mut b = vec![0.0; layout.n_eq + layout.n_ineq];
+        fill_obstacles(&layout, &p, ObstacleConstraint::Distance, 0.0, 0.05, &o, &xbar, &mut a, &mut b);
+        assert_eq!(AXLE_POINTS, 2);
+        for k in 0..2 {
+            let (hf, _) = o[0].point_clearance(&p, AxlePoint::Front, &xbar[k + 1]);
+            let (hr, gr) = o[0].point_clearance(&p, AxlePoint::Rear, &xbar[k + 1]);
+            assert!((b[layout.row_obstacle(k, 0, 0)] - (hf - 0.05)).abs() < 1e-15);
+            assert!((b[layout.row_obstacle(k, 0, 1)] - (hr - 0.05)).abs() < 1e-15);
+            assert!(hr < hf);
+            let e = layout.a_obs[layout.obstacle_entry(k, 0, 1)];
+            for c in 0..4 {
+                assert_eq!(a[e[c]], -gr[c]);
+            }
+            assert!(gr[2] != 0.0 && gr[3] != 0.0);
+            let ef = layout.a_obs[layout.obstacle_entry(k, 0, 0)];
+            assert_eq!((a[ef[2]], a[ef[3]]), (0.0, 0.0));
+        }
     }
 }

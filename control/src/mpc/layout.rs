@@ -22,13 +22,15 @@
 //! | controls | 4N | ≥ 0 | ±(ū_n + Δu_n) ≤ u_max (hard) |
 //! | states | 6N | ≥ 0 | ±(x̄_{n,c} + Δx_{n,c}) − s_{n,c} ≤ max_c, c ∈ {β, β̇, v_f}, n = 1..N |
 //! | state slacks | 3N | ≥ 0 | s_{n,c} ≥ 0 |
-//! | obstacles | n_obs·N | ≥ 0 | linearised h_j + s_k ≥ 0 (or its CBF form), row k = 0..N−1 |
+//! | obstacles | 2·n_obs·N | ≥ 0 | linearised h_{j,a} + s_k ≥ 0 (or its CBF form), row k = 0..N−1, axle point a ∈ {front, rear} |
 //! | obstacle slacks | N (if n_obs > 0) | ≥ 0 | s_k ≥ 0 |
 //!
-//! All obstacles of one row share its slack, so the penalty is w·Σ_k max_j
-//! (violation): still an exact penalty, with 7N fewer variables and rows than
-//! one slack per obstacle at 8 slots (the interior-point cost grows with the
-//! KKT size).
+//! All obstacles and both axle points of one row share its slack, so the
+//! penalty is w·Σ_k max_{j,a} (violation): still an exact penalty, with far
+//! fewer variables and rows than one slack per constraint (the interior-point
+//! cost grows with the KKT size). Each obstacle row has entries on
+//! (x_f, y_f, θ, β) of x_{k+1} (and of x_k in the CBF form): the rear axle
+//! moves with θ and β (DESIGN §10); the front rows write zeros there.
 
 use super::settings::ObstacleConstraint;
 
@@ -40,6 +42,10 @@ pub const NX: usize = 6;
 pub const NU: usize = 2;
 /// Soft-bounded state components: β, β̇, v_f.
 pub const SOFT_STATES: [usize; 3] = [3, 4, 5];
+/// State components an obstacle row depends on: x_f, y_f, θ, β.
+pub const OBS_STATES: [usize; 4] = [0, 1, 2, 3];
+/// Axle points constrained per obstacle (front, rear; DESIGN §10).
+pub const AXLE_POINTS: usize = 2;
 
 /// A fixed CSC sparsity pattern.
 #[derive(Debug, Clone, PartialEq)]
@@ -139,9 +145,9 @@ pub struct QpLayout {
     pub a_dyn_x: Vec<[[usize; NX]; NX]>,
     /// nzval position of −∂f/∂u (i, j) in the dynamics rows of stage n.
     pub a_dyn_u: Vec<[[usize; NU]; NX]>,
-    /// nzval positions of obstacle row (k, j): [∂/∂x_{k+1}, ∂/∂y_{k+1}] and, in
-    /// the CBF form, [∂/∂x_k, ∂/∂y_k]; index `k * n_obs + j`.
-    pub a_obs: Vec<[usize; 4]>,
+    /// nzval positions of obstacle row (k, j, a): ∂/∂(x_f, y_f, θ, β) of x_{k+1}
+    /// and, in the CBF form, of x_k; index [`Self::obstacle_entry`].
+    pub a_obs: Vec<[usize; 2 * OBS_STATES.len()]>,
     /// A's values that never change (identities, ±1 of bounds and slacks);
     /// the changing positions hold nominal values for the equilibration.
     pub a_constant: Vec<f64>,
@@ -153,7 +159,7 @@ impl QpLayout {
         let n_obs_slack = if n_obs > 0 { n } else { 0 };
         let n_var = NZ * n + NX + 3 * n + n_obs_slack;
         let n_eq = NX * (n + 1);
-        let n_ineq = 13 * n + n_obs * n + n_obs_slack;
+        let n_ineq = 13 * n + AXLE_POINTS * n_obs * n + n_obs_slack;
         let mut layout = Self {
             horizon,
             n_obs,
@@ -177,7 +183,7 @@ impl QpLayout {
             p_terminal: [[0; NX]; NX],
             a_dyn_x: vec![[[0; NX]; NX]; n],
             a_dyn_u: vec![[[0; NU]; NX]; n],
-            a_obs: vec![[0; 4]; n * n_obs],
+            a_obs: vec![[0; 2 * OBS_STATES.len()]; AXLE_POINTS * n * n_obs],
             a_constant: vec![],
         };
         layout.build_p();
@@ -225,14 +231,19 @@ impl QpLayout {
         self.n_eq + 10 * self.horizon + 3 * (n - 1) + c
     }
 
-    /// Row of obstacle constraint (k, j).
-    pub fn row_obstacle(&self, k: usize, j: usize) -> usize {
-        self.n_eq + 13 * self.horizon + k * self.n_obs + j
+    /// Index of obstacle row (k, j, axle point a) among the obstacle rows and in `a_obs`.
+    pub fn obstacle_entry(&self, k: usize, j: usize, a: usize) -> usize {
+        (k * self.n_obs + j) * AXLE_POINTS + a
+    }
+
+    /// Row of obstacle constraint (k, j, axle point a).
+    pub fn row_obstacle(&self, k: usize, j: usize, a: usize) -> usize {
+        self.n_eq + 13 * self.horizon + self.obstacle_entry(k, j, a)
     }
 
     /// Row of obstacle slack k ≥ 0.
     pub fn row_obstacle_slack(&self, k: usize) -> usize {
-        self.n_eq + 13 * self.horizon + self.horizon * self.n_obs + k
+        self.n_eq + 13 * self.horizon + AXLE_POINTS * self.horizon * self.n_obs + k
     }
 
     fn build_p(&mut self) {
@@ -329,25 +340,28 @@ impl QpLayout {
                 put(&mut b, self.row_state_slack(n, c), s, -1.0);
             }
         }
-        // Obstacles. Nominal gradient (1/√2, 1/√2).
+        // Obstacles. Nominal gradient (1/√2, 1/√2) in (x_f, y_f), 0 in θ, β.
         let g = -std::f64::consts::FRAC_1_SQRT_2;
+        let nominal = [g, g, 0.0, 0.0];
         let cbf = self.obstacle_constraint == ObstacleConstraint::Cbf;
-        let mut obs = vec![[0; 4]; self.horizon * self.n_obs];
+        let mut obs = vec![[0; 2 * OBS_STATES.len()]; AXLE_POINTS * self.horizon * self.n_obs];
         for k in 0..self.horizon {
             if self.n_obs == 0 {
                 break;
             }
             let s = self.obstacle_slack(k);
             for j in 0..self.n_obs {
-                let r = self.row_obstacle(k, j);
-                let e = &mut obs[k * self.n_obs + j];
-                e[0] = put(&mut b, r, self.x(k + 1), g);
-                e[1] = put(&mut b, r, self.x(k + 1) + 1, g);
-                if cbf {
-                    e[2] = put(&mut b, r, self.x(k), -g);
-                    e[3] = put(&mut b, r, self.x(k) + 1, -g);
+                for a in 0..AXLE_POINTS {
+                    let r = self.row_obstacle(k, j, a);
+                    let e = &mut obs[self.obstacle_entry(k, j, a)];
+                    for (c, &ix) in OBS_STATES.iter().enumerate() {
+                        e[c] = put(&mut b, r, self.x(k + 1) + ix, nominal[c]);
+                        if cbf {
+                            e[OBS_STATES.len() + c] = put(&mut b, r, self.x(k) + ix, -nominal[c]);
+                        }
+                    }
+                    put(&mut b, r, s, -1.0);
                 }
-                put(&mut b, r, s, -1.0);
             }
             put(&mut b, self.row_obstacle_slack(k), s, -1.0);
         }
@@ -367,7 +381,7 @@ impl QpLayout {
             }
         }
         for e in &mut obs {
-            let used = if cbf { 4 } else { 2 };
+            let used = if cbf { 2 } else { 1 } * OBS_STATES.len();
             for h in e.iter_mut().take(used) {
                 *h = pos[*h];
             }
@@ -441,10 +455,14 @@ mod tests {
                     (l.row_dynamics(k) + 5, l.u(k) + 1)
                 );
                 for j in 0..n_obs {
-                    assert_eq!(
-                        at(&l.a, l.a_obs[k * n_obs + j][1]),
-                        (l.row_obstacle(k, j), l.x(k + 1) + 1)
-                    );
+                    for a in 0..AXLE_POINTS {
+                        let e = l.a_obs[l.obstacle_entry(k, j, a)];
+                        assert_eq!(at(&l.a, e[1]), (l.row_obstacle(k, j, a), l.x(k + 1) + 1));
+                        assert_eq!(at(&l.a, e[3]), (l.row_obstacle(k, j, a), l.x(k + 1) + 3));
+                        if form == ObstacleConstraint::Cbf {
+                            assert_eq!(at(&l.a, e[6]), (l.row_obstacle(k, j, a), l.x(k) + 2));
+                        }
+                    }
                 }
             }
             assert_eq!(at(&l.p, l.p_terminal[0][5]), (l.x(n), l.x(n) + 5));

@@ -263,7 +263,9 @@ fn nominal_data<D: Dynamics>(
     constraints::fill_bounds(layout, params, &xs, &us, &mut data.b);
     for k in 0..layout.horizon {
         for j in 0..layout.n_obs {
-            data.b[layout.row_obstacle(k, j)] = 1.0;
+            for a in 0..layout::AXLE_POINTS {
+                data.b[layout.row_obstacle(k, j, a)] = 1.0;
+            }
         }
     }
     data

@@ -53,6 +53,11 @@ pub struct MpcSettings {
     pub obstacle_constraint: ObstacleConstraint,
     /// γ_cbf in (0, 1] of the CBF form. Default 0.3.
     pub cbf_gamma: f64,
+    /// Margin [m] by which the planned axle points keep clear of every circle
+    /// (h ≥ margin at the ticks), so that the plant between ticks, its lag
+    /// and the linearisation error stay outside the circle itself. Default
+    /// 0.05. ≥ 0.
+    pub obstacle_margin: f64,
     /// Obstacle slots reserved in the QP (its sparsity pattern is fixed), at
     /// most 8. Default 8.
     pub max_obstacles: usize,
@@ -88,6 +93,7 @@ impl Default for MpcSettings {
             obstacle_slack_weight: 100.0,
             obstacle_constraint: ObstacleConstraint::Distance,
             cbf_gamma: 0.3,
+            obstacle_margin: 0.05,
             max_obstacles: MAX_OBSTACLES,
             delay: 0.2,
             qp_tolerance: 1e-6,
@@ -117,8 +123,8 @@ pub enum MpcError {
     BadGoal { x: f64, y: f64, theta: f64 },
     #[error("{given} obstacles given, the MPC was built for at most {max} (`max_obstacles`)")]
     TooManyObstacles { given: usize, max: usize },
-    #[error("obstacle {index}: {reason}")]
-    BadObstacle { index: usize, reason: &'static str },
+    #[error(transparent)]
+    BadObstacle(#[from] crate::obstacle::BadObstacle),
     #[error("no goal set: call `set_goal` before `step`")]
     NoGoal,
     #[error("QP solver set-up failed: {0}")]
@@ -158,6 +164,7 @@ impl MpcSettings {
             ("levenberg_marquardt", self.levenberg_marquardt),
             ("min_eigenvalue", self.min_eigenvalue),
             ("delay", self.delay),
+            ("obstacle_margin", self.obstacle_margin),
         ];
         for (name, value) in non_negative {
             if !(value.is_finite() && value >= 0.0) {

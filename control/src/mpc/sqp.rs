@@ -322,8 +322,10 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
         let obstacles = &self.obstacles[..self.n_obstacles];
         fill_obstacles(
             l,
+            &self.params,
             s.obstacle_constraint,
             s.cbf_gamma,
+            s.obstacle_margin,
             obstacles,
             &self.xs,
             &mut d.a,
