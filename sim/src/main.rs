@@ -6,7 +6,7 @@
 //!     [--sqp-iterations 1] [--step-length 1] \
 //!     [--delay 0.2] [--lag 0.1] [--tolerance 0.1] [--weights critic-weights] --out out/eval
 //! wlnav-sim paper [--weights critic-weights] [--out docs]
-//! wlnav-sim scenarios --out sim/scenarios
+//! wlnav-sim scenarios --out sim/scenarios   # paper128, selection64, obstacles200 (seeded)
 //! ```
 
 use std::path::{Path, PathBuf};
@@ -15,6 +15,7 @@ use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand, ValueEnum};
 use control::critic::HessianMode;
 use control::mpc::{MpcSettings, ObstacleConstraint};
+use control::MachineParams;
 use control::plant::PlantConfig;
 use control::scenario;
 use sim::eval;
@@ -116,6 +117,9 @@ enum Command {
         out: PathBuf,
     },
 }
+
+/// Seed of `sim/scenarios/obstacles200.csv` (issue 14).
+const OBSTACLES_SEED: u64 = 14;
 
 fn load_scenarios(path: &Path) -> Result<Vec<scenario::Scenario>> {
     let text =
@@ -224,6 +228,10 @@ fn main() -> Result<()> {
             for (name, set) in [
                 ("paper128.csv", scenario::paper_scenarios()),
                 ("selection64.csv", scenario::selection_scenarios(64, 1)),
+                (
+                    "obstacles200.csv",
+                    scenario::obstacle_scenarios(50, OBSTACLES_SEED, &MachineParams::default()),
+                ),
             ] {
                 let path = out.join(name);
                 std::fs::write(&path, scenario::to_csv(&set))?;
