@@ -2,9 +2,11 @@
 //!
 //! ```text
 //! wlnav-sim eval --scenarios sim/scenarios/paper128.csv --methods mpc,actor,baseline,min-time \
-//!     [--horizon 10] [--hessian exact|gauss-newton] [--obstacles distance|cbf] \
-//!     [--sqp-iterations 1] [--step-length 1] \
+//!     [--horizon N] [--hessian exact|gauss-newton] [--obstacles distance|cbf] \
+//!     [--sqp-iterations K] [--step-length A] [--obstacle-margin M] \
 //!     [--delay 0.2] [--lag 0.1] [--tolerance 0.1] [--weights critic-weights] --out out/eval
+//! # controller options left out take the daemon's defaults (MpcSettings::default());
+//! # the plant is ideal unless --delay / --lag are given (the paper's test)
 //! wlnav-sim paper [--weights critic-weights] [--out docs]
 //! wlnav-sim scenarios --out sim/scenarios   # paper128, selection64, obstacles200 (seeded)
 //! ```
@@ -69,19 +71,24 @@ enum Command {
         /// Comma-separated: mpc, actor, baseline, min-time.
         #[arg(long, default_value = "mpc,actor,baseline,min-time")]
         methods: String,
-        /// MPC horizon N.
-        #[arg(long, default_value_t = 10)]
-        horizon: usize,
-        #[arg(long, value_enum, default_value_t = Hessian::Exact)]
-        hessian: Hessian,
-        #[arg(long, value_enum, default_value_t = Obstacles::Distance)]
-        obstacles: Obstacles,
-        /// SQP iterations per tick (1 = real-time iteration).
-        #[arg(long, default_value_t = 1)]
-        sqp_iterations: usize,
-        /// Step length of every SQP iteration, in (0, 1].
-        #[arg(long, default_value_t = 1.0)]
-        step_length: f64,
+        /// MPC horizon N (default: the daemon's, `MpcSettings::default()`).
+        #[arg(long)]
+        horizon: Option<usize>,
+        /// Hessian of the critic cost (default: the daemon's).
+        #[arg(long, value_enum)]
+        hessian: Option<Hessian>,
+        /// Obstacle constraint form (default: the daemon's).
+        #[arg(long, value_enum)]
+        obstacles: Option<Obstacles>,
+        /// SQP iterations per tick (1 = real-time iteration; default: the daemon's).
+        #[arg(long)]
+        sqp_iterations: Option<usize>,
+        /// Step length of every SQP iteration, in (0, 1] (default: the daemon's).
+        #[arg(long)]
+        step_length: Option<f64>,
+        /// Margin [m] the planned axle points keep from every circle (default: the daemon's).
+        #[arg(long)]
+        obstacle_margin: Option<f64>,
         /// Plant input delay [s] (compensated by the MPC).
         #[arg(long, default_value_t = 0.0)]
         delay: f64,
@@ -176,18 +183,21 @@ fn main() -> Result<()> {
             let mut cfg = base_config(&common);
             cfg.methods = Method::parse_list(&methods)?;
             cfg.duration = duration;
+            // Unset options keep the daemon's defaults (the same `MpcSettings::default()`).
+            let d = MpcSettings::default();
             cfg.mpc = MpcSettings {
-                horizon,
-                hessian: match hessian {
+                horizon: horizon.unwrap_or(d.horizon),
+                hessian: hessian.map_or(d.hessian, |h| match h {
                     Hessian::Exact => HessianMode::Exact,
                     Hessian::GaussNewton => HessianMode::GaussNewton,
-                },
-                obstacle_constraint: match obstacles {
+                }),
+                obstacle_constraint: obstacles.map_or(d.obstacle_constraint, |o| match o {
                     Obstacles::Distance => ObstacleConstraint::Distance,
                     Obstacles::Cbf => ObstacleConstraint::Cbf,
-                },
-                sqp_iterations,
-                step_length,
+                }),
+                sqp_iterations: sqp_iterations.unwrap_or(d.sqp_iterations),
+                step_length: step_length.unwrap_or(d.step_length),
+                obstacle_margin: obstacle_margin.unwrap_or(d.obstacle_margin),
                 ..cfg.mpc
             };
             cfg.mpc.validate()?;
@@ -200,8 +210,14 @@ fn main() -> Result<()> {
             cfg.plant.validate()?;
             let ev = eval::evaluate(&cfg, &nets, &set)?;
             let header = format!(
-                "# eval: {}\n\nmethods {methods}, N = {horizon}, SQP iterations {sqp_iterations} × step {step_length}, delay {delay} s, lag {lag} s, tolerance {}, networks: {}\n",
+                "# eval: {}\n\nmethods {methods}, N = {}, Hessian {:?}, obstacles {:?} with margin {} m, SQP iterations {} × step {}, delay {delay} s, lag {lag} s, tolerance {}, networks: {}\n",
                 scenarios.display(),
+                cfg.mpc.horizon,
+                cfg.mpc.hessian,
+                cfg.mpc.obstacle_constraint,
+                cfg.mpc.obstacle_margin,
+                cfg.mpc.sqp_iterations,
+                cfg.mpc.step_length,
                 common.tolerance,
                 nets.source
             );
