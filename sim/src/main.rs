@@ -168,6 +168,7 @@ fn main() -> Result<()> {
             obstacles,
             sqp_iterations,
             step_length,
+            obstacle_margin,
             delay,
             lag,
             duration,
