@@ -17,9 +17,9 @@ use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand, ValueEnum};
 use control::critic::HessianMode;
 use control::mpc::{MpcSettings, ObstacleConstraint};
-use control::MachineParams;
 use control::plant::PlantConfig;
 use control::scenario;
+use control::MachineParams;
 use sim::eval;
 use sim::runner::{EvalConfig, Method, Networks};
 
@@ -112,6 +112,12 @@ enum Command {
         scenarios: PathBuf,
         #[arg(long, default_value = "sim/scenarios/highlighted.csv")]
         highlighted: PathBuf,
+        /// Work-site scenario files of section 4, comma-separated (empty: no section 4).
+        #[arg(
+            long,
+            default_value = "sim/scenarios/obstacles.csv,sim/scenarios/obstacles200.csv"
+        )]
+        worksite: String,
         #[command(flatten)]
         common: Common,
         #[arg(long, default_value = "docs")]
@@ -230,15 +236,20 @@ fn main() -> Result<()> {
         Command::Paper {
             scenarios,
             highlighted,
+            worksite,
             common,
             out,
         } => {
             let set = load_scenarios(&scenarios)?;
             let hl = load_scenarios(&highlighted)?;
+            let mut site = Vec::new();
+            for f in worksite.split(',').filter(|f| !f.trim().is_empty()) {
+                site.extend(load_scenarios(Path::new(f.trim()))?);
+            }
             let nets = networks(&common)?;
             let cfg = base_config(&common);
             let cmd = "cargo run --release -p sim --bin wlnav-sim -- paper";
-            sim::report::paper(&cfg, &nets, &set, &hl, &out, cmd)?;
+            sim::report::paper(&cfg, &nets, &set, &hl, &site, &out, cmd)?;
         }
         Command::Scenarios { out } => {
             std::fs::create_dir_all(&out)?;
