@@ -25,10 +25,7 @@ fn wiggly_point(n: usize) -> Vec<f64> {
 #[test]
 fn baseline_and_min_time_gradients_match_finite_differences() {
     let p = MachineParams::default();
-    let sc = scenario(
-        Goal::new(3.0, 1.0, 2.5),
-        vec![Obstacle::new(1.0, 0.2, 0.4)],
-    );
+    let sc = scenario(Goal::new(3.0, 1.0, 2.5), vec![Obstacle::new(1.0, 0.2, 0.4)]);
     let s = BaselineSettings {
         horizon: 2.0,
         ..Default::default()
