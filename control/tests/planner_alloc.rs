@@ -34,8 +34,11 @@ fn set_goal_and_update_do_not_allocate() {
         .collect();
     let goal = Goal::new(8.0, 0.0, 0.0);
     let start = State::zeros();
-    for kind in [PlannerKind::HybridAStar] {
+    for kind in [PlannerKind::HybridAStar, PlannerKind::WaypointGraph] {
         for networks in [false, true] {
+            if kind == PlannerKind::WaypointGraph && !networks {
+                continue;
+            }
             let settings = NavigatorSettings {
                 planner: kind,
                 ..NavigatorSettings::default()

@@ -24,11 +24,13 @@ pub mod hybrid_astar;
 pub mod primitives;
 pub mod rollout;
 pub mod route;
+pub mod waypoint_graph;
 pub mod world;
 
 use std::time::{Duration, Instant};
 
 pub use hybrid_astar::{HybridAStar, SearchFailure, SearchStats};
+pub use waypoint_graph::WaypointGraph;
 pub use world::World;
 
 use crate::actor::{Actor, ActorWorkspace};
@@ -131,6 +133,9 @@ pub struct NavigatorSettings {
     pub ring_offset: f64,
     pub graph_neighbours: usize,
     pub max_edge_checks: usize,
+    /// Waypoint graph: longest edge [m] (the critic was trained on goals up
+    /// to 10 m away). Default 6.
+    pub graph_edge_length: f64,
 }
 
 impl Default for NavigatorSettings {
@@ -168,6 +173,7 @@ impl Default for NavigatorSettings {
             ring_offset: 0.4,
             graph_neighbours: 10,
             max_edge_checks: 40,
+            graph_edge_length: 6.0,
         }
     }
 }
@@ -199,6 +205,7 @@ impl NavigatorSettings {
             ("rollout_dt", self.rollout_dt),
             ("direct_horizon", self.direct_horizon),
             ("ring_offset", self.ring_offset),
+            ("graph_edge_length", self.graph_edge_length),
         ];
         for (name, v) in positive {
             if !(v.is_finite() && v > 0.0) {
@@ -359,16 +366,19 @@ pub struct PlanReport {
 struct Networks {
     actor: Actor,
     actor_ws: ActorWorkspace,
-    // Kept for the waypoint graph's edge costs.
-    #[allow(dead_code)]
+    /// The waypoint graph's edge costs.
     critic: Critic,
-    #[allow(dead_code)]
     critic_ws: CriticWorkspace,
 }
 
 enum Planner {
     HybridAStar(Box<HybridAStar>),
+    WaypointGraph(Box<WaypointGraph>),
 }
+
+/// Seconds per unit of critic cost when the fit fails (measured on the
+/// published critic: about 0.22, `docs/global-layer.md`).
+const FALLBACK_SECONDS_PER_COST: f64 = 0.22;
 
 /// The global layer: built once, then `set_goal` per goal and `update` per tick.
 pub struct Navigator {
@@ -407,24 +417,41 @@ impl Navigator {
             .validate()
             .map_err(|_| bad("params", "machine parameters must be valid", f64::NAN))?;
         settings.validate()?;
-        let planner = match settings.planner {
-            PlannerKind::HybridAStar => {
-                Planner::HybridAStar(Box::new(HybridAStar::new(params, &settings)))
-            }
-            PlannerKind::WaypointGraph => {
-                return Err(bad(
-                    "planner",
-                    "waypoint-graph is not available yet",
-                    f64::NAN,
-                ))
-            }
-        };
-        let networks = networks.map(|(actor, critic)| Networks {
+        let mut networks = networks.map(|(actor, critic)| Networks {
             actor_ws: ActorWorkspace::new(&actor),
             critic_ws: CriticWorkspace::new(&critic),
             actor,
             critic,
         });
+        let planner = match (settings.planner, networks.as_mut()) {
+            (PlannerKind::HybridAStar, _) => {
+                Planner::HybridAStar(Box::new(HybridAStar::new(params, &settings)))
+            }
+            (PlannerKind::WaypointGraph, Some(n)) => {
+                let seconds_per_cost = waypoint_graph::calibrate(
+                    &params,
+                    &n.actor,
+                    &mut n.actor_ws,
+                    &n.critic,
+                    &mut n.critic_ws,
+                    settings.rollout_dt,
+                    settings.shot_tolerance,
+                )
+                .unwrap_or(FALLBACK_SECONDS_PER_COST);
+                Planner::WaypointGraph(Box::new(WaypointGraph::new(
+                    params,
+                    &settings,
+                    seconds_per_cost,
+                )))
+            }
+            (PlannerKind::WaypointGraph, None) => {
+                return Err(bad(
+                    "planner",
+                    "waypoint-graph needs the actor and critic",
+                    f64::NAN,
+                ))
+            }
+        };
         Ok(Self {
             params,
             world: World::new(params, settings.max_obstacles, settings.clearance_margin),
@@ -624,10 +651,24 @@ impl Navigator {
         if direct {
             self.path.clear();
         } else {
-            let actor = self.networks.as_mut().map(|n| (&n.actor, &mut n.actor_ws));
-            let (result, stats) = match &mut self.planner {
-                Planner::HybridAStar(h) => {
+            let (result, stats) = match (&mut self.planner, self.networks.as_mut()) {
+                (Planner::HybridAStar(h), n) => {
+                    let actor = n.map(|n| (&n.actor, &mut n.actor_ws));
                     h.search(&self.world, start, &goal, actor, &mut self.path)
+                }
+                (Planner::WaypointGraph(w), Some(n)) => w.search(
+                    &self.world,
+                    start,
+                    &goal,
+                    &n.actor,
+                    &mut n.actor_ws,
+                    &n.critic,
+                    &mut n.critic_ws,
+                    &mut self.path,
+                ),
+                // `new` refuses a waypoint graph without networks.
+                (Planner::WaypointGraph(_), None) => {
+                    (Err(SearchFailure::Unreachable), SearchStats::default())
                 }
             };
             report.search = stats;
@@ -644,10 +685,16 @@ impl Navigator {
         }
         if new_route {
             if report.outcome == PlanOutcome::Route {
+                // Hybrid A*'s nodes are 0.6 m apart: thin them to the
+                // spacing. The graph's nodes are each a chosen waypoint.
+                let spacing = match self.planner {
+                    Planner::HybridAStar(_) => self.settings.subgoal_spacing,
+                    Planner::WaypointGraph(_) => 0.0,
+                };
                 route::subgoals_from_path(
                     &self.path,
                     goal,
-                    self.settings.subgoal_spacing,
+                    spacing,
                     self.settings.subgoal_radius,
                     &mut self.route,
                 );

@@ -33,6 +33,13 @@ fn navigator(kind: PlannerKind, networks: bool) -> Navigator {
     Navigator::new(params(), settings, networks.then(trained)).unwrap()
 }
 
+/// Each planner, with and without the networks (the graph needs them).
+const COMBINATIONS: [(PlannerKind, bool); 3] = [
+    (PlannerKind::HybridAStar, false),
+    (PlannerKind::HybridAStar, true),
+    (PlannerKind::WaypointGraph, true),
+];
+
 fn at_rest(x: f64, y: f64, theta: f64) -> State {
     State::new(x, y, theta, 0.0, 0.0, 0.0)
 }
@@ -152,14 +159,18 @@ fn open_ground_is_direct_from_the_first_tick() {
 
 #[test]
 fn a_wall_is_in_the_way_and_the_route_goes_around_it() {
-    for networks in [false, true] {
-        let mut nav = navigator(PlannerKind::HybridAStar, networks);
+    for (kind, networks) in COMBINATIONS {
+        let mut nav = navigator(kind, networks);
         let goal = Goal::new(8.0, 0.0, 0.0);
         let obstacles = wall();
         nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &obstacles)
             .unwrap();
         let report = nav.last_plan().unwrap();
-        assert_eq!(report.outcome, PlanOutcome::Route, "networks {networks}");
+        assert_eq!(
+            report.outcome,
+            PlanOutcome::Route,
+            "{kind:?} networks {networks}"
+        );
         assert_path_clear(&nav, &obstacles, nav.settings().clearance_margin);
         // Around the wall's end (|y| ≥ 3.2 + 0.6).
         let widest = nav.path().iter().map(|q| q.y.abs()).fold(0.0, f64::max);
@@ -167,10 +178,14 @@ fn a_wall_is_in_the_way_and_the_route_goes_around_it() {
         let route = nav.route().to_vec();
         assert!(route.len() >= 3, "{route:?}");
         assert_eq!(*route.last().unwrap(), goal);
-        // Consecutive subgoals are about the spacing apart.
+        // Consecutive subgoals are at most an edge / about the spacing apart.
+        let s = nav.settings();
         for w in route.windows(2) {
             let d = (w[1].x - w[0].x).hypot(w[1].y - w[0].y);
-            assert!(d < 2.0 * nav.settings().subgoal_spacing + 1.0, "{d}");
+            assert!(
+                d <= s.graph_edge_length.max(2.0 * s.subgoal_spacing + 1.0),
+                "{d}"
+            );
         }
         // The first tick drives to the first subgoal, not the goal.
         match nav.update(&at_rest(0.0, 0.0, 0.0), 0.0) {
@@ -188,26 +203,39 @@ fn a_wall_is_in_the_way_and_the_route_goes_around_it() {
 
 #[test]
 fn a_gap_between_two_walls_is_taken() {
-    let mut nav = navigator(PlannerKind::HybridAStar, false);
-    let goal = Goal::new(8.0, 0.0, 0.0);
-    let obstacles = gap();
-    nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &obstacles)
-        .unwrap();
-    assert_eq!(nav.last_plan().unwrap().outcome, PlanOutcome::Route);
-    assert_path_clear(&nav, &obstacles, nav.settings().clearance_margin);
-    // It crosses x = 4 within the gap.
-    let crossing = nav
-        .path()
-        .windows(2)
-        .find(|w| w[0].x < 4.0 && w[1].x >= 4.0)
-        .expect("the path crosses x = 4");
-    assert!((crossing[1].y - GAP_Y).abs() < 1.0, "{crossing:?}");
+    for (kind, networks) in COMBINATIONS {
+        let mut nav = navigator(kind, networks);
+        let goal = Goal::new(8.0, 0.0, 0.0);
+        let obstacles = gap();
+        nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &obstacles)
+            .unwrap();
+        assert_eq!(
+            nav.last_plan().unwrap().outcome,
+            PlanOutcome::Route,
+            "{kind:?}"
+        );
+        assert_path_clear(&nav, &obstacles, nav.settings().clearance_margin);
+        // The path, then the last leg to the goal (a goal shot's), crosses
+        // x = 4 between the gap's edges at 1 and 3.
+        let mut pts: Vec<(f64, f64)> = nav.path().iter().map(|q| (q.x, q.y)).collect();
+        pts.push((goal.x, goal.y));
+        let crossing = pts
+            .windows(2)
+            .find(|w| w[0].0 < 4.0 && w[1].0 >= 4.0)
+            .unwrap_or_else(|| panic!("{kind:?}: no crossing of x = 4: {pts:?}"));
+        let f = (4.0 - crossing[0].0) / (crossing[1].0 - crossing[0].0);
+        let y = crossing[0].1 + f * (crossing[1].1 - crossing[0].1);
+        assert!(
+            (y - GAP_Y).abs() < 1.0,
+            "{kind:?} crosses at y {y}: {crossing:?}"
+        );
+    }
 }
 
 #[test]
 fn an_enclosed_goal_has_no_route_and_aborts_on_the_first_tick() {
-    for networks in [false, true] {
-        let mut nav = navigator(PlannerKind::HybridAStar, networks);
+    for (kind, networks) in COMBINATIONS {
+        let mut nav = navigator(kind, networks);
         let goal = Goal::new(8.0, 0.0, 0.0);
         nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &ring())
             .unwrap();
@@ -367,6 +395,24 @@ fn a_stall_replans_from_the_current_state_then_aborts() {
         "aborted at {t}"
     );
     assert!(nav.plans() as usize <= 1 + s.max_replans);
+}
+
+#[test]
+fn the_waypoint_graph_needs_the_networks_and_its_cost_scale_is_fitted() {
+    let s = NavigatorSettings {
+        planner: PlannerKind::WaypointGraph,
+        ..NavigatorSettings::default()
+    };
+    let e = Navigator::new(params(), s, None).err().unwrap();
+    assert!(e.to_string().contains("planner"), "{e}");
+    // The published critic's cost-to-go is close to proportional to the
+    // actor's time to the goal: the fit lands near the measured 0.22 s.
+    let (actor, critic) = trained();
+    let mut aws = ActorWorkspace::new(&actor);
+    let mut cws = CriticWorkspace::new(&critic);
+    let k = waypoint_graph::calibrate(&params(), &actor, &mut aws, &critic, &mut cws, 0.2, 0.2)
+        .unwrap();
+    assert!((0.15..0.3).contains(&k), "{k} s per unit of cost");
 }
 
 #[test]
