@@ -147,6 +147,40 @@ pub fn navigation_text(ev: &Evaluation) -> String {
     )
 }
 
+/// One row per plan of every run with a navigator: when, how long, the
+/// route (`x:y:theta` subgoals separated by `;`, the goal last) and how the
+/// run's navigation ended.
+pub fn navigation_csv(ev: &Evaluation) -> Option<String> {
+    let mut out =
+        String::from("name,method,plan,at,plan_ms,expansions,shots,route,abort,aborted_at\n");
+    let mut any = false;
+    for s in &ev.runs {
+        for (m, r) in &s.runs {
+            let Some(n) = &r.navigation else { continue };
+            any = true;
+            for (k, route) in n.routes.iter().enumerate() {
+                let goals: Vec<String> = route
+                    .iter()
+                    .map(|g| format!("{:.3}:{:.3}:{:.3}", g.x, g.y, g.theta))
+                    .collect();
+                out.push_str(&format!(
+                    "{},{},{k},{},{:.3},{},{},{},{},{}\n",
+                    s.scenario.name,
+                    m.name(),
+                    n.plan_at.get(k).copied().unwrap_or(0.0),
+                    n.plan_ms.get(k).copied().unwrap_or(0.0),
+                    n.plan_work.get(k).map_or(0, |w| w.0),
+                    n.plan_work.get(k).map_or(0, |w| w.1),
+                    goals.join(";"),
+                    n.abort.map_or("", |a| a.name()),
+                    n.aborted_at.map_or(String::new(), |t| format!("{t:.1}")),
+                ));
+            }
+        }
+    }
+    any.then_some(out)
+}
+
 /// Writes results.csv, summary.md and the plots into `dir`.
 pub fn write_outputs(
     ev: &Evaluation,
@@ -163,6 +197,9 @@ pub fn write_outputs(
         navigation_text(ev)
     );
     std::fs::write(dir.join("summary.md"), summary)?;
+    if let Some(csv) = navigation_csv(ev) {
+        std::fs::write(dir.join("navigation.csv"), csv)?;
+    }
     if plots_per_scenario {
         let tdir = dir.join("trajectories");
         std::fs::create_dir_all(&tdir)?;

@@ -142,6 +142,9 @@ enum Command {
         /// Navigator: seconds without approach before a replan.
         #[arg(long)]
         replan_after: Option<f64>,
+        /// Navigator: clearance the actor's roll-out keeps for "nothing in the way" [m].
+        #[arg(long)]
+        direct_margin: Option<f64>,
         #[command(flatten)]
         common: Common,
         #[arg(long)]
@@ -225,6 +228,7 @@ fn main() -> Result<()> {
             subgoal_spacing,
             route_margin,
             replan_after,
+            direct_margin,
             common,
             out,
         } => {
@@ -267,6 +271,7 @@ fn main() -> Result<()> {
                     subgoal_spacing: subgoal_spacing.unwrap_or(nd.subgoal_spacing),
                     clearance_margin: route_margin.unwrap_or(nd.clearance_margin),
                     replan_after: replan_after.unwrap_or(nd.replan_after),
+                    direct_margin: direct_margin.unwrap_or(nd.direct_margin),
                     ..nd.clone()
                 }),
             };

@@ -206,6 +206,10 @@ pub struct Navigation {
     pub routes: Vec<Vec<Goal>>,
     /// Duration of every plan [ms] (the "in the way" test and the search).
     pub plan_ms: Vec<f64>,
+    /// When each plan was made [s] (the goal's at 0).
+    pub plan_at: Vec<f64>,
+    /// Each plan's search: (expansions, shots or edge checks).
+    pub plan_work: Vec<(usize, usize)>,
     /// Duration of every `update` [ms] (including the replans in it).
     pub update_ms: Vec<f64>,
     /// Why the navigator ended the run, if it did.
@@ -216,12 +220,14 @@ pub struct Navigation {
 
 impl Navigation {
     /// Records the navigator's latest plan if it is new.
-    fn record_plan(&mut self, nav: &Navigator, seen: &mut u64) {
+    fn record_plan(&mut self, nav: &Navigator, seen: &mut u64, now: f64) {
         if nav.plans() != *seen {
             *seen = nav.plans();
             if let Some(r) = nav.last_plan() {
                 self.plan_ms.push(r.duration.as_secs_f64() * 1e3);
+                self.plan_work.push((r.search.expansions, r.search.shots));
             }
+            self.plan_at.push(now);
             self.routes.push(nav.route().to_vec());
         }
     }
@@ -337,7 +343,7 @@ pub fn run_mpc(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run> 
                 let t0 = Instant::now();
                 let step = nav.update(&x, now);
                 rec.update_ms.push(t0.elapsed().as_secs_f64() * 1e3);
-                rec.record_plan(nav, &mut plans_seen);
+                rec.record_plan(nav, &mut plans_seen, now);
                 match step {
                     NavStep::Drive { target, .. } => {
                         if mpc.goal() != Some(target) {

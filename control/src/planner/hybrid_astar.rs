@@ -85,6 +85,12 @@ impl PartialOrd for Open {
 
 const NO_PARENT: u32 = u32::MAX;
 
+/// Steps of a goal shot over `dist`: the distance at a cautious pace plus the
+/// final approach.
+fn shot_steps(dist: f64, dt: f64) -> usize {
+    ((2.0 * dist + 8.0) / dt).ceil() as usize
+}
+
 /// Both axle points keep the margin along `prim` driven from `pose` (every
 /// sample, at the primitive's articulation). Articulating from the node's
 /// `beta` to the primitive's swings the rear axle about the joint at the
@@ -257,18 +263,18 @@ impl HybridAStar {
             since_shot += 1;
             if let Some((a, ws)) = actor.as_mut() {
                 let dist = (n.pose[0] - goal.x).hypot(n.pose[1] - goal.y);
-                let grid = self.heuristic.distance(n.pose[0], n.pose[1]);
-                let in_sight = grid <= 1.1 * dist + 2.0 * self.resolution;
-                if in_sight
-                    && dist <= s.shot_range
-                    && since_shot >= s.shot_interval
+                // Shots get more frequent closer to the goal (as Nav2's
+                // analytic expansion), and are only tried along a clear line
+                // of sight: the obstacle-blind actor heads roughly straight.
+                let interval = (s.shot_interval as f64 * dist / s.shot_range) as usize;
+                if dist <= s.shot_range
+                    && since_shot >= interval
                     && stats.shots < s.max_shots
+                    && world.segment_clear([n.pose[0], n.pose[1]], [goal.x, goal.y], world.margin())
                 {
                     since_shot = 0;
                     stats.shots += 1;
                     let x = State::new(n.pose[0], n.pose[1], n.pose[2], n.beta, 0.0, 0.0);
-                    // Long enough for the distance at a cautious pace plus the final approach.
-                    let steps = ((2.0 * dist + 8.0) / s.dt).ceil() as usize;
                     let r = roll_out(
                         &self.params,
                         a,
@@ -278,7 +284,8 @@ impl HybridAStar {
                         goal,
                         Arrival::Pose(s.shot_tolerance),
                         s.dt,
-                        steps,
+                        shot_steps(dist, s.dt),
+                        None,
                     );
                     if r.reached {
                         found = Some(node);

@@ -84,6 +84,11 @@ pub struct NavigatorSettings {
     /// Clearance both axle points keep from every (inflated) circle on a
     /// planned route and in the "in the way" test [m]. Default 0.15.
     pub clearance_margin: f64,
+    /// Clearance the actor's roll-out must keep for "nothing in the way"
+    /// [m]: more than the route's, since the MPC does not drive the actor's
+    /// path exactly and, without subgoals, may stall at a circle it passes
+    /// close by. Default 0.3.
+    pub direct_margin: f64,
     /// Half the side of the square the planners search, centred between
     /// start and goal [m]. Default 14.
     pub workspace_half_size: f64,
@@ -149,6 +154,7 @@ impl Default for NavigatorSettings {
             max_replans: 3,
             reached_tolerance: SUCCESS_TOLERANCE,
             clearance_margin: 0.15,
+            direct_margin: 0.3,
             workspace_half_size: 14.0,
             grid_resolution: 0.3,
             heading_bins: 72,
@@ -215,6 +221,7 @@ impl NavigatorSettings {
         let non_negative = [
             ("progress.min_approach", self.progress.min_approach),
             ("clearance_margin", self.clearance_margin),
+            ("direct_margin", self.direct_margin),
             ("direction_change_penalty", self.direction_change_penalty),
         ];
         for (name, v) in non_negative {
@@ -634,19 +641,22 @@ impl Navigator {
         // Near a pile the start or goal may already be inside the margin: the
         // plan keeps what the endpoints have (half of it), never more than asked.
         let goal_pose = State::new(goal.x, goal.y, goal.theta, 0.0, 0.0, 0.0);
-        let margin = s
-            .clearance_margin
-            .min(0.5 * self.world.state_clearance(start))
-            .min(0.5 * self.world.state_clearance(&goal_pose))
-            .max(0.0);
-        self.world.set_margin(margin);
+        let endpoints = 0.5
+            * self
+                .world
+                .state_clearance(start)
+                .min(self.world.state_clearance(&goal_pose));
+        let margin = s.clearance_margin.min(endpoints).max(0.0);
+        let direct_margin = s.direct_margin.min(endpoints).max(margin);
         let mut report = PlanReport {
             outcome: PlanOutcome::Direct,
             duration: Duration::ZERO,
             search: SearchStats::default(),
             replan: force,
         };
+        self.world.set_margin(direct_margin);
         let direct = self.world.is_empty() || (!force && self.nothing_in_the_way(start, &goal));
+        self.world.set_margin(margin);
         let mut new_route = true;
         if direct {
             self.path.clear();
@@ -727,6 +737,7 @@ impl Navigator {
                     Arrival::Pose(s.shot_tolerance),
                     s.rollout_dt,
                     steps,
+                    None,
                 );
                 !r.collided
             }

@@ -51,7 +51,8 @@ impl Rollout {
 
 /// Rolls the actor out from `start` towards `goal` for at most `max_steps`
 /// steps of `dt`, stopping at arrival or at the first state within the margin.
-/// Allocation-free.
+/// With `trace`, every state after the start is appended to it (within its
+/// capacity). Allocation-free.
 #[allow(clippy::too_many_arguments)]
 pub fn roll_out(
     params: &MachineParams,
@@ -63,6 +64,7 @@ pub fn roll_out(
     arrival: Arrival,
     dt: f64,
     max_steps: usize,
+    mut trace: Option<&mut Vec<State>>,
 ) -> Rollout {
     let mut x = *start;
     for k in 0..=max_steps {
@@ -85,6 +87,11 @@ pub fn roll_out(
         if k < max_steps {
             let u = actor.action(ws, &x, goal);
             x = env_step(params, &x, &u, dt);
+            if let Some(t) = trace.as_deref_mut() {
+                if t.len() < t.capacity() {
+                    t.push(x);
+                }
+            }
         }
     }
     Rollout {

@@ -221,6 +221,7 @@ impl WaypointGraph {
                     arrival,
                     self.dt,
                     steps,
+                    None,
                 );
                 if r.reached {
                     self.edges[e].state = EdgeState::Checked;
@@ -357,7 +358,7 @@ impl WaypointGraph {
             let bearing = (q[1] - p[1]).atan2(q[0] - p[0]);
             if d <= self.max_edge_length
                 && wrap_angle(bearing - p[2]).abs() <= AHEAD
-                && segment_clear(world, p, *q)
+                && world.segment_clear([p[0], p[1]], [q[0], q[1]], 0.0)
             {
                 self.candidates.push((d, j as u32));
             }
@@ -372,7 +373,7 @@ impl WaypointGraph {
         let x = State::new(p[0], p[1], p[2], 0.0, 0.0, 0.0);
         let goal_pose = self.poses[GOAL];
         // The goal is always a candidate (its edge decides whether a shot works).
-        let goal_ok = segment_clear(world, p, goal_pose);
+        let goal_ok = world.segment_clear([p[0], p[1]], [goal_pose[0], goal_pose[1]], 0.0);
         for c in 0..k + usize::from(goal_ok) {
             let j = if c < k {
                 self.candidates[c].1
@@ -391,22 +392,6 @@ impl WaypointGraph {
         }
         self.edge_count[i] = Some(count);
     }
-}
-
-/// The straight segment between two front-axle positions misses every circle
-/// (a cheap filter before the critic is asked; the roll-out is the real check).
-fn segment_clear(world: &World, a: [f64; 3], b: [f64; 3]) -> bool {
-    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
-    let len2 = dx * dx + dy * dy;
-    world.obstacles().iter().all(|o| {
-        let t = if len2 > 0.0 {
-            (((o.x - a[0]) * dx + (o.y - a[1]) * dy) / len2).clamp(0.0, 1.0)
-        } else {
-            0.0
-        };
-        let (cx, cy) = (a[0] + t * dx, a[1] + t * dy);
-        (cx - o.x).hypot(cy - o.y) >= o.radius
-    })
 }
 
 /// Fits seconds per unit of critic cost-to-go: the actor rolled out from rest
@@ -439,6 +424,7 @@ pub fn calibrate(
                     Arrival::Pose(tolerance),
                     dt,
                     (30.0 / dt) as usize,
+                    None,
                 );
                 if r.reached {
                     let l = critic.value(critic_ws, &x0, &Control::zeros(), &g);

@@ -90,4 +90,20 @@ impl World {
     pub fn state_free(&self, s: &State) -> bool {
         self.state_clearance(s) >= self.margin
     }
+
+    /// The straight segment between two points keeps `extra` from every
+    /// circle (a point test, for cheap line-of-sight filters).
+    pub fn segment_clear(&self, a: [f64; 2], b: [f64; 2], extra: f64) -> bool {
+        let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+        let len2 = dx * dx + dy * dy;
+        self.obstacles.iter().all(|o| {
+            let t = if len2 > 0.0 {
+                (((o.x - a[0]) * dx + (o.y - a[1]) * dy) / len2).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            let (cx, cy) = (a[0] + t * dx, a[1] + t * dy);
+            (cx - o.x).hypot(cy - o.y) >= o.radius + extra
+        })
+    }
 }
