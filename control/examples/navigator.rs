@@ -1,8 +1,12 @@
 //! The global layer on three blocked scenes (a wall, a gap between two walls,
 //! an enclosed goal): the route it hands the MPC and how long planning took.
 //!
+//! With a scenario file, times the first plan (`set_goal`) of every scenario
+//! instead: the smallest of five runs each (the least disturbed by other
+//! load on the machine), then median / p90 / p99 / max over the file.
+//!
 //! ```text
-//! cargo run --release -p control --example navigator [-- waypoint-graph]
+//! cargo run --release -p control --example navigator [-- hybrid-astar|waypoint-graph [SCENARIOS.csv]]
 //! ```
 
 use control::model::{Goal, MachineParams, State};
@@ -25,14 +29,41 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         Actor::from_weights(read("actor.safetensors")?)?,
         Critic::from_weights(read("critic.safetensors")?)?,
     );
-    let mut settings = NavigatorSettings {
-        planner,
-        ..NavigatorSettings::default()
-    };
-    if let Some(w) = std::env::args().nth(2).and_then(|w| w.parse().ok()) {
-        settings.heuristic_weight = w;
-    }
+    let mut settings = NavigatorSettings::default();
+    let file = std::env::args().nth(2);
+    settings.planner = planner;
     let mut nav = Navigator::new(MachineParams::default(), settings, Some(networks))?;
+    if let Some(file) = file {
+        let set = control::scenario::parse(&std::fs::read_to_string(&file)?, &file)?;
+        let mut times = Vec::new();
+        let mut searched = Vec::new();
+        for sc in &set {
+            let mut best = f64::INFINITY;
+            for _ in 0..5 {
+                nav.set_goal(&sc.start, sc.goal, &sc.obstacles)?;
+                let r = nav.last_plan().expect("set_goal plans");
+                best = best.min(r.duration.as_secs_f64() * 1e3);
+            }
+            times.push(best);
+            if nav.last_plan().is_some_and(|r| r.search.expansions > 0) {
+                searched.push(best);
+            }
+        }
+        for (name, v) in [("all plans", &mut times), ("searches", &mut searched)] {
+            v.sort_by(f64::total_cmp);
+            let q = |p: f64| v[((v.len() - 1) as f64 * p).round() as usize];
+            println!(
+                "{} {name}: n {} median {:.2} / p90 {:.2} / p99 {:.2} / max {:.2} ms",
+                planner.name(),
+                v.len(),
+                q(0.5),
+                q(0.9),
+                q(0.99),
+                q(1.0)
+            );
+        }
+        return Ok(());
+    }
     let wall: Vec<Obstacle> = (-4..=4)
         .map(|k| Obstacle::new(4.0, 0.8 * k as f64, 0.6))
         .collect();

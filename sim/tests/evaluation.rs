@@ -228,3 +228,40 @@ fn committed_critic_drives_from_beside_the_goal_into_it() {
         "the MPC reached {reached} of 16 goals beside its start"
     );
 }
+
+/// The global layer in closed loop (DESIGN §10): on walls across the straight
+/// path the MPC alone stops in front of the wall; driven through the
+/// navigator it goes around, keeps clear of the circles and records the route.
+#[test]
+fn the_navigator_takes_the_mpc_around_walls() {
+    let nets = Networks::load(&manifest("../critic-weights")).unwrap();
+    let path = manifest("scenarios/obstacles200.csv");
+    let set: Vec<Scenario> =
+        scenario::parse(&std::fs::read_to_string(&path).unwrap(), "obstacles200.csv")
+            .unwrap()
+            .into_iter()
+            .filter(|s| ["wall000", "wall001", "wall002"].contains(&s.name.as_str()))
+            .collect();
+    assert_eq!(set.len(), 3);
+    let run = |navigator| {
+        let cfg = EvalConfig {
+            methods: vec![Method::Mpc],
+            navigator,
+            jobs: 2,
+            progress: false,
+            ..Default::default()
+        };
+        sim::eval::evaluate(&cfg, &nets, &set).unwrap()
+    };
+    let alone = run(None);
+    let navigated = run(Some(control::planner::NavigatorSettings::default()));
+    assert_eq!(alone.rows.iter().filter(|r| r.success).count(), 0);
+    for (s, row) in navigated.runs.iter().zip(&navigated.rows) {
+        assert!(row.success, "{} not reached", row.name);
+        assert!(row.min_clearance.unwrap() > -0.005, "{row:?}");
+        let nav = s.runs[0].1.navigation.as_ref().unwrap();
+        assert!(nav.routes[0].len() > 1, "{}: no route", row.name);
+        assert_eq!(*nav.routes[0].last().unwrap(), s.scenario.goal);
+        assert!(nav.abort.is_none());
+    }
+}
