@@ -415,6 +415,13 @@ fn the_waypoint_graph_needs_the_networks_and_its_cost_scale_is_fitted() {
     assert!((0.15..0.3).contains(&k), "{k} s per unit of cost");
 }
 
+/// A plan may run off the tick thread: the navigator moves between threads.
+#[test]
+fn the_navigator_is_send() {
+    fn send<T: Send>() {}
+    send::<Navigator>();
+}
+
 #[test]
 fn settings_are_validated_by_name() {
     let s = NavigatorSettings {
