@@ -12,7 +12,8 @@ use std::time::Duration;
 use control::model::{
     env_step, goal_distance, ix, wrap_angle, Control, Goal, MachineParams, State,
 };
-use control::scenario::{Obstacle, Scenario};
+use control::obstacle::{AxlePoint, Obstacle};
+use control::scenario::Scenario;
 
 use crate::collocation::hermite_simpson;
 use crate::ipopt::{self, IpoptStatus, OptValue};
@@ -49,6 +50,8 @@ pub struct BaselineSettings {
     /// does not touch the stops between nodes (that made open-loop replays
     /// drift off the plan).
     pub state_margin: f64,
+    /// Footprint constraint points inside each interval (besides its nodes).
+    pub obstacle_samples: usize,
 }
 
 impl Default for BaselineSettings {
@@ -63,6 +66,7 @@ impl Default for BaselineSettings {
             tol: 1e-6,
             max_iter: 1000,
             state_margin: 0.97,
+            obstacle_samples: 1,
         }
     }
 }
@@ -172,36 +176,107 @@ impl Element for Interval {
     }
 }
 
-/// All obstacles at one node: (x − x_o)² + (y − y_o)² ≥ R².
-struct NodeObstacles {
-    vars: [usize; 2],
+/// The footprint (DESIGN §10) on one collocation interval: both axle points
+/// outside every circle, ‖q − o‖ − R ≥ 0, at the points τ ∈ (0, 1] of the
+/// interval's cubic Hermite interpolant
+///   x(τ) = h₀₀ x₀ + h₁₀ h f(x₀,u) + h₀₁ x₁ + h₁₁ h f(x₁,u)
+/// (τ = 1 is the node x₁; τ = ½ the Hermite–Simpson midpoint). Variables as
+/// [`Interval`]: (x₀, u, x₁) and, with a free final time, T.
+struct IntervalFootprint {
+    vars: Vec<usize>,
+    params: MachineParams,
+    h: Option<f64>,
+    intervals: usize,
+    taus: Vec<f64>,
     obstacles: Vec<Obstacle>,
 }
 
-impl Element for NodeObstacles {
+/// The interpolation points of [`IntervalFootprint`]: `interior` evenly spaced
+/// points inside the interval, and its end node.
+fn footprint_taus(interior: usize) -> Vec<f64> {
+    (1..=interior + 1)
+        .map(|i| i as f64 / (interior + 1) as f64)
+        .collect()
+}
+
+impl IntervalFootprint {
+    /// The interpolated state at τ and its Jacobian with respect to the
+    /// local variables (6 × nv, row-major).
+    fn point(&self, z: &[f64], tau: f64, jac: &mut [f64]) -> State {
+        let nv = self.vars.len();
+        let x0 = State::from_column_slice(&z[0..6]);
+        let u = Control::new(z[6], z[7]);
+        let x1 = State::from_column_slice(&z[8..14]);
+        let (h, dh_dt) = match self.h {
+            Some(h) => (h, 0.0),
+            None => (z[14] / self.intervals as f64, 1.0 / self.intervals as f64),
+        };
+        let (t2, t3) = (tau * tau, tau * tau * tau);
+        let h00 = 2.0 * t3 - 3.0 * t2 + 1.0;
+        let h10 = t3 - 2.0 * t2 + tau;
+        let h01 = -2.0 * t3 + 3.0 * t2;
+        let h11 = t3 - t2;
+        let p = &self.params;
+        let f0 = control::model::f_continuous(p, &x0, &u);
+        let f1 = control::model::f_continuous(p, &x1, &u);
+        let x = x0 * h00 + f0 * (h10 * h) + x1 * h01 + f1 * (h11 * h);
+        let a0 = crate::collocation::jacobian_x(p, &x0) * (h10 * h);
+        let a1 = crate::collocation::jacobian_x(p, &x1) * (h11 * h);
+        let b = crate::collocation::jacobian_u() * ((h10 + h11) * h);
+        let dh = (f0 * h10 + f1 * h11) * dh_dt;
+        jac[..6 * nv].fill(0.0);
+        for r in 0..6 {
+            let row = &mut jac[r * nv..(r + 1) * nv];
+            for c in 0..6 {
+                row[c] = a0[(r, c)];
+                row[8 + c] = a1[(r, c)];
+            }
+            row[r] += h00;
+            row[8 + r] += h01;
+            row[6] = b[(r, 0)];
+            row[7] = b[(r, 1)];
+            if nv == 15 {
+                row[14] = dh[r];
+            }
+        }
+        x
+    }
+}
+
+impl Element for IntervalFootprint {
     fn vars(&self) -> &[usize] {
         &self.vars
     }
 
     fn n_cons(&self) -> usize {
-        self.obstacles.len()
+        self.taus.len() * self.obstacles.len() * AxlePoint::ALL.len()
     }
 
     fn con_bounds(&self, lower: &mut [f64], upper: &mut [f64]) {
-        for (i, o) in self.obstacles.iter().enumerate() {
-            lower[i] = o.radius * o.radius;
-            upper[i] = INF;
-        }
+        lower.fill(0.0);
+        upper.fill(INF);
     }
 
     fn eval(&self, z: &[f64], obj: &mut f64, grad: &mut [f64], g: &mut [f64], jac: &mut [f64]) {
         *obj = 0.0;
         grad.fill(0.0);
-        for (i, o) in self.obstacles.iter().enumerate() {
-            let (dx, dy) = (z[0] - o.x, z[1] - o.y);
-            g[i] = dx * dx + dy * dy;
-            jac[2 * i] = 2.0 * dx;
-            jac[2 * i + 1] = 2.0 * dy;
+        let nv = self.vars.len();
+        let mut dx = [0.0; 6 * 15];
+        let mut row = 0;
+        for &tau in &self.taus {
+            let x = self.point(z, tau, &mut dx);
+            for o in &self.obstacles {
+                for point in AxlePoint::ALL {
+                    // ∂h/∂(x_f, y_f, θ, β), chained through ∂x(τ)/∂z.
+                    let (c, dc) = o.point_clearance(&self.params, point, &x);
+                    g[row] = c;
+                    let out = &mut jac[row * nv..(row + 1) * nv];
+                    for (j, o) in out.iter_mut().enumerate() {
+                        *o = (0..4).map(|i| dc[i] * dx[i * nv + j]).sum();
+                    }
+                    row += 1;
+                }
+            }
         }
     }
 }
@@ -294,17 +369,30 @@ fn fix_state(nlp: &mut ElementNlp, k: usize, x: &State) {
     }
 }
 
-fn obstacle_elements(
+/// Footprint constraints on every interval (its end node and `interior`
+/// points inside), with the same variables as the interval's defects.
+fn footprint_elements(
     elements: &mut Vec<Box<dyn Element>>,
+    p: &MachineParams,
     obstacles: &[Obstacle],
     k_intervals: usize,
+    h: Option<f64>,
+    interior: usize,
 ) {
     if obstacles.is_empty() {
         return;
     }
-    for k in 1..=k_intervals {
-        elements.push(Box::new(NodeObstacles {
-            vars: [xi(k), xi(k) + 1],
+    for k in 0..k_intervals {
+        let mut vars: Vec<usize> = (xi(k)..xi(k) + 14).collect();
+        if h.is_none() {
+            vars.push(8 * k_intervals + 6);
+        }
+        elements.push(Box::new(IntervalFootprint {
+            vars,
+            params: *p,
+            h,
+            intervals: k_intervals,
+            taus: footprint_taus(interior),
             obstacles: obstacles.to_vec(),
         }));
     }
@@ -337,7 +425,14 @@ pub fn baseline_nlp(
             cost: Some((*s, goal)),
         }));
     }
-    obstacle_elements(&mut elements, &sc.obstacles, k_intervals);
+    footprint_elements(
+        &mut elements,
+        p,
+        &sc.obstacles,
+        k_intervals,
+        Some(s.dt),
+        s.obstacle_samples,
+    );
     let mut nlp = ElementNlp::new(n, elements, s.hessian);
     set_model_bounds(&mut nlp, p, k_intervals, s.state_margin);
     fix_state(&mut nlp, 0, &admissible_start(p, &sc.start));
@@ -511,6 +606,8 @@ pub struct MinTimeSettings {
     /// Bounds of T [s].
     pub t_min: f64,
     pub t_max: f64,
+    /// Footprint constraint points inside each interval (besides its nodes).
+    pub obstacle_samples: usize,
 }
 
 impl Default for MinTimeSettings {
@@ -523,6 +620,7 @@ impl Default for MinTimeSettings {
             max_iter: 1000,
             t_min: 0.2,
             t_max: 60.0,
+            obstacle_samples: 1,
         }
     }
 }
@@ -552,7 +650,14 @@ pub fn min_time_nlp(
             cost: None,
         }));
     }
-    obstacle_elements(&mut elements, &sc.obstacles, k_intervals);
+    footprint_elements(
+        &mut elements,
+        p,
+        &sc.obstacles,
+        k_intervals,
+        None,
+        s.obstacle_samples,
+    );
     let kk = xi(k_intervals);
     elements.push(Box::new(TerminalSet {
         vars: [kk, kk + 1, kk + 2],
@@ -654,6 +759,17 @@ pub fn solve_min_time(
         let r = ipopt::solve(&mut nlp, &z0, &ipopt_options(s.tol, s.max_iter));
         solve_time += r.solve_time;
         let violation = nlp.max_violation(&r.z);
+        if std::env::var_os("WLNAV_MT_DEBUG").is_some() {
+            eprintln!(
+                "min-time {}: guess T {:.2} -> {} T {:.3} violation {:.1e} in {:.2} s",
+                sc.name,
+                g.duration,
+                r.status.name(),
+                r.z[n - 1],
+                violation,
+                r.solve_time.as_secs_f64()
+            );
+        }
         if !(violation < 1e-5) || !r.objective.is_finite() {
             continue;
         }
