@@ -608,6 +608,12 @@ pub struct MinTimeSettings {
     pub t_max: f64,
     /// Footprint constraint points inside each interval (besides its nodes).
     pub obstacle_samples: usize,
+    /// Routes around the obstacles tried as initial guesses.
+    pub max_routes: usize,
+    /// Solves per scenario at most.
+    pub max_attempts: usize,
+    /// IPOPT's CPU-time limit per solve [s].
+    pub max_solve_seconds: f64,
 }
 
 impl Default for MinTimeSettings {
@@ -621,6 +627,9 @@ impl Default for MinTimeSettings {
             t_min: 0.2,
             t_max: 60.0,
             obstacle_samples: 1,
+            max_routes: 4,
+            max_attempts: 12,
+            max_solve_seconds: 20.0,
         }
     }
 }
@@ -716,17 +725,46 @@ pub struct MinTime {
     pub attempts: usize,
 }
 
-/// Solves min-time from the given guesses plus straight-line guesses forward
-/// and in reverse; keeps the shortest feasible T.
-pub fn solve_min_time(
+/// Initial guesses of the min-time problem, most promising first: with
+/// obstacles, routes around each side of them ([`crate::routes`]), driven
+/// forward and, where the start or goal heading suits it, in reverse; then the
+/// callers' guesses (other methods' trajectories); then straight lines forward
+/// and in reverse on both heading branches. Each route guess carries the
+/// route's length over v_max, a lower estimate of its time.
+pub fn min_time_guesses(
     p: &MachineParams,
     sc: &Scenario,
     s: &MinTimeSettings,
     guesses: &[Guess],
-) -> MinTime {
-    let mut solve_time = Duration::ZERO;
+) -> Vec<(Guess, f64)> {
+    let mut all: Vec<(Guess, f64)> = Vec::new();
+    for (i, route) in crate::routes::side_routes(sc, s.max_routes)
+        .iter()
+        .enumerate()
+    {
+        let estimate = route.length / p.v_max;
+        all.push((
+            crate::routes::route_guess(p, sc, route, false, 0.8 * p.v_max, 0.8 * p.a_max),
+            estimate,
+        ));
+        // Reverse along the two shortest routes when either end faces backwards.
+        let pts = &route.points;
+        let (n, m) = (pts.len(), pts.len().saturating_sub(1));
+        if i < 2 && n >= 2 {
+            let t0 = (pts[1][1] - pts[0][1]).atan2(pts[1][0] - pts[0][0]);
+            let t1 = (pts[m][1] - pts[m - 1][1]).atan2(pts[m][0] - pts[m - 1][0]);
+            let backwards =
+                |heading: f64, tangent: f64| wrap_angle(heading - tangent).abs() > 0.5 * PI;
+            if backwards(sc.start[ix::THETA], t0) || backwards(sc.goal.theta, t1) {
+                all.push((
+                    crate::routes::route_guess(p, sc, route, true, 0.8 * p.v_max, 0.8 * p.a_max),
+                    estimate,
+                ));
+            }
+        }
+    }
+    all.extend(guesses.iter().cloned().map(|g| (g, 0.0)));
     let dist = (sc.goal.x - sc.start[0]).hypot(sc.goal.y - sc.start[1]);
-    let mut all: Vec<Guess> = guesses.to_vec();
     let t_line = (dist / 0.7).max(3.0);
     for reverse in [false, true] {
         for &theta in &heading_branches(sc.start[ix::THETA], sc.goal.theta) {
@@ -734,20 +772,41 @@ pub fn solve_min_time(
             let k = 50;
             let z = straight_guess(sc, &goal, k, t_line / k as f64, 1.0, reverse);
             let (states, controls) = plan_from(&z, k);
-            all.push(Guess {
-                states,
-                controls,
-                dt: t_line / k as f64,
-                duration: t_line,
-            });
+            all.push((
+                Guess {
+                    states,
+                    controls,
+                    dt: t_line / k as f64,
+                    duration: t_line,
+                },
+                0.0,
+            ));
         }
     }
+    all
+}
+
+/// Solves min-time from [`min_time_guesses`] (at most `max_attempts` solves;
+/// a route whose length alone takes longer than the best time found is
+/// skipped) and keeps the shortest feasible T.
+pub fn solve_min_time(
+    p: &MachineParams,
+    sc: &Scenario,
+    s: &MinTimeSettings,
+    guesses: &[Guess],
+) -> MinTime {
+    let mut solve_time = Duration::ZERO;
+    let all = min_time_guesses(p, sc, s, guesses);
     let mut best: Option<(f64, Plan)> = None;
-    let attempts = all.len();
-    for g in &all {
-        if !(g.duration > 0.0) || g.states.len() < 2 {
+    let mut attempts = 0;
+    for (g, estimate) in &all {
+        if g.duration.is_nan() || g.duration <= 0.0 || g.states.len() < 2 {
             continue;
         }
+        if attempts >= s.max_attempts || best.as_ref().is_some_and(|(bt, _)| *estimate > *bt) {
+            continue;
+        }
+        attempts += 1;
         let end = g.states[((g.duration / g.dt).round() as usize).min(g.states.len() - 1)];
         let theta_goal = end[ix::THETA] + wrap_angle(sc.goal.theta - end[ix::THETA]);
         let mut nlp = min_time_nlp(p, sc, s, theta_goal);
@@ -756,7 +815,9 @@ pub fn solve_min_time(
         z0[..6].copy_from_slice(x0.as_slice());
         let n = z0.len();
         z0[n - 1] = z0[n - 1].clamp(s.t_min, s.t_max);
-        let r = ipopt::solve(&mut nlp, &z0, &ipopt_options(s.tol, s.max_iter));
+        let mut options = ipopt_options(s.tol, s.max_iter);
+        options.push(("max_cpu_time", OptValue::Num(s.max_solve_seconds)));
+        let r = ipopt::solve(&mut nlp, &z0, &options);
         solve_time += r.solve_time;
         let violation = nlp.max_violation(&r.z);
         if std::env::var_os("WLNAV_MT_DEBUG").is_some() {
@@ -770,7 +831,7 @@ pub fn solve_min_time(
                 r.solve_time.as_secs_f64()
             );
         }
-        if !(violation < 1e-5) || !r.objective.is_finite() {
+        if violation.is_nan() || violation >= 1e-5 || !r.objective.is_finite() {
             continue;
         }
         let t = r.z[n - 1];
@@ -785,7 +846,7 @@ pub fn solve_min_time(
             violation,
             solve_time: Duration::ZERO,
         };
-        if best.as_ref().map_or(true, |(bt, _)| t < *bt) {
+        if best.as_ref().is_none_or(|(bt, _)| t < *bt) {
             best = Some((t, plan));
         }
     }
