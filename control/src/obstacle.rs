@@ -96,7 +96,11 @@ impl Obstacle {
         let q = point.position(p, x);
         let (dx, dy) = (q[0] - self.x, q[1] - self.y);
         let d = dx.hypot(dy);
-        let n = if d > 1e-9 { [dx / d, dy / d] } else { [1.0, 0.0] };
+        let n = if d > 1e-9 {
+            [dx / d, dy / d]
+        } else {
+            [1.0, 0.0]
+        };
         let j = point.jacobian(p, x);
         let mut g = [0.0; 4];
         for (k, gk) in g.iter_mut().enumerate() {
@@ -173,7 +177,11 @@ mod tests {
                 b[i] -= e;
                 let fd = (o.point_clearance(&p, point, &a).0 - o.point_clearance(&p, point, &b).0)
                     / (2.0 * e);
-                assert!((fd - g[k]).abs() < 1e-7, "{point:?} d/d{i}: {fd} vs {}", g[k]);
+                assert!(
+                    (fd - g[k]).abs() < 1e-7,
+                    "{point:?} d/d{i}: {fd} vs {}",
+                    g[k]
+                );
             }
             let q = point.position(&p, &x);
             assert!((h - o.clearance_of(q)).abs() < 1e-15);

@@ -207,6 +207,171 @@ pub fn selection_scenarios(n: usize, seed: u64) -> Vec<Scenario> {
         .collect()
 }
 
+/// The kinds of work-site scenario in [`obstacle_scenarios`] (DESIGN §10):
+/// the straight way from start to goal is blocked in each.
+pub const OBSTACLE_KINDS: [&str; 4] = ["circles", "wall", "gap", "dock"];
+
+/// Distance from point `q` to the segment a–b.
+fn segment_distance(q: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
+    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+    let len2 = dx * dx + dy * dy;
+    let t = if len2 > 0.0 {
+        (((q[0] - a[0]) * dx + (q[1] - a[1]) * dy) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (q[0] - a[0] - t * dx).hypot(q[1] - a[1] - t * dy)
+}
+
+/// True when the straight segment from the start's front axle to the goal
+/// crosses a circle: the way a controller without a global layer would take.
+pub fn straight_path_blocked(sc: &Scenario) -> bool {
+    let a = [sc.start[0], sc.start[1]];
+    let b = [sc.goal.x, sc.goal.y];
+    sc.obstacles
+        .iter()
+        .any(|o| segment_distance([o.x, o.y], a, b) < o.radius)
+}
+
+/// Seeded work-site scenarios (DESIGN §10, issue 14): `per_kind` of each of
+/// [`OBSTACLE_KINDS`], every one with its straight path blocked, start and
+/// goal footprints (both axle points, `params`) at least 0.3 m clear of every
+/// circle, and about a third starting in motion or articulated.
+///
+/// - `circles`: 1–3 circles (radius 0.5–1.2 m) on the straight path;
+/// - `wall`: a wall of 3–6 overlapping circles across the path;
+/// - `gap`: two walls across the path with a 1.2–2.2 m gap between their
+///   edges, off the straight line;
+/// - `dock`: the goal just beyond a pile of 1–3 large circles (radius
+///   1.0–1.8 m), 0.3–0.8 m from its edge, facing along or away from it.
+///
+/// Radii include the machine's half-width (as on the wire). Goals lie 6–11 m
+/// from the start; at most 8 circles a scenario (the wire's limit).
+pub fn obstacle_scenarios(
+    per_kind: usize,
+    seed: u64,
+    params: &crate::model::MachineParams,
+) -> Vec<Scenario> {
+    use crate::obstacle::footprint_clearance;
+    use rand::{Rng, SeedableRng};
+    use std::f64::consts::PI;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let mut out = Vec::with_capacity(per_kind * OBSTACLE_KINDS.len());
+    for kind in OBSTACLE_KINDS {
+        let mut made = 0;
+        while made < per_kind {
+            // Start: at the origin, any heading; a third moving or articulated.
+            let theta0 = crate::model::wrap_angle(rng.gen_range(-PI..PI));
+            let mut start = State::new(0.0, 0.0, theta0, 0.0, 0.0, 0.0);
+            if rng.gen_bool(0.35) {
+                start[3] = rng.gen_range(-0.5..0.5);
+                start[5] = if rng.gen_bool(0.6) {
+                    rng.gen_range(0.2..params.v_max)
+                } else {
+                    0.0
+                };
+            }
+            let r = rng.gen_range(6.0..11.0);
+            let bearing = rng.gen_range(-PI..PI);
+            let (ub, vb) = (
+                (bearing.cos(), bearing.sin()),
+                (-bearing.sin(), bearing.cos()),
+            );
+            // A point `along` metres on the way and `side` metres to its left.
+            let at =
+                |along: f64, side: f64| [along * ub.0 + side * vb.0, along * ub.1 + side * vb.1];
+            let mut obstacles = Vec::new();
+            let mut goal_heading = crate::model::wrap_angle(rng.gen_range(-PI..PI));
+            let goal_r = r;
+            match kind {
+                "circles" => {
+                    let n = rng.gen_range(1..=3);
+                    for _ in 0..n {
+                        let c = at(rng.gen_range(0.3..0.7) * r, rng.gen_range(-0.6..0.6));
+                        obstacles.push(crate::obstacle::Obstacle::new(
+                            c[0],
+                            c[1],
+                            rng.gen_range(0.5..1.2),
+                        ));
+                    }
+                }
+                "wall" => {
+                    let n = rng.gen_range(3..=6);
+                    let rad = rng.gen_range(0.5..0.7);
+                    let spacing = 1.5 * rad;
+                    let along = rng.gen_range(0.4..0.6) * r;
+                    let shift = rng.gen_range(-0.5..0.5) * spacing * (n as f64 - 1.0) * 0.5;
+                    let tilt: f64 = rng.gen_range(-0.4..0.4);
+                    for i in 0..n {
+                        let s = (i as f64 - 0.5 * (n as f64 - 1.0)) * spacing + shift;
+                        let c = at(along + s * tilt.sin(), s * tilt.cos());
+                        obstacles.push(crate::obstacle::Obstacle::new(c[0], c[1], rad));
+                    }
+                }
+                "gap" => {
+                    let rad = rng.gen_range(0.5..0.65);
+                    let spacing = 1.5 * rad;
+                    let gap = rng.gen_range(1.2..2.2);
+                    let along = rng.gen_range(0.4..0.6) * r;
+                    // The gap's centre 1–2.5 m to one side: the straight line hits a wall.
+                    let side = if rng.gen_bool(0.5) { 1.0 } else { -1.0 };
+                    let centre = side * rng.gen_range(1.0..2.5);
+                    let (n_a, n_b) = (rng.gen_range(2..=4), rng.gen_range(2..=4));
+                    let half = 0.5 * gap + rad;
+                    for i in 0..n_a {
+                        let c = at(along, centre + half + i as f64 * spacing);
+                        obstacles.push(crate::obstacle::Obstacle::new(c[0], c[1], rad));
+                    }
+                    for i in 0..n_b {
+                        let c = at(along, centre - half - i as f64 * spacing);
+                        obstacles.push(crate::obstacle::Obstacle::new(c[0], c[1], rad));
+                    }
+                }
+                _ => {
+                    // dock: the pile just short of the goal, the goal beside its far edge.
+                    let rad = rng.gen_range(1.0..1.8);
+                    let clear = rng.gen_range(0.3..0.8);
+                    let pile = goal_r - rad - clear;
+                    let c = at(pile, 0.0);
+                    obstacles.push(crate::obstacle::Obstacle::new(c[0], c[1], rad));
+                    for _ in 0..rng.gen_range(0..=2) {
+                        let a: f64 = rng.gen_range(-PI..PI);
+                        let d = rad * rng.gen_range(0.8..1.3);
+                        let r2 = rng.gen_range(0.7..1.2);
+                        obstacles.push(crate::obstacle::Obstacle::new(
+                            c[0] + d * a.cos(),
+                            c[1] + d * a.sin(),
+                            r2,
+                        ));
+                    }
+                    // Along the pile's face (either way) or away from it.
+                    goal_heading = crate::model::wrap_angle(match rng.gen_range(0..3) {
+                        0 => bearing + PI / 2.0,
+                        1 => bearing - PI / 2.0,
+                        _ => bearing,
+                    });
+                }
+            }
+            let g = at(goal_r, 0.0);
+            let goal = Goal::new(g[0], g[1], goal_heading);
+            let sc = Scenario {
+                name: format!("{kind}{made:03}"),
+                start,
+                goal,
+                obstacles,
+            };
+            let goal_state = State::new(goal.x, goal.y, goal.theta, 0.0, 0.0, 0.0);
+            let clear = footprint_clearance(params, &sc.start, &sc.obstacles)
+                .min(footprint_clearance(params, &goal_state, &sc.obstacles));
+            if clear >= 0.3 && straight_path_blocked(&sc) && sc.obstacles.len() <= 8 {
+                out.push(sc);
+                made += 1;
+            }
+        }
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -230,6 +395,49 @@ mod tests {
     }
 
     #[test]
+    fn obstacle_set_is_seeded_blocked_and_clear_at_both_ends() {
+        let p = crate::model::MachineParams::default();
+        let set = obstacle_scenarios(12, 7, &p);
+        assert_eq!(set, obstacle_scenarios(12, 7, &p));
+        assert_ne!(set, obstacle_scenarios(12, 8, &p));
+        assert_eq!(set.len(), 48);
+        for kind in OBSTACLE_KINDS {
+            assert_eq!(set.iter().filter(|s| s.name.starts_with(kind)).count(), 12);
+        }
+        let mut moving = 0;
+        for sc in &set {
+            assert!(straight_path_blocked(sc), "{}", sc.name);
+            assert!((1..=8).contains(&sc.obstacles.len()), "{}", sc.name);
+            let g = State::new(sc.goal.x, sc.goal.y, sc.goal.theta, 0.0, 0.0, 0.0);
+            for x in [&sc.start, &g] {
+                assert!(
+                    crate::obstacle::footprint_clearance(&p, x, &sc.obstacles) >= 0.3,
+                    "{}",
+                    sc.name
+                );
+            }
+            moving += usize::from(sc.start[3] != 0.0 || sc.start[5] != 0.0);
+        }
+        assert!(
+            moving > 5 && moving < 30,
+            "{moving} moving or articulated starts"
+        );
+        // Round trip through the file format.
+        assert_eq!(parse(&to_csv(&set), "o.csv").unwrap(), set);
+    }
+
+    #[test]
+    fn a_clear_straight_path_is_not_blocked() {
+        let mut sc = paper_scenarios().remove(0);
+        assert!(!straight_path_blocked(&sc));
+        sc.obstacles
+            .push(crate::obstacle::Obstacle::new(2.0, 0.9, 1.0));
+        assert!(straight_path_blocked(&sc));
+        sc.obstacles[0].y = 1.1;
+        assert!(!straight_path_blocked(&sc));
+    }
+
+    #[test]
     fn paper_set_round_trips() {
         let set = paper_scenarios();
         assert_eq!(set.len(), 128);
@@ -247,10 +455,7 @@ mod tests {
         let s = parse(&text, "f.csv").unwrap();
         assert_eq!(
             s[0].obstacles,
-            vec![
-                Obstacle::new(3.0, 0.2, 1.0),
-                Obstacle::new(6.0, -1.0, 0.8)
-            ]
+            vec![Obstacle::new(3.0, 0.2, 1.0), Obstacle::new(6.0, -1.0, 0.8)]
         );
     }
 

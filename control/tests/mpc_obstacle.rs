@@ -107,7 +107,11 @@ fn the_rear_axle_stays_out_when_reversing() {
     let goal = Goal::new(-0.5, 0.0, 0.0);
     let settings = MpcSettings::default();
     let (clearance, end) = drive(settings, PlantConfig::ideal(), obstacle, start, goal, 75);
-    assert!(clearance > -0.005, "rear axle entered the circle by {:.3} m", -clearance);
+    assert!(
+        clearance > -0.005,
+        "rear axle entered the circle by {:.3} m",
+        -clearance
+    );
     // It did reverse towards the goal (as far as the rear axle allows).
     assert!(end[0] < -0.15, "did not back up: x_f {:.3}", end[0]);
     let front_only_end = -0.5 - p.l_f - p.l_r;

@@ -112,24 +112,7 @@ pub fn write_outputs(
         let tdir = dir.join("trajectories");
         std::fs::create_dir_all(&tdir)?;
         for s in &ev.runs {
-            let tracks: Vec<Track> = s
-                .runs
-                .iter()
-                .map(|(m, r)| Track {
-                    label: match r.row.t_converge {
-                        Some(t) => format!("{} (t = {t:.1} s)", m.name()),
-                        None => format!("{} (not converged)", m.name()),
-                    },
-                    states: &r.states,
-                    color: method_color(m.name()),
-                })
-                .collect();
-            plots::trajectory_svg(
-                &tdir.join(format!("{}.svg", s.scenario.name)),
-                &s.scenario.name,
-                &[&s.scenario],
-                &tracks,
-            )?;
+            scenario_svg(s, &tdir.join(format!("{}.svg", s.scenario.name)))?;
         }
     }
     let methods: Vec<&str> = ev.summaries.iter().map(|m| m.method.as_str()).collect();
@@ -138,6 +121,23 @@ pub fn write_outputs(
     }
     histogram(ev, &dir.join("histogram.svg"), "Convergence times")?;
     Ok(())
+}
+
+/// One scenario with every method's path.
+pub fn scenario_svg(s: &ScenarioRuns, path: &Path) -> Result<()> {
+    let tracks: Vec<Track> = s
+        .runs
+        .iter()
+        .map(|(m, r)| Track {
+            label: match r.row.t_converge {
+                Some(t) => format!("{} (t = {t:.1} s)", m.name()),
+                None => format!("{} (not converged)", m.name()),
+            },
+            states: &r.states,
+            color: method_color(m.name()),
+        })
+        .collect();
+    plots::trajectory_svg(path, &s.scenario.name, &[&s.scenario], &tracks)
 }
 
 /// All scenarios and one method's trajectories in one figure (paper Fig. 6).

@@ -2,11 +2,13 @@
 //!
 //! ```text
 //! wlnav-sim eval --scenarios sim/scenarios/paper128.csv --methods mpc,actor,baseline,min-time \
-//!     [--horizon 10] [--hessian exact|gauss-newton] [--obstacles distance|cbf] \
-//!     [--sqp-iterations 1] [--step-length 1] \
+//!     [--horizon N] [--hessian exact|gauss-newton] [--obstacles distance|cbf] \
+//!     [--sqp-iterations K] [--step-length A] [--obstacle-margin M] \
 //!     [--delay 0.2] [--lag 0.1] [--tolerance 0.1] [--weights critic-weights] --out out/eval
+//! # controller options left out take the daemon's defaults (MpcSettings::default());
+//! # the plant is ideal unless --delay / --lag are given (the paper's test)
 //! wlnav-sim paper [--weights critic-weights] [--out docs]
-//! wlnav-sim scenarios --out sim/scenarios
+//! wlnav-sim scenarios --out sim/scenarios   # paper128, selection64, obstacles200 (seeded)
 //! ```
 
 use std::path::{Path, PathBuf};
@@ -17,6 +19,7 @@ use control::critic::HessianMode;
 use control::mpc::{MpcSettings, ObstacleConstraint};
 use control::plant::PlantConfig;
 use control::scenario;
+use control::MachineParams;
 use sim::eval;
 use sim::runner::{EvalConfig, Method, Networks};
 
@@ -68,19 +71,24 @@ enum Command {
         /// Comma-separated: mpc, actor, baseline, min-time.
         #[arg(long, default_value = "mpc,actor,baseline,min-time")]
         methods: String,
-        /// MPC horizon N.
-        #[arg(long, default_value_t = 10)]
-        horizon: usize,
-        #[arg(long, value_enum, default_value_t = Hessian::Exact)]
-        hessian: Hessian,
-        #[arg(long, value_enum, default_value_t = Obstacles::Distance)]
-        obstacles: Obstacles,
-        /// SQP iterations per tick (1 = real-time iteration).
-        #[arg(long, default_value_t = 1)]
-        sqp_iterations: usize,
-        /// Step length of every SQP iteration, in (0, 1].
-        #[arg(long, default_value_t = 1.0)]
-        step_length: f64,
+        /// MPC horizon N (default: the daemon's, `MpcSettings::default()`).
+        #[arg(long)]
+        horizon: Option<usize>,
+        /// Hessian of the critic cost (default: the daemon's).
+        #[arg(long, value_enum)]
+        hessian: Option<Hessian>,
+        /// Obstacle constraint form (default: the daemon's).
+        #[arg(long, value_enum)]
+        obstacles: Option<Obstacles>,
+        /// SQP iterations per tick (1 = real-time iteration; default: the daemon's).
+        #[arg(long)]
+        sqp_iterations: Option<usize>,
+        /// Step length of every SQP iteration, in (0, 1] (default: the daemon's).
+        #[arg(long)]
+        step_length: Option<f64>,
+        /// Margin [m] the planned axle points keep from every circle (default: the daemon's).
+        #[arg(long)]
+        obstacle_margin: Option<f64>,
         /// Plant input delay [s] (compensated by the MPC).
         #[arg(long, default_value_t = 0.0)]
         delay: f64,
@@ -104,6 +112,12 @@ enum Command {
         scenarios: PathBuf,
         #[arg(long, default_value = "sim/scenarios/highlighted.csv")]
         highlighted: PathBuf,
+        /// Work-site scenario files of section 4, comma-separated (empty: no section 4).
+        #[arg(
+            long,
+            default_value = "sim/scenarios/obstacles.csv,sim/scenarios/obstacles200.csv"
+        )]
+        worksite: String,
         #[command(flatten)]
         common: Common,
         #[arg(long, default_value = "docs")]
@@ -116,6 +130,9 @@ enum Command {
         out: PathBuf,
     },
 }
+
+/// Seed of `sim/scenarios/obstacles200.csv` (issue 14).
+const OBSTACLES_SEED: u64 = 14;
 
 fn load_scenarios(path: &Path) -> Result<Vec<scenario::Scenario>> {
     let text =
@@ -157,6 +174,7 @@ fn main() -> Result<()> {
             obstacles,
             sqp_iterations,
             step_length,
+            obstacle_margin,
             delay,
             lag,
             duration,
@@ -172,18 +190,21 @@ fn main() -> Result<()> {
             let mut cfg = base_config(&common);
             cfg.methods = Method::parse_list(&methods)?;
             cfg.duration = duration;
+            // Unset options keep the daemon's defaults (the same `MpcSettings::default()`).
+            let d = MpcSettings::default();
             cfg.mpc = MpcSettings {
-                horizon,
-                hessian: match hessian {
+                horizon: horizon.unwrap_or(d.horizon),
+                hessian: hessian.map_or(d.hessian, |h| match h {
                     Hessian::Exact => HessianMode::Exact,
                     Hessian::GaussNewton => HessianMode::GaussNewton,
-                },
-                obstacle_constraint: match obstacles {
+                }),
+                obstacle_constraint: obstacles.map_or(d.obstacle_constraint, |o| match o {
                     Obstacles::Distance => ObstacleConstraint::Distance,
                     Obstacles::Cbf => ObstacleConstraint::Cbf,
-                },
-                sqp_iterations,
-                step_length,
+                }),
+                sqp_iterations: sqp_iterations.unwrap_or(d.sqp_iterations),
+                step_length: step_length.unwrap_or(d.step_length),
+                obstacle_margin: obstacle_margin.unwrap_or(d.obstacle_margin),
                 ..cfg.mpc
             };
             cfg.mpc.validate()?;
@@ -196,8 +217,14 @@ fn main() -> Result<()> {
             cfg.plant.validate()?;
             let ev = eval::evaluate(&cfg, &nets, &set)?;
             let header = format!(
-                "# eval: {}\n\nmethods {methods}, N = {horizon}, SQP iterations {sqp_iterations} × step {step_length}, delay {delay} s, lag {lag} s, tolerance {}, networks: {}\n",
+                "# eval: {}\n\nmethods {methods}, N = {}, Hessian {:?}, obstacles {:?} with margin {} m, SQP iterations {} × step {}, delay {delay} s, lag {lag} s, tolerance {}, networks: {}\n",
                 scenarios.display(),
+                cfg.mpc.horizon,
+                cfg.mpc.hessian,
+                cfg.mpc.obstacle_constraint,
+                cfg.mpc.obstacle_margin,
+                cfg.mpc.sqp_iterations,
+                cfg.mpc.step_length,
                 common.tolerance,
                 nets.source
             );
@@ -209,21 +236,30 @@ fn main() -> Result<()> {
         Command::Paper {
             scenarios,
             highlighted,
+            worksite,
             common,
             out,
         } => {
             let set = load_scenarios(&scenarios)?;
             let hl = load_scenarios(&highlighted)?;
+            let mut site = Vec::new();
+            for f in worksite.split(',').filter(|f| !f.trim().is_empty()) {
+                site.extend(load_scenarios(Path::new(f.trim()))?);
+            }
             let nets = networks(&common)?;
             let cfg = base_config(&common);
             let cmd = "cargo run --release -p sim --bin wlnav-sim -- paper";
-            sim::report::paper(&cfg, &nets, &set, &hl, &out, cmd)?;
+            sim::report::paper(&cfg, &nets, &set, &hl, &site, &out, cmd)?;
         }
         Command::Scenarios { out } => {
             std::fs::create_dir_all(&out)?;
             for (name, set) in [
                 ("paper128.csv", scenario::paper_scenarios()),
                 ("selection64.csv", scenario::selection_scenarios(64, 1)),
+                (
+                    "obstacles200.csv",
+                    scenario::obstacle_scenarios(50, OBSTACLES_SEED, &MachineParams::default()),
+                ),
             ] {
                 let path = out.join(name);
                 std::fs::write(&path, scenario::to_csv(&set))?;

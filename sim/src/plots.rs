@@ -185,17 +185,31 @@ pub fn trajectory_svg(
 /// Histogram of convergence times, one bar colour per method, 1 s bins
 /// (paper Fig. 8).
 pub fn histogram_svg(path: &Path, title: &str, series: &[(String, Vec<f64>)]) -> Result<()> {
-    let t_max = series
-        .iter()
-        .flat_map(|(_, v)| v.iter().cloned())
-        .fold(1.0, f64::max)
-        .ceil()
-        + 1.0;
-    let bins = t_max as usize;
+    value_histogram_svg(path, title, "convergence time [s]", 1.0, series)
+}
+
+/// Histogram of any values, one bar colour per series, bins of `bin` from
+/// the largest multiple of `bin` at or below the smallest value (or 0).
+pub fn value_histogram_svg(
+    path: &Path,
+    title: &str,
+    x_desc: &str,
+    bin: f64,
+    series: &[(String, Vec<f64>)],
+) -> Result<()> {
+    let values = || {
+        series
+            .iter()
+            .flat_map(|(_, v)| v.iter().cloned())
+            .filter(|v| v.is_finite())
+    };
+    let lo = (values().fold(0.0, f64::min) / bin).floor() * bin;
+    let hi = (values().fold(lo + bin, f64::max) / bin).floor() * bin + bin;
+    let bins = ((hi - lo) / bin).round().max(1.0) as usize;
     let mut counts = vec![vec![0usize; bins]; series.len()];
     for (m, (_, v)) in series.iter().enumerate() {
-        for &t in v {
-            let b = (t.max(0.0).floor() as usize).min(bins - 1);
+        for &t in v.iter().filter(|v| v.is_finite()) {
+            let b = (((t - lo) / bin).floor().max(0.0) as usize).min(bins - 1);
             counts[m][b] += 1;
         }
     }
@@ -207,16 +221,16 @@ pub fn histogram_svg(path: &Path, title: &str, series: &[(String, Vec<f64>)]) ->
         .margin(10)
         .x_label_area_size(35)
         .y_label_area_size(45)
-        .build_cartesian_2d(0.0..t_max, 0.0..(c_max as f64 * 1.1))
+        .build_cartesian_2d(lo..hi, 0.0..(c_max as f64 * 1.1))
         .map_err(err)?;
     chart
         .configure_mesh()
-        .x_desc("convergence time [s]")
+        .x_desc(x_desc)
         .y_desc("scenarios")
         .light_line_style(WHITE)
         .draw()
         .map_err(err)?;
-    let width = 0.9 / series.len().max(1) as f64;
+    let width = 0.9 * bin / series.len().max(1) as f64;
     for (m, (name, _)) in series.iter().enumerate() {
         let color = method_color(name);
         let bars = counts[m]
@@ -224,7 +238,7 @@ pub fn histogram_svg(path: &Path, title: &str, series: &[(String, Vec<f64>)]) ->
             .enumerate()
             .filter(|(_, &c)| c > 0)
             .map(|(b, &c)| {
-                let x = b as f64 + 0.05 + m as f64 * width;
+                let x = lo + b as f64 * bin + 0.05 * bin + m as f64 * width;
                 Rectangle::new([(x, 0.0), (x + width, c as f64)], color.mix(0.8).filled())
             });
         chart

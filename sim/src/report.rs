@@ -7,6 +7,8 @@
 //! 2. The same 128 with the paper's machine (0.2 s delay, velocity lag): MPC.
 //! 3. The three highlighted scenarios with N = 10 and N = 20, ideal and with
 //!    delay + lag, exact vs Gauss–Newton Hessian, distance vs CBF obstacles.
+//! 4. Work sites: the obstacle set with the daemon's defaults against the
+//!    min-time bound with obstacles (issue 14).
 
 use std::fmt::Write as _;
 use std::path::Path;
@@ -48,6 +50,7 @@ pub fn paper(
     nets: &Networks,
     paper_set: &[Scenario],
     highlighted: &[Scenario],
+    worksite: &[Scenario],
     out_dir: &Path,
     command: &str,
 ) -> Result<()> {
@@ -405,9 +408,173 @@ pub fn paper(
         plots::trajectory_svg(&assets.join(&file), &sc.name, &[sc], &tracks)?;
         let _ = writeln!(md, "![{}](results/{file})\n", sc.name);
     }
+    if !worksite.is_empty() {
+        worksite_study(base, nets, worksite, &assets, &mut md)?;
+    }
     let path = out_dir.join("results.md");
     std::fs::write(&path, md).with_context(|| format!("writing {}", path.display()))?;
     eprintln!("wrote {}", path.display());
+    Ok(())
+}
+
+/// Allowed penetration of the footprint into a circle on the plant [m] (issue 14).
+pub const PENETRATION_TOLERANCE: f64 = 0.005;
+
+/// The scenario's kind: its name without the trailing number (`wall012` → `wall`).
+fn kind_of(name: &str) -> &str {
+    name.trim_end_matches(|c: char| c.is_ascii_digit())
+}
+
+/// 4. Work sites (DESIGN §10, issue 14): the MPC with the daemon's defaults
+/// (global layer included) and the min-time bound with obstacles, per kind;
+/// footprint clearance on the plant's sub-steps.
+fn worksite_study(
+    base: &EvalConfig,
+    nets: &Networks,
+    set: &[Scenario],
+    assets: &Path,
+    md: &mut String,
+) -> Result<()> {
+    eprintln!(
+        "paper study 4/4: {} work-site scenarios, ideal plant, mpc/min-time",
+        set.len()
+    );
+    let cfg = EvalConfig {
+        methods: vec![Method::Mpc, Method::MinTime],
+        plant: PlantConfig::ideal(),
+        ..base.clone()
+    };
+    let ev = eval::evaluate(&cfg, nets, set)?;
+    std::fs::write(assets.join("worksite.csv"), results::to_csv(&ev.rows))?;
+    let _ = writeln!(
+        md,
+        "## 4. Work sites: obstacles
+"
+    );
+    let _ = writeln!(
+        md,
+        "`sim/scenarios/obstacles200.csv` (written by `wlnav-sim scenarios`, seeded: 50 each of 1–3 circles on the straight          path, a wall of overlapping circles across it, a gap between two walls off the straight line, a goal docked just          beyond a pile; a third start moving or articulated) and `c_obstacles` of `sim/scenarios/obstacles.csv`. Ideal          plant; the MPC with the daemon's defaults (N = {}, {:?} Hessian, {:?} obstacle rows on both axle points with a          {} m margin, {} SQP iteration(s) per tick) and the global layer. `min clearance` is the smallest distance of either          axle point to any circle's edge over the run, on the plant's integration sub-steps (min-time: its plan          re-integrated in sub-steps). T* is the min-time bound with the same obstacles and footprint.\n",
+        cfg.mpc.horizon,
+        cfg.mpc.hessian,
+        cfg.mpc.obstacle_constraint,
+        cfg.mpc.obstacle_margin,
+        cfg.mpc.sqp_iterations,
+    );
+    let _ = writeln!(
+        md,
+        "| kind | scenarios | MPC reached | MPC t mean [s] | T* mean [s] | t / T* mean | mean t / mean T* | worst clearance [m] | runs below −{} m |\n|---|---|---|---|---|---|---|---|---|",
+        PENETRATION_TOLERANCE
+    );
+    let mut kinds: Vec<&str> = Vec::new();
+    for sc in set {
+        let k = kind_of(&sc.name);
+        if !kinds.contains(&k) {
+            kinds.push(k);
+        }
+    }
+    kinds.push("all");
+    for kind in kinds {
+        let in_kind = |name: &str| kind == "all" || kind_of(name) == kind;
+        let mpc: Vec<&ResultRow> = ev
+            .rows
+            .iter()
+            .filter(|r| r.method == "mpc" && in_kind(&r.name))
+            .collect();
+        let t_star = |name: &str| {
+            ev.rows
+                .iter()
+                .find(|r| r.method == "min-time" && r.name == name && r.success)
+                .and_then(|r| r.t_converge)
+        };
+        let pairs: Vec<(f64, f64)> = mpc
+            .iter()
+            .filter(|r| r.success)
+            .filter_map(|r| Some((r.t_converge?, t_star(&r.name)?)))
+            .collect();
+        let mean = |v: &mut dyn Iterator<Item = f64>| {
+            let (s, n) = v.fold((0.0, 0usize), |(s, n), x| (s + x, n + 1));
+            (n > 0).then(|| s / n as f64)
+        };
+        let f = |v: Option<f64>, d: usize| v.map_or("–".into(), |v| format!("{v:.d$}"));
+        let t_mean = mean(&mut pairs.iter().map(|p| p.0));
+        let ts_mean = mean(&mut pairs.iter().map(|p| p.1));
+        let ratio = mean(&mut pairs.iter().map(|p| p.0 / p.1.max(1e-9)));
+        let worst = mpc
+            .iter()
+            .filter_map(|r| r.min_clearance)
+            .fold(f64::INFINITY, f64::min);
+        let below = mpc
+            .iter()
+            .filter(|r| r.min_clearance.is_some_and(|c| c < -PENETRATION_TOLERANCE))
+            .count();
+        let _ = writeln!(
+            md,
+            "| {kind} | {} | {} ({:.1} %) | {} | {} | {} | {} | {:.3} | {below} |",
+            mpc.len(),
+            mpc.iter().filter(|r| r.success).count(),
+            100.0 * mpc.iter().filter(|r| r.success).count() as f64 / mpc.len().max(1) as f64,
+            f(t_mean, 2),
+            f(ts_mean, 2),
+            f(ratio, 3),
+            f(t_mean.zip(ts_mean).map(|(a, b)| a / b), 3),
+            worst,
+        );
+    }
+    let _ = writeln!(
+        md,
+        "\nt / T* over the scenarios both reached. All methods:\n"
+    );
+    md.push_str(&results::summary_markdown(&ev.summaries));
+    let _ = writeln!(md, "\n```\n{}```\n", eval::timing_text(&ev));
+    let _ = writeln!(
+        md,
+        "Per-scenario results: [results/worksite.csv](results/worksite.csv).\n"
+    );
+    let clearances: Vec<(String, Vec<f64>)> = ["mpc", "min-time"]
+        .iter()
+        .map(|m| {
+            let v = ev
+                .rows
+                .iter()
+                .filter(|r| r.method == *m)
+                .filter_map(|r| r.min_clearance)
+                .collect();
+            (m.to_string(), v)
+        })
+        .collect();
+    plots::value_histogram_svg(
+        &assets.join("worksite_clearance.svg"),
+        "Work sites: smallest footprint clearance per run",
+        "min clearance [m]",
+        0.05,
+        &clearances,
+    )?;
+    let _ = writeln!(
+        md,
+        "![clearance histogram](results/worksite_clearance.svg)\n"
+    );
+    eval::histogram(
+        &ev,
+        &assets.join("worksite_histogram.svg"),
+        "Work sites: convergence times",
+    )?;
+    let _ = writeln!(md, "![convergence times](results/worksite_histogram.svg)\n");
+    // One path plot per kind (its first scenario) and every MPC miss.
+    let mut shown: Vec<&str> = Vec::new();
+    for s in &ev.runs {
+        let k = kind_of(&s.scenario.name);
+        let missed = s
+            .runs
+            .iter()
+            .any(|(m, r)| *m == Method::Mpc && !r.row.success);
+        if shown.contains(&k) && !missed {
+            continue;
+        }
+        shown.push(k);
+        let file = format!("worksite_{}.svg", s.scenario.name);
+        eval::scenario_svg(s, &assets.join(&file))?;
+        let _ = writeln!(md, "![{}](results/{file})\n", s.scenario.name);
+    }
     Ok(())
 }
 

@@ -4,8 +4,8 @@
 //! all linearised at the linearisation point (x̄, ū). Rows and entries are
 //! those of [`super::layout::QpLayout`].
 
-pub use crate::obstacle::Obstacle;
 use crate::obstacle::AxlePoint;
+pub use crate::obstacle::Obstacle;
 
 use crate::model::{Control, MachineParams, State};
 
@@ -111,7 +111,17 @@ mod tests {
         let o = [Obstacle::new(-1.5, -0.3, 0.2)];
         let mut a = layout.a_constant.clone();
         let mut b = vec![0.0; layout.n_eq + layout.n_ineq];
-        fill_obstacles(&layout, &p, ObstacleConstraint::Distance, 0.0, 0.05, &o, &xbar, &mut a, &mut b);
+        fill_obstacles(
+            &layout,
+            &p,
+            ObstacleConstraint::Distance,
+            0.0,
+            0.05,
+            &o,
+            &xbar,
+            &mut a,
+            &mut b,
+        );
         assert_eq!(AXLE_POINTS, 2);
         for k in 0..2 {
             let (hf, _) = o[0].point_clearance(&p, AxlePoint::Front, &xbar[k + 1]);
