@@ -728,8 +728,9 @@ pub struct MinTime {
 /// Initial guesses of the min-time problem, most promising first: with
 /// obstacles, routes around each side of them ([`crate::routes`]), driven
 /// forward and, where the start or goal heading suits it, in reverse; then the
-/// callers' guesses (other methods' trajectories); then straight lines forward
-/// and in reverse on both heading branches. Each route guess carries the
+/// callers' guesses (other methods' trajectories); then, unless a circle is
+/// in the way, straight lines forward and in reverse on both heading
+/// branches. Each route guess carries the
 /// route's length over v_max, a lower estimate of its time.
 pub fn min_time_guesses(
     p: &MachineParams,
@@ -764,6 +765,9 @@ pub fn min_time_guesses(
         }
     }
     all.extend(guesses.iter().cloned().map(|g| (g, 0.0)));
+    if crate::routes::straight_blocked(sc, 0.0) && all.len() > guesses.len() {
+        return all;
+    }
     let dist = (sc.goal.x - sc.start[0]).hypot(sc.goal.y - sc.start[1]);
     let t_line = (dist / 0.7).max(3.0);
     for reverse in [false, true] {
@@ -807,45 +811,12 @@ pub fn solve_min_time(
             continue;
         }
         attempts += 1;
-        let end = g.states[((g.duration / g.dt).round() as usize).min(g.states.len() - 1)];
-        let theta_goal = end[ix::THETA] + wrap_angle(sc.goal.theta - end[ix::THETA]);
-        let mut nlp = min_time_nlp(p, sc, s, theta_goal);
-        let mut z0 = guess_vector(g, s.intervals);
-        let x0 = admissible_start(p, &sc.start);
-        z0[..6].copy_from_slice(x0.as_slice());
-        let n = z0.len();
-        z0[n - 1] = z0[n - 1].clamp(s.t_min, s.t_max);
-        let mut options = ipopt_options(s.tol, s.max_iter);
-        options.push(("max_cpu_time", OptValue::Num(s.max_solve_seconds)));
-        let r = ipopt::solve(&mut nlp, &z0, &options);
-        solve_time += r.solve_time;
-        let violation = nlp.max_violation(&r.z);
-        if std::env::var_os("WLNAV_MT_DEBUG").is_some() {
-            eprintln!(
-                "min-time {}: guess T {:.2} -> {} T {:.3} violation {:.1e} in {:.2} s",
-                sc.name,
-                g.duration,
-                r.status.name(),
-                r.z[n - 1],
-                violation,
-                r.solve_time.as_secs_f64()
-            );
-        }
-        if violation.is_nan() || violation >= 1e-5 || !r.objective.is_finite() {
+        let (plan, time) = min_time_attempt(p, sc, s, g);
+        solve_time += time;
+        let Some(plan) = plan else {
             continue;
-        }
-        let t = r.z[n - 1];
-        let h = t / s.intervals as f64;
-        let (states, controls) = plan_from(&r.z, s.intervals);
-        let plan = Plan {
-            status: r.status,
-            states,
-            controls,
-            dt: h,
-            objective: t,
-            violation,
-            solve_time: Duration::ZERO,
         };
+        let t = plan.objective;
         if best.as_ref().is_none_or(|(bt, _)| t < *bt) {
             best = Some((t, plan));
         }
@@ -867,6 +838,55 @@ pub fn solve_min_time(
             attempts,
         },
     }
+}
+
+/// One min-time solve from guess `g` (goal heading on the branch nearest the
+/// guess's final heading): the plan when it is feasible (bound and constraint
+/// violation < 1e-5; `objective` is T), and the time spent.
+pub fn min_time_attempt(
+    p: &MachineParams,
+    sc: &Scenario,
+    s: &MinTimeSettings,
+    g: &Guess,
+) -> (Option<Plan>, Duration) {
+    let end = g.states[((g.duration / g.dt).round() as usize).min(g.states.len() - 1)];
+    let theta_goal = end[ix::THETA] + wrap_angle(sc.goal.theta - end[ix::THETA]);
+    let mut nlp = min_time_nlp(p, sc, s, theta_goal);
+    let mut z0 = guess_vector(g, s.intervals);
+    let x0 = admissible_start(p, &sc.start);
+    z0[..6].copy_from_slice(x0.as_slice());
+    let n = z0.len();
+    z0[n - 1] = z0[n - 1].clamp(s.t_min, s.t_max);
+    let mut options = ipopt_options(s.tol, s.max_iter);
+    options.push(("max_cpu_time", OptValue::Num(s.max_solve_seconds)));
+    let r = ipopt::solve(&mut nlp, &z0, &options);
+    let violation = nlp.max_violation(&r.z);
+    if std::env::var_os("WLNAV_MT_DEBUG").is_some() {
+        eprintln!(
+            "min-time {}: guess T {:.2} -> {} T {:.3} violation {:.1e} in {:.2} s",
+            sc.name,
+            g.duration,
+            r.status.name(),
+            r.z[n - 1],
+            violation,
+            r.solve_time.as_secs_f64()
+        );
+    }
+    if violation.is_nan() || violation >= 1e-5 || !r.objective.is_finite() {
+        return (None, r.solve_time);
+    }
+    let t = r.z[n - 1];
+    let (states, controls) = plan_from(&r.z, s.intervals);
+    let plan = Plan {
+        status: r.status,
+        states,
+        controls,
+        dt: t / s.intervals as f64,
+        objective: t,
+        violation,
+        solve_time: r.solve_time,
+    };
+    (Some(plan), r.solve_time)
 }
 
 /// Goal distance of the last state of a plan (for tests and diagnostics).

@@ -73,13 +73,13 @@ pub fn clusters(obstacles: &[Obstacle]) -> (Vec<usize>, usize) {
     let mut label = vec![usize::MAX; n];
     let mut out = vec![0; n];
     let mut count = 0;
-    for i in 0..n {
+    for (i, o) in out.iter_mut().enumerate() {
         let r = find(&mut parent, i);
         if label[r] == usize::MAX {
             label[r] = count;
             count += 1;
         }
-        out[i] = label[r];
+        *o = label[r];
     }
     (out, count)
 }
@@ -249,6 +249,89 @@ impl Grid {
     }
 }
 
+impl Grid {
+    /// A grid path as a route: line-of-sight shortcuts on `cost`, resampled
+    /// every 0.2 m, corners rounded by a few passes of neighbour averaging
+    /// (moves onto cells blocked in `base` refused).
+    fn finish(
+        &self,
+        cost: &[f64],
+        base: &[f64],
+        cells: &[usize],
+        s: [f64; 2],
+        g: [f64; 2],
+    ) -> Vec<[f64; 2]> {
+        let pts: Vec<[f64; 2]> = cells.iter().map(|&c| self.point(c)).collect();
+        let mut short = vec![s];
+        let mut i = 0;
+        while i + 1 < pts.len() {
+            let mut j = pts.len() - 1;
+            while j > i + 1 && !self.visible(cost, pts[i], pts[j]) {
+                j -= 1;
+            }
+            short.push(pts[j]);
+            i = j;
+        }
+        if short.len() == 1 {
+            short.push(g);
+        }
+        *short.last_mut().expect("non-empty") = g;
+        let mut points = resample(&short, 0.2);
+        for _ in 0..4 {
+            let prev = points.clone();
+            for k in 1..points.len() - 1 {
+                let q = [
+                    0.25 * prev[k - 1][0] + 0.5 * prev[k][0] + 0.25 * prev[k + 1][0],
+                    0.25 * prev[k - 1][1] + 0.5 * prev[k][1] + 0.25 * prev[k + 1][1],
+                ];
+                if self.cell(q).is_some_and(|c| base[c].is_finite()) {
+                    points[k] = q;
+                }
+            }
+        }
+        points
+    }
+}
+
+/// Whether the straight start–goal segment of the front axle comes within
+/// `margin` of a circle.
+pub fn straight_blocked(sc: &Scenario, margin: f64) -> bool {
+    let s = [sc.start[ix::X], sc.start[ix::Y]];
+    let g = [sc.goal.x, sc.goal.y];
+    sc.obstacles
+        .iter()
+        .any(|o| segment_distance(s, g, [o.x, o.y]).0 < o.radius + margin)
+}
+
+/// The shortest route from the start through the points `via` (in order) to
+/// the goal, with no side imposed (for independent checks with random
+/// via-points); `None` when a leg has no path or a via-point is blocked.
+pub fn via_route(sc: &Scenario, via: &[[f64; 2]]) -> Option<Route> {
+    let s = [sc.start[ix::X], sc.start[ix::Y]];
+    let g = [sc.goal.x, sc.goal.y];
+    let grid = Grid::new(sc);
+    let mut cost = grid.cost.clone();
+    let ends = [grid.cell(s)?, grid.cell(g)?];
+    for c in ends {
+        cost[c] = cost[c].min(1.0 + SOFT_WEIGHT);
+    }
+    let mut stops = vec![s];
+    stops.extend_from_slice(via);
+    stops.push(g);
+    let mut points: Vec<[f64; 2]> = Vec::new();
+    for leg in stops.windows(2) {
+        let (a, b) = (grid.cell(leg[0])?, grid.cell(leg[1])?);
+        let cells = grid.shortest(&cost, a, b)?;
+        let part = grid.finish(&cost, &cost, &cells, leg[0], leg[1]);
+        if !points.is_empty() {
+            points.pop();
+        }
+        points.extend(part);
+    }
+    let length = polyline_length(&points);
+    Some(Route { points, length })
+}
+
 fn polyline_length(p: &[[f64; 2]]) -> f64 {
     p.windows(2)
         .map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]))
@@ -341,33 +424,7 @@ pub fn side_routes(sc: &Scenario, max_routes: usize) -> Vec<Route> {
         let Some(cells) = grid.shortest(&cost, sc_cell, gc_cell) else {
             continue;
         };
-        // Line-of-sight shortcuts on the same (ray-blocked) cost.
-        let pts: Vec<[f64; 2]> = cells.iter().map(|&c| grid.point(c)).collect();
-        let mut short = vec![s];
-        let mut i = 0;
-        while i + 1 < pts.len() {
-            let mut j = pts.len() - 1;
-            while j > i + 1 && !grid.visible(&cost, pts[i], pts[j]) {
-                j -= 1;
-            }
-            short.push(pts[j]);
-            i = j;
-        }
-        *short.last_mut().expect("non-empty") = g;
-        let mut points = resample(&short, 0.2);
-        // A few passes of neighbour averaging round the corners.
-        for _ in 0..4 {
-            let prev = points.clone();
-            for k in 1..points.len() - 1 {
-                let q = [
-                    0.25 * prev[k - 1][0] + 0.5 * prev[k][0] + 0.25 * prev[k + 1][0],
-                    0.25 * prev[k - 1][1] + 0.5 * prev[k][1] + 0.25 * prev[k + 1][1],
-                ];
-                if grid.cell(q).is_some_and(|c| base[c].is_finite()) {
-                    points[k] = q;
-                }
-            }
-        }
+        let points = grid.finish(&cost, &base, &cells, s, g);
         let length = polyline_length(&points);
         let same = routes.iter().any(|r| same_route(&r.points, &points));
         if !same {

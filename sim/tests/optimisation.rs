@@ -216,3 +216,82 @@ fn footprint_keeps_out_a_rear_axle_that_alone_would_cut_a_circle() {
     let c = trajectory_clearance(&p, &replayed, &b.controls, b.dt, &o);
     assert!(c >= -0.005, "baseline footprint clearance {c}");
 }
+
+/// An independent check of the min-time bound among obstacles (issue 14,
+/// item 7), by brute force: many solves of the same NLP from random routes
+/// (through a random via-point, no side imposed; random speed; forward or in
+/// reverse), the best kept, against `solve_min_time`. Slow; run by hand:
+/// `WLNAV_CHECK=circles004,wall001 WLNAV_CHECK_SEEDS=30 cargo test -p sim
+/// --test optimisation -- --ignored --nocapture brute_force`.
+#[test]
+#[ignore]
+fn brute_force_finds_nothing_faster_than_min_time() {
+    let p = MachineParams::default();
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/scenarios/obstacles200.csv");
+    let text = std::fs::read_to_string(path).expect("scenario file");
+    let all = control::scenario::parse(&text, path).expect("parses");
+    let names = std::env::var("WLNAV_CHECK").unwrap_or_else(|_| "circles004".into());
+    let seeds: usize = std::env::var("WLNAV_CHECK_SEEDS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(30);
+    let s = MinTimeSettings {
+        max_solve_seconds: 10.0,
+        ..Default::default()
+    };
+    let mut rng = 0x9e37_79b9_7f4a_7c15_u64;
+    let mut uniform = move || {
+        rng ^= rng << 13;
+        rng ^= rng >> 7;
+        rng ^= rng << 17;
+        (rng >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let mut worse = Vec::new();
+    for name in names.split(',') {
+        let sc = all
+            .iter()
+            .find(|s| s.name == name)
+            .expect("scenario exists");
+        let mt = ocp::solve_min_time(&p, sc, &s, &[]);
+        let (mut lo, mut hi) = (
+            [sc.goal.x.min(sc.start[0]), sc.goal.y.min(sc.start[1])],
+            [sc.goal.x.max(sc.start[0]), sc.goal.y.max(sc.start[1])],
+        );
+        for o in &sc.obstacles {
+            lo = [lo[0].min(o.x - o.radius), lo[1].min(o.y - o.radius)];
+            hi = [hi[0].max(o.x + o.radius), hi[1].max(o.y + o.radius)];
+        }
+        let mut best = f64::INFINITY;
+        let mut solved = 0;
+        for _ in 0..seeds {
+            let via = [
+                lo[0] - 1.5 + uniform() * (hi[0] - lo[0] + 3.0),
+                lo[1] - 1.5 + uniform() * (hi[1] - lo[1] + 3.0),
+            ];
+            if sc.obstacles.iter().any(|o| o.clearance_of(via) < 0.2) {
+                continue;
+            }
+            let Some(route) = sim::routes::via_route(sc, &[via]) else {
+                continue;
+            };
+            let reverse = uniform() < 0.25;
+            let cruise = 0.5 + 0.5 * uniform();
+            let g = sim::routes::route_guess(&p, sc, &route, reverse, cruise, 0.8);
+            if let (Some(plan), _) = ocp::min_time_attempt(&p, sc, &s, &g) {
+                solved += 1;
+                best = best.min(plan.objective);
+            }
+        }
+        eprintln!(
+            "{name}: min-time {:.3} s ({} attempts, {:.1} s); brute force {best:.3} s ({solved}/{seeds} solved); ratio {:.3}",
+            mt.time,
+            mt.attempts,
+            mt.solve_time.as_secs_f64(),
+            mt.time / best
+        );
+        if mt.time.is_nan() || mt.time > best + 0.05 {
+            worse.push(name.to_string());
+        }
+    }
+    assert!(worse.is_empty(), "brute force beat min-time on {worse:?}");
+}
