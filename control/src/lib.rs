@@ -11,6 +11,7 @@ pub mod mlp;
 pub mod model;
 pub mod mpc;
 pub mod obstacle;
+pub mod planner;
 pub mod plant;
 pub mod progress;
 pub mod scenario;

@@ -93,6 +93,94 @@ pub fn timing_text(ev: &Evaluation) -> String {
     s
 }
 
+/// The global layer's figures (MPC runs with a navigator): how many runs
+/// planned a route, plan times (median / p99 / max over every plan, the
+/// direct decisions included), `update` times, and aborts by reason.
+pub fn navigation_text(ev: &Evaluation) -> String {
+    let navs: Vec<&crate::runner::Navigation> = ev
+        .runs
+        .iter()
+        .flat_map(|s| s.runs.iter().filter_map(|(_, r)| r.navigation.as_ref()))
+        .collect();
+    if navs.is_empty() {
+        return String::new();
+    }
+    let plans: Vec<f64> = navs
+        .iter()
+        .flat_map(|n| n.plan_ms.iter().copied())
+        .collect();
+    let updates: Vec<f64> = navs
+        .iter()
+        .flat_map(|n| n.update_ms.iter().copied())
+        .collect();
+    let routed = navs
+        .iter()
+        .filter(|n| n.routes.iter().any(|r| r.len() > 1))
+        .count();
+    let replans = navs
+        .iter()
+        .map(|n| n.plan_ms.len().saturating_sub(1))
+        .sum::<usize>();
+    let aborts =
+        |r: control::planner::AbortReason| navs.iter().filter(|n| n.abort == Some(r)).count();
+    let stats = |v: &[f64]| {
+        if v.is_empty() {
+            "-".to_string()
+        } else {
+            format!(
+                "median {:.3} / p99 {:.3} / max {:.3} ms",
+                results::quantile(v, 0.5),
+                results::quantile(v, 0.99),
+                v.iter().cloned().fold(0.0, f64::max)
+            )
+        }
+    };
+    format!(
+        "navigation: {} runs, {routed} with a route, {replans} replans; aborted no-route {}, no-progress {}\n\
+         navigation: plan {} ({} plans); update {}\n",
+        navs.len(),
+        aborts(control::planner::AbortReason::NoRoute),
+        aborts(control::planner::AbortReason::NoProgress),
+        stats(&plans),
+        plans.len(),
+        stats(&updates),
+    )
+}
+
+/// One row per plan of every run with a navigator: when, how long, the
+/// route (`x:y:theta` subgoals separated by `;`, the goal last) and how the
+/// run's navigation ended.
+pub fn navigation_csv(ev: &Evaluation) -> Option<String> {
+    let mut out =
+        String::from("name,method,plan,at,plan_ms,expansions,shots,route,abort,aborted_at\n");
+    let mut any = false;
+    for s in &ev.runs {
+        for (m, r) in &s.runs {
+            let Some(n) = &r.navigation else { continue };
+            any = true;
+            for (k, route) in n.routes.iter().enumerate() {
+                let goals: Vec<String> = route
+                    .iter()
+                    .map(|g| format!("{:.3}:{:.3}:{:.3}", g.x, g.y, g.theta))
+                    .collect();
+                out.push_str(&format!(
+                    "{},{},{k},{},{:.3},{},{},{},{},{}\n",
+                    s.scenario.name,
+                    m.name(),
+                    n.plan_at.get(k).copied().unwrap_or(0.0),
+                    n.plan_ms.get(k).copied().unwrap_or(0.0),
+                    n.plan_work.get(k).map_or(0, |w| w.0),
+                    n.plan_work.get(k).map_or(0, |w| w.1),
+                    goals.join(";"),
+                    n.abort.map_or("", |a| a.name()),
+                    n.aborted_at.map_or(String::new(), |t| format!("{t:.1}")),
+                ));
+            }
+        }
+    }
+    any.then_some(out)
+}
+
 /// Writes results.csv, summary.md and the plots into `dir`.
 pub fn write_outputs(
     ev: &Evaluation,
@@ -103,11 +191,15 @@ pub fn write_outputs(
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     std::fs::write(dir.join("results.csv"), results::to_csv(&ev.rows))?;
     let summary = format!(
-        "{header}\n{}\n```\n{}```\n",
+        "{header}\n{}\n```\n{}{}```\n",
         results::summary_markdown(&ev.summaries),
-        timing_text(ev)
+        timing_text(ev),
+        navigation_text(ev)
     );
     std::fs::write(dir.join("summary.md"), summary)?;
+    if let Some(csv) = navigation_csv(ev) {
+        std::fs::write(dir.join("navigation.csv"), csv)?;
+    }
     if plots_per_scenario {
         let tdir = dir.join("trajectories");
         std::fs::create_dir_all(&tdir)?;
@@ -135,6 +227,7 @@ pub fn scenario_svg(s: &ScenarioRuns, path: &Path) -> Result<()> {
             },
             states: &r.states,
             color: method_color(m.name()),
+            routes: r.navigation.as_ref().map_or(&[][..], |n| &n.routes[..]),
         })
         .collect();
     plots::trajectory_svg(path, &s.scenario.name, &[&s.scenario], &tracks)
@@ -151,6 +244,7 @@ pub fn overview_svg(ev: &Evaluation, method: &str, path: &Path) -> Result<()> {
             label: m.name().to_string(),
             states: &r.states,
             color: method_color(m.name()),
+            routes: r.navigation.as_ref().map_or(&[][..], |n| &n.routes[..]),
         })
         .collect();
     plots::trajectory_svg(

@@ -17,6 +17,7 @@ use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand, ValueEnum};
 use control::critic::HessianMode;
 use control::mpc::{MpcSettings, ObstacleConstraint};
+use control::planner::{NavigatorSettings, PlannerKind};
 use control::plant::PlantConfig;
 use control::scenario;
 use control::MachineParams;
@@ -37,6 +38,30 @@ struct Cli {
 enum Hessian {
     Exact,
     GaussNewton,
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
+enum Planner {
+    HybridAstar,
+    WaypointGraph,
+    None,
+}
+
+impl Default for Planner {
+    /// The measured better candidate (docs/global-layer.md).
+    fn default() -> Self {
+        match NavigatorSettings::default().planner {
+            PlannerKind::HybridAStar => Planner::HybridAstar,
+            PlannerKind::WaypointGraph => Planner::WaypointGraph,
+        }
+    }
+}
+
+impl std::fmt::Display for Planner {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let v = self.to_possible_value().expect("no skipped variants");
+        f.write_str(v.get_name())
+    }
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -101,6 +126,25 @@ enum Command {
         /// Skip the per-scenario trajectory plots.
         #[arg(long)]
         no_scenario_plots: bool,
+        /// The global layer above the MPC (DESIGN §10): the planner used when
+        /// the way is blocked, or none (the MPC drives straight to the goal).
+        #[arg(long, value_enum, default_value_t = Planner::default())]
+        planner: Planner,
+        /// Navigator: subgoal switching radius [m] (default: NavigatorSettings::default()).
+        #[arg(long)]
+        subgoal_radius: Option<f64>,
+        /// Navigator: distance between subgoals along the path [m].
+        #[arg(long)]
+        subgoal_spacing: Option<f64>,
+        /// Navigator: clearance margin of the planned route [m].
+        #[arg(long)]
+        route_margin: Option<f64>,
+        /// Navigator: seconds without approach before a replan.
+        #[arg(long)]
+        replan_after: Option<f64>,
+        /// Navigator: clearance the actor's roll-out keeps for "nothing in the way" [m].
+        #[arg(long)]
+        direct_margin: Option<f64>,
         #[command(flatten)]
         common: Common,
         #[arg(long)]
@@ -179,6 +223,12 @@ fn main() -> Result<()> {
             lag,
             duration,
             no_scenario_plots,
+            planner,
+            subgoal_radius,
+            subgoal_spacing,
+            route_margin,
+            replan_after,
+            direct_margin,
             common,
             out,
         } => {
@@ -208,6 +258,26 @@ fn main() -> Result<()> {
                 ..cfg.mpc
             };
             cfg.mpc.validate()?;
+            let nd = NavigatorSettings::default();
+            cfg.navigator = match planner {
+                Planner::None => None,
+                Planner::HybridAstar | Planner::WaypointGraph => Some(NavigatorSettings {
+                    planner: if planner == Planner::HybridAstar {
+                        PlannerKind::HybridAStar
+                    } else {
+                        PlannerKind::WaypointGraph
+                    },
+                    subgoal_radius: subgoal_radius.unwrap_or(nd.subgoal_radius),
+                    subgoal_spacing: subgoal_spacing.unwrap_or(nd.subgoal_spacing),
+                    clearance_margin: route_margin.unwrap_or(nd.clearance_margin),
+                    replan_after: replan_after.unwrap_or(nd.replan_after),
+                    direct_margin: direct_margin.unwrap_or(nd.direct_margin),
+                    ..nd.clone()
+                }),
+            };
+            if let Some(n) = &cfg.navigator {
+                n.validate()?;
+            }
             cfg.plant = PlantConfig {
                 delay,
                 tau_beta_dot: lag,
@@ -217,7 +287,7 @@ fn main() -> Result<()> {
             cfg.plant.validate()?;
             let ev = eval::evaluate(&cfg, &nets, &set)?;
             let header = format!(
-                "# eval: {}\n\nmethods {methods}, N = {}, Hessian {:?}, obstacles {:?} with margin {} m, SQP iterations {} × step {}, delay {delay} s, lag {lag} s, tolerance {}, networks: {}\n",
+                "# eval: {}\n\nmethods {methods}, planner {planner}, N = {}, Hessian {:?}, obstacles {:?} with margin {} m, SQP iterations {} × step {}, delay {delay} s, lag {lag} s, tolerance {}, networks: {}\n",
                 scenarios.display(),
                 cfg.mpc.horizon,
                 cfg.mpc.hessian,
@@ -231,6 +301,7 @@ fn main() -> Result<()> {
             eval::write_outputs(&ev, &out, &header, !no_scenario_plots)?;
             print!("{}", sim::results::summary_markdown(&ev.summaries));
             print!("{}", eval::timing_text(&ev));
+            print!("{}", eval::navigation_text(&ev));
             println!("wrote {}", out.join("results.csv").display());
         }
         Command::Paper {

@@ -5,7 +5,7 @@
 use std::path::Path;
 
 use anyhow::{anyhow, Result};
-use control::model::State;
+use control::model::{Goal, State};
 use control::scenario::Scenario;
 use plotters::prelude::*;
 
@@ -25,6 +25,31 @@ pub struct Track<'a> {
     pub label: String,
     pub states: &'a [State],
     pub color: RGBColor,
+    /// The global layer's routes (subgoals ending with the goal), drawn
+    /// dashed from the track's start through the subgoals; empty for none.
+    pub routes: &'a [Vec<Goal>],
+}
+
+/// A dashed polyline: every other piece of `pts` cut into `dash`-long pieces.
+fn dashed(pts: &[(f64, f64)], dash: f64) -> Vec<Vec<(f64, f64)>> {
+    let mut out = Vec::new();
+    let mut on = true;
+    for w in pts.windows(2) {
+        let (a, b) = (w[0], w[1]);
+        let len = (b.0 - a.0).hypot(b.1 - a.1);
+        let n = (len / dash).ceil().max(1.0) as usize;
+        for k in 0..n {
+            let (f0, f1) = (k as f64 / n as f64, (k + 1) as f64 / n as f64);
+            if on {
+                out.push(vec![
+                    (a.0 + f0 * (b.0 - a.0), a.1 + f0 * (b.1 - a.1)),
+                    (a.0 + f1 * (b.0 - a.0), a.1 + f1 * (b.1 - a.1)),
+                ]);
+            }
+            on = !on;
+        }
+    }
+    out
 }
 
 fn arrow(x: f64, y: f64, theta: f64, len: f64) -> [Vec<(f64, f64)>; 2] {
@@ -147,6 +172,32 @@ pub fn trajectory_svg(
                     part,
                     orange.stroke_width(2),
                 )))
+                .map_err(err)?;
+        }
+    }
+    // Routes under the tracks: dashed from where the track starts (the
+    // machine) through the subgoals, a dot on each subgoal.
+    for t in tracks {
+        let Some(x0) = t.states.first() else {
+            continue;
+        };
+        for route in t.routes.iter().filter(|r| r.len() > 1) {
+            let mut pts = vec![(x0[0], x0[1])];
+            pts.extend(route.iter().map(|g| (g.x, g.y)));
+            let style = t.color.mix(0.6).stroke_width(1);
+            chart
+                .draw_series(
+                    dashed(&pts, 0.15)
+                        .into_iter()
+                        .map(|p| PathElement::new(p, style)),
+                )
+                .map_err(err)?;
+            chart
+                .draw_series(
+                    route[..route.len() - 1]
+                        .iter()
+                        .map(|g| Circle::new((g.x, g.y), 3, t.color.mix(0.8).filled())),
+                )
                 .map_err(err)?;
         }
     }

@@ -390,6 +390,7 @@ pub fn paper(
                 label: format!("{} ({})", m.name(), t_label(r.row.t_converge)),
                 states: &r.states,
                 color: method_color(m.name()),
+                routes: &[],
             });
         }
         for (k, (v, ev)) in variants.iter().zip(&variant_evals).enumerate() {
@@ -402,6 +403,7 @@ pub fn paper(
                 label: format!("MPC {} ({})", v.label, t_label(r.row.t_converge)),
                 states: &r.states,
                 color: palette[k],
+                routes: &[],
             });
         }
         let file = format!("highlighted_{}.svg", sc.name);

@@ -22,8 +22,11 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use control::delay::DelayCompensator;
 use control::mlp::PAPER_HIDDEN;
-use control::model::{converged, env_step, ix, Control, MachineParams, State, SUCCESS_TOLERANCE};
+use control::model::{
+    converged, env_step, ix, Control, Goal, MachineParams, State, SUCCESS_TOLERANCE,
+};
 use control::mpc::{Mpc, MpcSettings};
+use control::planner::{AbortReason, NavStep, Navigator, NavigatorSettings};
 use control::plant::{Plant, PlantConfig, VelocityCommand};
 use control::scenario::Scenario;
 use control::weights::{decode, random_network, NetworkMetadata, NetworkRole};
@@ -146,6 +149,9 @@ pub struct EvalConfig {
     pub duration: f64,
     pub baseline: BaselineSettings,
     pub min_time: MinTimeSettings,
+    /// The global layer above the MPC (DESIGN §10); `None` drives the MPC
+    /// straight to the goal.
+    pub navigator: Option<NavigatorSettings>,
     /// Worker threads.
     pub jobs: usize,
     pub progress: bool,
@@ -170,6 +176,7 @@ impl Default for EvalConfig {
             duration: 30.0,
             baseline: BaselineSettings::default(),
             min_time: MinTimeSettings::default(),
+            navigator: Some(NavigatorSettings::default()),
             jobs: std::thread::available_parallelism().map_or(2, |n| n.get()),
             progress: true,
         }
@@ -187,6 +194,43 @@ pub struct Run {
     pub solve_ms: Vec<f64>,
     /// Wall time of the whole run [s].
     pub wall_s: f64,
+    /// What the global layer did (MPC runs with a navigator only).
+    pub navigation: Option<Navigation>,
+}
+
+/// The global layer's record of one run.
+#[derive(Debug, Clone, Default)]
+pub struct Navigation {
+    /// Every route it handed the MPC (the goal's plan, then each replan),
+    /// subgoals ending with the goal.
+    pub routes: Vec<Vec<Goal>>,
+    /// Duration of every plan [ms] (the "in the way" test and the search).
+    pub plan_ms: Vec<f64>,
+    /// When each plan was made [s] (the goal's at 0).
+    pub plan_at: Vec<f64>,
+    /// Each plan's search: (expansions, shots or edge checks).
+    pub plan_work: Vec<(usize, usize)>,
+    /// Duration of every `update` [ms] (including the replans in it).
+    pub update_ms: Vec<f64>,
+    /// Why the navigator ended the run, if it did.
+    pub abort: Option<AbortReason>,
+    /// Tick at which it aborted.
+    pub aborted_at: Option<f64>,
+}
+
+impl Navigation {
+    /// Records the navigator's latest plan if it is new.
+    fn record_plan(&mut self, nav: &Navigator, seen: &mut u64, now: f64) {
+        if nav.plans() != *seen {
+            *seen = nav.plans();
+            if let Some(r) = nav.last_plan() {
+                self.plan_ms.push(r.duration.as_secs_f64() * 1e3);
+                self.plan_work.push((r.search.expansions, r.search.shots));
+            }
+            self.plan_at.push(now);
+            self.routes.push(nav.route().to_vec());
+        }
+    }
 }
 
 /// All methods on one scenario.
@@ -259,22 +303,73 @@ pub fn run_mpc(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run> 
         Some(nets.actor.clone()),
         settings,
     )?;
-    mpc.set_goal(sc.goal, &sc.obstacles)?;
+    // The global layer hands the MPC its target each tick; without one the
+    // MPC drives to the goal. With nothing in the way the target is the goal
+    // from the first tick, so the MPC sees exactly the same calls.
+    let mut nav = match &cfg.navigator {
+        Some(s) => {
+            let mut nav = Navigator::new(
+                cfg.params,
+                s.clone(),
+                Some((nets.actor.clone(), nets.critic.clone())),
+            )?;
+            nav.set_goal(&sc.start, sc.goal, &sc.obstacles)
+                .with_context(|| format!("scenario {}", sc.name))?;
+            Some(nav)
+        }
+        None => {
+            mpc.set_goal(sc.goal, &sc.obstacles)?;
+            None
+        }
+    };
+    let mut navigation = nav.as_ref().map(|_| Navigation::default());
+    let mut plans_seen = 0;
     let mut plant = Plant::new(cfg.params, cfg.plant, sc.start)?;
     let steps = (cfg.duration / settings.dt).round() as usize;
     let mut states = Vec::with_capacity(steps + 1);
     let mut solve_ms = Vec::with_capacity(steps);
     let mut clearance = ClearanceMeter::new(cfg.params, &sc.obstacles);
     clearance.observe(&plant.state());
+    let mut aborted = false;
     for k in 0..=steps {
         let x = plant.measure();
         states.push(plant.state());
         if k == steps {
             break;
         }
-        let sol = mpc.step(&x)?;
-        solve_ms.push(sol.solve_time.as_secs_f64() * 1e3);
-        plant.command(sol.command)?;
+        if let (Some(nav), Some(rec)) = (nav.as_mut(), navigation.as_mut()) {
+            if !aborted {
+                let now = k as f64 * settings.dt;
+                let t0 = Instant::now();
+                let step = nav.update(&x, now);
+                rec.update_ms.push(t0.elapsed().as_secs_f64() * 1e3);
+                rec.record_plan(nav, &mut plans_seen, now);
+                match step {
+                    NavStep::Drive { target, .. } => {
+                        if mpc.goal() != Some(target) {
+                            mpc.set_goal(target, &sc.obstacles)?;
+                        }
+                    }
+                    NavStep::Abort(reason) => {
+                        rec.abort = Some(reason);
+                        rec.aborted_at = Some(now);
+                        aborted = true;
+                    }
+                }
+            }
+        }
+        if aborted {
+            // An aborted goal ends the run: the machine is commanded to rest
+            // (the plant ramps down within its limits).
+            plant.command(VelocityCommand {
+                beta_dot: 0.0,
+                v: 0.0,
+            })?;
+        } else {
+            let sol = mpc.step(&x)?;
+            solve_ms.push(sol.solve_time.as_secs_f64() * 1e3);
+            plant.command(sol.command)?;
+        }
         plant.advance_observed(settings.dt, |x| clearance.observe(x));
     }
     let row = score(
@@ -292,6 +387,7 @@ pub fn run_mpc(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run> 
         dt: settings.dt,
         solve_ms,
         wall_s: start.elapsed().as_secs_f64(),
+        navigation,
     })
 }
 
@@ -342,6 +438,7 @@ pub fn run_actor(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run
         dt,
         solve_ms,
         wall_s: start.elapsed().as_secs_f64(),
+        navigation: None,
     })
 }
 
@@ -383,6 +480,7 @@ pub fn run_baseline(cfg: &EvalConfig, sc: &Scenario) -> Result<(Run, ocp::Plan)>
             dt: plan.dt,
             solve_ms,
             wall_s: start.elapsed().as_secs_f64(),
+            navigation: None,
         },
         plan,
     ))
@@ -476,6 +574,7 @@ pub fn run_min_time(cfg: &EvalConfig, sc: &Scenario, others: &[(Method, Run)]) -
         dt,
         solve_ms,
         wall_s: start.elapsed().as_secs_f64(),
+        navigation: None,
     })
 }
 

@@ -1,0 +1,775 @@
+//! The global layer above the MPC (DESIGN §10, issue 14): when the way to the
+//! goal is blocked it finds a collision-free route and hands the MPC a
+//! sequence of subgoals, passes through them without stopping, replans when
+//! progress stalls, and aborts a goal that makes no progress or has no route.
+//!
+//! Why: the MPC's horizon is 2 s and its critic knows no obstacles, so behind
+//! an obstacle it sits in a local minimum. The critic is goal-conditioned, so
+//! a subgoal is just a [`Goal`]; the MPC needs no change.
+//!
+//! Pieces: [`World`] (the circles, both axle points, a margin), the actor
+//! [`rollout`] ("is anything in the way?", goal shots, edge checks), two
+//! planners behind [`PlannerKind`] — [`HybridAStar`] over (x, y, θ) with the
+//! model's [`primitives`], and [`WaypointGraph`] (a critic-cost graph over
+//! waypoints around the circles, after Eysenbach et al., "Search on the
+//! Replay Buffer") — and [`route`] (path → subgoals).
+//!
+//! Everything is allocated in [`Navigator::new`]; `set_goal` and `update`
+//! (including a replan inside `update`) allocate nothing. A plan takes
+//! milliseconds (bounded by the expansion and node limits; see
+//! `docs/global-layer.md`); `update` without a replan takes microseconds.
+
+pub mod grid;
+pub mod hybrid_astar;
+pub mod primitives;
+pub mod rollout;
+pub mod route;
+pub mod waypoint_graph;
+pub mod world;
+
+use std::time::{Duration, Instant};
+
+pub use hybrid_astar::{HybridAStar, SearchFailure, SearchStats};
+pub use waypoint_graph::WaypointGraph;
+pub use world::World;
+
+use crate::actor::{Actor, ActorWorkspace};
+use crate::critic::{Critic, CriticWorkspace};
+use crate::model::{goal_distance, ix, Goal, MachineParams, State, SUCCESS_TOLERANCE};
+use crate::obstacle::{BadObstacle, Obstacle};
+use crate::progress::{ProgressChecker, ProgressSettings};
+
+use rollout::{roll_out, Arrival};
+
+/// Which planner finds the route when the way is blocked.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PlannerKind {
+    /// Hybrid A* over (x, y, θ) with motion primitives from the model.
+    HybridAStar,
+    /// A graph over waypoints around the circles with critic edge costs,
+    /// edges checked by actor roll-outs (needs the networks).
+    WaypointGraph,
+}
+
+impl PlannerKind {
+    pub fn name(self) -> &'static str {
+        match self {
+            PlannerKind::HybridAStar => "hybrid-astar",
+            PlannerKind::WaypointGraph => "waypoint-graph",
+        }
+    }
+}
+
+/// Everything the navigator is tuned with; `Default` gives the measured best.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NavigatorSettings {
+    pub planner: PlannerKind,
+    /// A subgoal is passed (the next one becomes the target) when the front
+    /// axle is within this distance of it [m]. Default 1.0: before the MPC
+    /// slows down for it.
+    pub subgoal_radius: f64,
+    /// Distance between subgoals along a planned path [m]. Default 2.5.
+    pub subgoal_spacing: f64,
+    /// The abort window: no approach to the current target for
+    /// `progress.timeout` (default 10 s) → `Abort(NoProgress)`.
+    pub progress: ProgressSettings,
+    /// Seconds without approach to the current target before a replan from
+    /// the current state. Default 4.
+    pub replan_after: f64,
+    /// Replans per goal. Default 3.
+    pub max_replans: usize,
+    /// Within this pose error of the goal the machine is holding it, not
+    /// stalled. Default [`SUCCESS_TOLERANCE`].
+    pub reached_tolerance: f64,
+    /// Clearance both axle points keep from every (inflated) circle on a
+    /// planned route and in the "in the way" test [m]. Default 0.15.
+    pub clearance_margin: f64,
+    /// Clearance the actor's roll-out must keep for "nothing in the way"
+    /// [m]: more than the route's, since the MPC does not drive the actor's
+    /// path exactly and, without subgoals, may stall at a circle it passes
+    /// close by. Default 0.3.
+    pub direct_margin: f64,
+    /// Half the side of the square the planners search, centred between
+    /// start and goal [m]. Default 14.
+    pub workspace_half_size: f64,
+    /// Side of a grid cell [m]. Default 0.3.
+    pub grid_resolution: f64,
+    /// Heading bins of the Hybrid A* grid. Default 72 (5°).
+    pub heading_bins: usize,
+    /// Arc length of a motion primitive [m]. Default 0.6 (leaves its cell).
+    pub primitive_length: f64,
+    /// Collision samples along a primitive, at most this far apart [m]. Default 0.15.
+    pub sample_spacing: f64,
+    /// Articulations of the primitives as fractions of β_max (each also
+    /// mirrored). Default [0, 0.5, 1].
+    pub articulations: Vec<f64>,
+    /// Cost factor of reversing. Default 2.
+    pub reverse_penalty: f64,
+    /// Cost of a cusp (stop, change gear, restart) [m]. Default 2.
+    pub direction_change_penalty: f64,
+    /// f = g + w h (w > 1 trades optimality for far fewer expansions: on a
+    /// wall across the path 92 expansions at 2 against 7 301 at 1). Default 2.
+    pub heuristic_weight: f64,
+    /// Hybrid A* expansion budget. Default 20 000.
+    pub max_expansions: usize,
+    /// Hybrid A* node pool. Default 100 000.
+    pub max_nodes: usize,
+    /// Goal region of the search (position [m], heading [rad]); the MPC does
+    /// the last part itself. Defaults 0.5 and 0.35.
+    pub goal_position_tolerance: f64,
+    pub goal_heading_tolerance: f64,
+    /// Goal shots (actor roll-outs to the goal): at most one per this many
+    /// expansions, at most `max_shots`, only within `shot_range` [m] and a
+    /// line of sight. Defaults 10, 10, 8.
+    pub shot_interval: usize,
+    pub max_shots: usize,
+    pub shot_range: f64,
+    /// A roll-out has reached the goal within this pose error. Default 0.2.
+    pub shot_tolerance: f64,
+    /// Step of every roll-out [s]: the actor's own Δt. Default 0.2.
+    pub rollout_dt: f64,
+    /// Length of the "is anything in the way?" roll-out [s]. Default 30.
+    pub direct_horizon: f64,
+    /// Circles the navigator takes. Default 32.
+    pub max_obstacles: usize,
+    /// Waypoint graph: points per circle, their distance beyond radius +
+    /// margin [m], neighbours per node and the edge-check budget.
+    pub ring_points: usize,
+    pub ring_offset: f64,
+    pub graph_neighbours: usize,
+    pub max_edge_checks: usize,
+    /// Waypoint graph: longest edge [m] (the critic was trained on goals up
+    /// to 10 m away). Default 6.
+    pub graph_edge_length: f64,
+}
+
+impl Default for NavigatorSettings {
+    fn default() -> Self {
+        Self {
+            planner: PlannerKind::HybridAStar,
+            subgoal_radius: 1.0,
+            subgoal_spacing: 2.5,
+            progress: ProgressSettings::default(),
+            replan_after: 4.0,
+            max_replans: 3,
+            reached_tolerance: SUCCESS_TOLERANCE,
+            clearance_margin: 0.15,
+            direct_margin: 0.3,
+            workspace_half_size: 14.0,
+            grid_resolution: 0.3,
+            heading_bins: 72,
+            primitive_length: 0.6,
+            sample_spacing: 0.15,
+            articulations: vec![0.0, 0.5, 1.0],
+            reverse_penalty: 2.0,
+            direction_change_penalty: 2.0,
+            heuristic_weight: 2.0,
+            max_expansions: 20_000,
+            max_nodes: 100_000,
+            goal_position_tolerance: 0.5,
+            goal_heading_tolerance: 0.35,
+            shot_interval: 10,
+            max_shots: 10,
+            shot_range: 8.0,
+            shot_tolerance: 0.2,
+            rollout_dt: 0.2,
+            direct_horizon: 30.0,
+            max_obstacles: 32,
+            ring_points: 8,
+            ring_offset: 0.4,
+            graph_neighbours: 10,
+            max_edge_checks: 40,
+            graph_edge_length: 6.0,
+        }
+    }
+}
+
+impl NavigatorSettings {
+    /// Cells a side of the search grid.
+    pub fn grid_cells(&self) -> usize {
+        (2.0 * self.workspace_half_size / self.grid_resolution).ceil() as usize
+    }
+
+    /// Checks every field once; the error names it.
+    pub fn validate(&self) -> Result<(), NavError> {
+        let positive = [
+            ("subgoal_radius", self.subgoal_radius),
+            ("subgoal_spacing", self.subgoal_spacing),
+            ("progress.timeout", self.progress.timeout),
+            ("replan_after", self.replan_after),
+            ("reached_tolerance", self.reached_tolerance),
+            ("workspace_half_size", self.workspace_half_size),
+            ("grid_resolution", self.grid_resolution),
+            ("primitive_length", self.primitive_length),
+            ("sample_spacing", self.sample_spacing),
+            ("reverse_penalty", self.reverse_penalty),
+            ("heuristic_weight", self.heuristic_weight),
+            ("goal_position_tolerance", self.goal_position_tolerance),
+            ("goal_heading_tolerance", self.goal_heading_tolerance),
+            ("shot_range", self.shot_range),
+            ("shot_tolerance", self.shot_tolerance),
+            ("rollout_dt", self.rollout_dt),
+            ("direct_horizon", self.direct_horizon),
+            ("ring_offset", self.ring_offset),
+            ("graph_edge_length", self.graph_edge_length),
+        ];
+        for (name, v) in positive {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(bad(name, "must be finite and > 0", v));
+            }
+        }
+        let non_negative = [
+            ("progress.min_approach", self.progress.min_approach),
+            ("clearance_margin", self.clearance_margin),
+            ("direct_margin", self.direct_margin),
+            ("direction_change_penalty", self.direction_change_penalty),
+        ];
+        for (name, v) in non_negative {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(bad(name, "must be finite and >= 0", v));
+            }
+        }
+        if self.replan_after >= self.progress.timeout {
+            return Err(bad(
+                "replan_after",
+                "must be below progress.timeout (a replan comes before the abort)",
+                self.replan_after,
+            ));
+        }
+        // The grid must be left by a primitive, or successors land on their parent.
+        if self.primitive_length <= self.grid_resolution * std::f64::consts::SQRT_2 {
+            return Err(bad(
+                "primitive_length",
+                "must exceed the cell diagonal (grid_resolution × √2)",
+                self.primitive_length,
+            ));
+        }
+        let cells = self.grid_cells();
+        if cells > 1024 || self.heading_bins == 0 || self.heading_bins > 360 {
+            return Err(bad(
+                "grid",
+                "needs workspace_half_size / grid_resolution ≤ 512 and 1..=360 heading_bins",
+                cells as f64,
+            ));
+        }
+        if self.articulations.is_empty()
+            || self
+                .articulations
+                .iter()
+                .any(|a| !(a.is_finite() && (0.0..=1.0).contains(a)))
+        {
+            return Err(bad(
+                "articulations",
+                "must be a non-empty list of fractions in [0, 1]",
+                f64::NAN,
+            ));
+        }
+        let counts = [
+            ("max_expansions", self.max_expansions),
+            ("max_nodes", self.max_nodes),
+            ("shot_interval", self.shot_interval),
+            ("max_obstacles", self.max_obstacles),
+            ("ring_points", self.ring_points),
+            ("graph_neighbours", self.graph_neighbours),
+        ];
+        for (name, v) in counts {
+            if v == 0 {
+                return Err(bad(name, "must be > 0", 0.0));
+            }
+        }
+        Ok(())
+    }
+}
+
+fn bad(name: &'static str, requirement: &'static str, value: f64) -> NavError {
+    NavError::BadSettings {
+        name,
+        requirement,
+        value,
+    }
+}
+
+/// One pose of a planned path: the front axle's pose, the articulation and
+/// the direction of travel that reached it (+1, −1; 0 at a start at rest).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PathPose {
+    pub x: f64,
+    pub y: f64,
+    pub theta: f64,
+    pub beta: f64,
+    pub direction: i8,
+}
+
+/// What the MPC should do this tick.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum NavStep {
+    /// Drive to `target`; `final_target` when it is the goal itself.
+    Drive { target: Goal, final_target: bool },
+    /// Stop: the goal ends aborted.
+    Abort(AbortReason),
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum AbortReason {
+    /// No approach to the current target for `progress.timeout`.
+    NoProgress,
+    /// The planner found no route (reported by the first `update` after the
+    /// failed plan; also returned while no goal is set).
+    NoRoute,
+}
+
+impl AbortReason {
+    /// The outcome reason's name in telemetry (DESIGN §10).
+    pub fn name(self) -> &'static str {
+        match self {
+            AbortReason::NoProgress => "no-progress",
+            AbortReason::NoRoute => "no-route",
+        }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum NavError {
+    #[error("goal in collision: its footprint (β = 0) is {depth:.3} m inside obstacle circle {obstacle}")]
+    GoalInCollision { obstacle: usize, depth: f64 },
+    #[error("start in collision: the machine's footprint is {depth:.3} m inside obstacle circle {obstacle}")]
+    StartInCollision { obstacle: usize, depth: f64 },
+    #[error("navigator setting `{name}` {requirement} (got {value})")]
+    BadSettings {
+        name: &'static str,
+        requirement: &'static str,
+        value: f64,
+    },
+    #[error("goal must be finite (got x {x}, y {y}, theta {theta})")]
+    BadGoal { x: f64, y: f64, theta: f64 },
+    #[error("{given} obstacles given, the navigator takes at most {max} (`max_obstacles`)")]
+    TooManyObstacles { given: usize, max: usize },
+    #[error(transparent)]
+    BadObstacle(BadObstacle),
+}
+
+/// How the last plan ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PlanOutcome {
+    /// Nothing in the way: the route is the goal alone.
+    Direct,
+    /// A route of subgoals.
+    Route,
+    /// The planner found none.
+    NoRoute,
+}
+
+/// What the last plan did and how long it took.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlanReport {
+    pub outcome: PlanOutcome,
+    /// The whole plan: the "in the way" test and the search.
+    pub duration: Duration,
+    pub search: SearchStats,
+    /// A replan from `update` (not a new goal).
+    pub replan: bool,
+}
+
+struct Networks {
+    actor: Actor,
+    actor_ws: ActorWorkspace,
+    /// The waypoint graph's edge costs.
+    critic: Critic,
+    critic_ws: CriticWorkspace,
+}
+
+enum Planner {
+    HybridAStar(Box<HybridAStar>),
+    WaypointGraph(Box<WaypointGraph>),
+}
+
+/// Seconds per unit of critic cost when the fit fails (measured on the
+/// published critic: about 0.22, `docs/global-layer.md`).
+const FALLBACK_SECONDS_PER_COST: f64 = 0.22;
+
+/// The global layer: built once, then `set_goal` per goal and `update` per tick.
+pub struct Navigator {
+    params: MachineParams,
+    settings: NavigatorSettings,
+    world: World,
+    networks: Option<Networks>,
+    planner: Planner,
+    path: Vec<PathPose>,
+    route: Vec<Goal>,
+    route_index: usize,
+    goal: Option<Goal>,
+    checker: ProgressChecker,
+    /// The target of the checker's window on the last tick: an approach only
+    /// counts on a window that was already running (a replan's new target
+    /// restarts the window, which is no progress).
+    window_target: Option<Goal>,
+    /// Set by `set_goal`: the first `update` starts the clocks.
+    clocks_pending: bool,
+    last_progress: f64,
+    last_replan: f64,
+    replans: usize,
+    pending_no_route: bool,
+    aborted: Option<AbortReason>,
+    last_plan: Option<PlanReport>,
+    plans: u64,
+}
+
+impl Navigator {
+    pub fn new(
+        params: MachineParams,
+        settings: NavigatorSettings,
+        networks: Option<(Actor, Critic)>,
+    ) -> Result<Self, NavError> {
+        params
+            .validate()
+            .map_err(|_| bad("params", "machine parameters must be valid", f64::NAN))?;
+        settings.validate()?;
+        let mut networks = networks.map(|(actor, critic)| Networks {
+            actor_ws: ActorWorkspace::new(&actor),
+            critic_ws: CriticWorkspace::new(&critic),
+            actor,
+            critic,
+        });
+        let planner = match (settings.planner, networks.as_mut()) {
+            (PlannerKind::HybridAStar, _) => {
+                Planner::HybridAStar(Box::new(HybridAStar::new(params, &settings)))
+            }
+            (PlannerKind::WaypointGraph, Some(n)) => {
+                let seconds_per_cost = waypoint_graph::calibrate(
+                    &params,
+                    &n.actor,
+                    &mut n.actor_ws,
+                    &n.critic,
+                    &mut n.critic_ws,
+                    settings.rollout_dt,
+                    settings.shot_tolerance,
+                )
+                .unwrap_or(FALLBACK_SECONDS_PER_COST);
+                Planner::WaypointGraph(Box::new(WaypointGraph::new(
+                    params,
+                    &settings,
+                    seconds_per_cost,
+                )))
+            }
+            (PlannerKind::WaypointGraph, None) => {
+                return Err(bad(
+                    "planner",
+                    "waypoint-graph needs the actor and critic",
+                    f64::NAN,
+                ))
+            }
+        };
+        Ok(Self {
+            params,
+            world: World::new(params, settings.max_obstacles, settings.clearance_margin),
+            networks,
+            planner,
+            path: Vec::with_capacity(settings.max_nodes),
+            route: Vec::with_capacity(settings.max_nodes + 1),
+            route_index: 0,
+            goal: None,
+            checker: ProgressChecker::new(settings.progress),
+            window_target: None,
+            clocks_pending: false,
+            last_progress: 0.0,
+            last_replan: 0.0,
+            replans: 0,
+            pending_no_route: false,
+            aborted: None,
+            last_plan: None,
+            plans: 0,
+            settings,
+        })
+    }
+
+    pub fn settings(&self) -> &NavigatorSettings {
+        &self.settings
+    }
+
+    /// New goal. Errors: `GoalInCollision` (the goal pose's footprint, β = 0,
+    /// inside a circle), `StartInCollision` (a circle contains the machine's
+    /// current footprint), and malformed input (`BadGoal`, `TooManyObstacles`,
+    /// `BadObstacle`). Decides whether the way is blocked; if so plans a
+    /// route. A failed plan is not an error here: the goal is accepted and
+    /// the first `update` reports `Abort(NoRoute)`.
+    pub fn set_goal(
+        &mut self,
+        start: &State,
+        goal: Goal,
+        obstacles: &[Obstacle],
+    ) -> Result<(), NavError> {
+        if !(goal.x.is_finite() && goal.y.is_finite() && goal.theta.is_finite()) {
+            return Err(NavError::BadGoal {
+                x: goal.x,
+                y: goal.y,
+                theta: goal.theta,
+            });
+        }
+        self.clear();
+        self.world.set(obstacles)?;
+        let goal_pose = State::new(goal.x, goal.y, goal.theta, 0.0, 0.0, 0.0);
+        if let Some((obstacle, depth)) = deepest(&self.params, &goal_pose, obstacles) {
+            self.world.clear();
+            return Err(NavError::GoalInCollision { obstacle, depth });
+        }
+        if let Some((obstacle, depth)) = deepest(&self.params, start, obstacles) {
+            self.world.clear();
+            return Err(NavError::StartInCollision { obstacle, depth });
+        }
+        self.goal = Some(goal);
+        self.clocks_pending = true;
+        self.plan(start, false);
+        Ok(())
+    }
+
+    /// Every tick: what the MPC should drive to now. Allocation-free; a
+    /// replan (after `replan_after` s without approach) runs inside it.
+    pub fn update(&mut self, x: &State, now: f64) -> NavStep {
+        if let Some(r) = self.aborted {
+            return NavStep::Abort(r);
+        }
+        let Some(goal) = self.goal else {
+            return NavStep::Abort(AbortReason::NoRoute);
+        };
+        if self.pending_no_route {
+            self.aborted = Some(AbortReason::NoRoute);
+            return NavStep::Abort(AbortReason::NoRoute);
+        }
+        if self.clocks_pending {
+            self.clocks_pending = false;
+            self.last_progress = now;
+            self.last_replan = now;
+        }
+        self.advance(x, now);
+        let target = self.route[self.route_index];
+        self.checker.update(x, &target, now);
+        let stalled_for = self.checker.stalled_for(now);
+        let final_target = self.route_index + 1 == self.route.len();
+        let holding = final_target && goal_distance(x, &goal) < self.settings.reached_tolerance;
+        let approached = stalled_for == 0.0 && self.window_target == Some(target);
+        self.window_target = Some(target);
+        if approached || holding {
+            self.last_progress = now;
+        }
+        if now - self.last_progress >= self.settings.progress.timeout {
+            self.aborted = Some(AbortReason::NoProgress);
+            return NavStep::Abort(AbortReason::NoProgress);
+        }
+        if !self.world.is_empty()
+            && !holding
+            && stalled_for >= self.settings.replan_after
+            && now - self.last_replan >= self.settings.replan_after
+            && self.replans < self.settings.max_replans
+        {
+            self.replans += 1;
+            self.last_replan = now;
+            self.plan(x, true);
+            // A failed replan keeps the route it had: the abort window decides.
+            self.pending_no_route = false;
+            self.advance(x, now);
+        }
+        let target = self.route[self.route_index];
+        NavStep::Drive {
+            target,
+            final_target: self.route_index + 1 == self.route.len(),
+        }
+    }
+
+    /// The current subgoal sequence ending with the goal ([goal] when direct;
+    /// empty without a goal).
+    pub fn route(&self) -> &[Goal] {
+        &self.route
+    }
+
+    /// The subgoals not yet passed, ending with the goal.
+    pub fn remaining_route(&self) -> &[Goal] {
+        &self.route[self.route_index.min(self.route.len())..]
+    }
+
+    /// The last planned path (empty when direct).
+    pub fn path(&self) -> &[PathPose] {
+        &self.path
+    }
+
+    pub fn goal(&self) -> Option<Goal> {
+        self.goal
+    }
+
+    /// The last plan's report.
+    pub fn last_plan(&self) -> Option<PlanReport> {
+        self.last_plan
+    }
+
+    /// Plans made since construction (a new report each time it grows).
+    pub fn plans(&self) -> u64 {
+        self.plans
+    }
+
+    /// Forgets the goal and the route.
+    pub fn clear(&mut self) {
+        self.goal = None;
+        self.route.clear();
+        self.path.clear();
+        self.route_index = 0;
+        self.checker = ProgressChecker::new(self.settings.progress);
+        self.window_target = None;
+        self.clocks_pending = false;
+        self.replans = 0;
+        self.pending_no_route = false;
+        self.aborted = None;
+    }
+
+    /// Passes every subgoal within `subgoal_radius` (never the goal).
+    fn advance(&mut self, x: &State, now: f64) {
+        while self.route_index + 1 < self.route.len() {
+            let t = &self.route[self.route_index];
+            if (x[ix::X] - t.x).hypot(x[ix::Y] - t.y) >= self.settings.subgoal_radius {
+                break;
+            }
+            self.route_index += 1;
+            self.last_progress = now;
+        }
+    }
+
+    /// Decides direct or not (unless `force`), plans, writes the route.
+    fn plan(&mut self, start: &State, force: bool) {
+        let t0 = Instant::now();
+        let Some(goal) = self.goal else {
+            return;
+        };
+        let s = &self.settings;
+        // Near a pile the start or goal may already be inside the margin: the
+        // plan keeps what the endpoints have (half of it), never more than asked.
+        let goal_pose = State::new(goal.x, goal.y, goal.theta, 0.0, 0.0, 0.0);
+        let endpoints = 0.5
+            * self
+                .world
+                .state_clearance(start)
+                .min(self.world.state_clearance(&goal_pose));
+        let margin = s.clearance_margin.min(endpoints).max(0.0);
+        let direct_margin = s.direct_margin.min(endpoints).max(margin);
+        let mut report = PlanReport {
+            outcome: PlanOutcome::Direct,
+            duration: Duration::ZERO,
+            search: SearchStats::default(),
+            replan: force,
+        };
+        self.world.set_margin(direct_margin);
+        let direct = self.world.is_empty() || (!force && self.nothing_in_the_way(start, &goal));
+        self.world.set_margin(margin);
+        let mut new_route = true;
+        if direct {
+            self.path.clear();
+        } else {
+            let (result, stats) = match (&mut self.planner, self.networks.as_mut()) {
+                (Planner::HybridAStar(h), n) => {
+                    let actor = n.map(|n| (&n.actor, &mut n.actor_ws));
+                    h.search(&self.world, start, &goal, actor, &mut self.path)
+                }
+                (Planner::WaypointGraph(w), Some(n)) => w.search(
+                    &self.world,
+                    start,
+                    &goal,
+                    &n.actor,
+                    &mut n.actor_ws,
+                    &n.critic,
+                    &mut n.critic_ws,
+                    &mut self.path,
+                ),
+                // `new` refuses a waypoint graph without networks.
+                (Planner::WaypointGraph(_), None) => {
+                    (Err(SearchFailure::Unreachable), SearchStats::default())
+                }
+            };
+            report.search = stats;
+            match result {
+                Ok(()) => report.outcome = PlanOutcome::Route,
+                Err(_) => {
+                    report.outcome = PlanOutcome::NoRoute;
+                    self.pending_no_route = true;
+                    // A replan that fails keeps the old route, a first plan has [goal].
+                    new_route = self.route.is_empty();
+                    self.path.clear();
+                }
+            }
+        }
+        if new_route {
+            if report.outcome == PlanOutcome::Route {
+                // Hybrid A*'s nodes are 0.6 m apart: thin them to the
+                // spacing. The graph's nodes are each a chosen waypoint.
+                let spacing = match self.planner {
+                    Planner::HybridAStar(_) => self.settings.subgoal_spacing,
+                    Planner::WaypointGraph(_) => 0.0,
+                };
+                route::subgoals_from_path(
+                    &self.path,
+                    goal,
+                    spacing,
+                    self.settings.subgoal_radius,
+                    &mut self.route,
+                );
+            } else {
+                self.route.clear();
+                self.route.push(goal);
+            }
+            self.route_index = 0;
+        }
+        report.duration = t0.elapsed();
+        self.last_plan = Some(report);
+        self.plans += 1;
+    }
+
+    /// "Is anything in the way?", by measurement: the actor rolled out from
+    /// the start (what the MPC's warm start does) keeps the margin all the way,
+    /// or, without networks, a straight corridor of both axle points does.
+    fn nothing_in_the_way(&mut self, start: &State, goal: &Goal) -> bool {
+        let s = &self.settings;
+        match self.networks.as_mut() {
+            Some(n) => {
+                let steps = (s.direct_horizon / s.rollout_dt).ceil() as usize;
+                let r = roll_out(
+                    &self.params,
+                    &n.actor,
+                    &mut n.actor_ws,
+                    &self.world,
+                    start,
+                    goal,
+                    Arrival::Pose(s.shot_tolerance),
+                    s.rollout_dt,
+                    steps,
+                    None,
+                );
+                !r.collided
+            }
+            None => straight_corridor_free(&self.world, start, goal, s.sample_spacing),
+        }
+    }
+}
+
+/// The circle a footprint is deepest inside, and how deep, if any.
+fn deepest(p: &MachineParams, x: &State, obstacles: &[Obstacle]) -> Option<(usize, f64)> {
+    let mut worst: Option<(usize, f64)> = None;
+    for (i, o) in obstacles.iter().enumerate() {
+        let c = crate::obstacle::footprint_clearance(p, x, std::slice::from_ref(o));
+        if c < 0.0 && worst.is_none_or(|(_, d)| -c > d) {
+            worst = Some((i, -c));
+        }
+    }
+    worst
+}
+
+/// Both axle points free along the straight line from the start's front axle
+/// to the goal's, heading along the line and unarticulated, plus both end poses.
+fn straight_corridor_free(world: &World, start: &State, goal: &Goal, spacing: f64) -> bool {
+    let (dx, dy) = (goal.x - start[ix::X], goal.y - start[ix::Y]);
+    let len = dx.hypot(dy);
+    let heading = dy.atan2(dx);
+    let n = (len / spacing).ceil() as usize;
+    let along = (0..=n).all(|k| {
+        let f = if n == 0 { 1.0 } else { k as f64 / n as f64 };
+        world.pose_free(start[ix::X] + f * dx, start[ix::Y] + f * dy, heading, 0.0)
+    });
+    along && world.state_free(start) && world.pose_free(goal.x, goal.y, goal.theta, 0.0)
+}
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,432 @@
+//! Behaviour of the global layer: collision checks of both axles, routes
+//! around a wall and through a gap, none for an enclosed goal, the direct
+//! case, subgoal switching, replanning and the abort window.
+
+use super::hybrid_astar::primitive_free;
+use super::primitives::{build, compose};
+use super::*;
+use crate::obstacle::{footprint_clearance, AxlePoint};
+use crate::weights::decode;
+
+fn params() -> MachineParams {
+    MachineParams::default()
+}
+
+/// The trained networks in `critic-weights/`.
+fn trained() -> (Actor, Critic) {
+    let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../critic-weights/");
+    let read = |name: &str| {
+        let path = format!("{dir}{name}");
+        decode(&std::fs::read(&path).expect("weights file"), &path).expect("valid weights")
+    };
+    (
+        Actor::from_weights(read("actor.safetensors")).unwrap(),
+        Critic::from_weights(read("critic.safetensors")).unwrap(),
+    )
+}
+
+fn navigator(kind: PlannerKind, networks: bool) -> Navigator {
+    let settings = NavigatorSettings {
+        planner: kind,
+        ..NavigatorSettings::default()
+    };
+    Navigator::new(params(), settings, networks.then(trained)).unwrap()
+}
+
+/// Each planner, with and without the networks (the graph needs them).
+const COMBINATIONS: [(PlannerKind, bool); 3] = [
+    (PlannerKind::HybridAStar, false),
+    (PlannerKind::HybridAStar, true),
+    (PlannerKind::WaypointGraph, true),
+];
+
+fn at_rest(x: f64, y: f64, theta: f64) -> State {
+    State::new(x, y, theta, 0.0, 0.0, 0.0)
+}
+
+/// A wall across the straight path at x = 4, |y| ≤ 3.2.
+fn wall() -> Vec<Obstacle> {
+    (-4..=4)
+        .map(|k| Obstacle::new(4.0, 0.8 * k as f64, 0.6))
+        .collect()
+}
+
+/// Two long walls at x = 4 with a gap around y = 2 (2 m between the
+/// circles' edges), off the straight line y = 0.
+fn gap() -> Vec<Obstacle> {
+    let mut v = Vec::new();
+    for k in 0..8 {
+        let d = 1.5 + 0.8 * k as f64;
+        v.push(Obstacle::new(4.0, GAP_Y + d, 0.5));
+        v.push(Obstacle::new(4.0, GAP_Y - d, 0.5));
+    }
+    v
+}
+
+const GAP_Y: f64 = 2.0;
+
+/// A closed ring of circles around (8, 0).
+fn ring() -> Vec<Obstacle> {
+    (0..16)
+        .map(|k| {
+            let a = k as f64 * std::f64::consts::TAU / 16.0;
+            Obstacle::new(8.0 + 2.5 * a.cos(), 2.5 * a.sin(), 0.6)
+        })
+        .collect()
+}
+
+/// Every path pose, and every primitive sample between consecutive poses,
+/// keeps both axle points at least `margin` from every circle.
+fn assert_path_clear(nav: &Navigator, obstacles: &[Obstacle], margin: f64) {
+    let p = params();
+    let path = nav.path();
+    assert!(!path.is_empty());
+    for q in path {
+        let s = State::new(q.x, q.y, q.theta, q.beta, 0.0, 0.0);
+        let c = footprint_clearance(&p, &s, obstacles);
+        assert!(c >= margin - 1e-9, "pose {q:?} clearance {c}");
+    }
+}
+
+#[test]
+fn the_world_sees_an_obstacle_only_the_rear_axle_touches() {
+    let p = params();
+    let mut world = World::new(p, 4, 0.1);
+    let rear = AxlePoint::Rear.position(&p, &at_rest(0.0, 0.0, 0.3));
+    world.set(&[Obstacle::new(rear[0], rear[1], 0.2)]).unwrap();
+    assert!(!world.pose_free(0.0, 0.0, 0.3, 0.0));
+    assert!(!world.state_free(&at_rest(0.0, 0.0, 0.3)));
+    // The front axle alone is 1.2 − 0.2 m clear.
+    assert!(world.obstacles()[0].clearance_of([0.0, 0.0]) > 0.9);
+}
+
+#[test]
+fn primitive_checks_catch_the_rear_axle_along_the_arc_and_in_the_swing() {
+    let p = params();
+    let prims = build(&p, &[0.0, p.beta_max], 0.6, 0.15);
+    let straight = prims
+        .iter()
+        .find(|q| q.beta == 0.0 && q.direction == 1)
+        .unwrap();
+    let mut world = World::new(p, 4, 0.0);
+    // Driving straight ahead 0.6 m, the rear axle passes x = −0.9 (it starts
+    // at −1.2); the front axle never comes within a metre of it.
+    world.set(&[Obstacle::new(-0.9, 0.0, 0.1)]).unwrap();
+    assert!(world.pose_free(0.0, 0.0, 0.0, 0.0), "the start is free");
+    for rel in &straight.samples {
+        let q = compose(0.0, 0.0, 0.0, rel);
+        assert!(world.obstacles()[0].clearance_of([q[0], q[1]]) > 0.9);
+    }
+    assert!(!primitive_free(&world, &[0.0, 0.0, 0.0], 0.0, straight));
+
+    // Articulating from β = 0 to β_max at rest swings the rear axle to
+    // `swung`; a small circle there blocks the primitive from β = 0, but not
+    // from a node already articulated (its samples are clear).
+    let left = prims
+        .iter()
+        .find(|q| q.beta == p.beta_max && q.direction == 1)
+        .unwrap();
+    let swung = AxlePoint::Rear.position(&p, &State::new(0.0, 0.0, 0.0, p.beta_max, 0.0, 0.0));
+    world
+        .set(&[Obstacle::new(swung[0], swung[1], 0.05)])
+        .unwrap();
+    assert!(world.pose_free(0.0, 0.0, 0.0, 0.0), "the start is free");
+    assert!(primitive_free(&world, &[0.0, 0.0, 0.0], p.beta_max, left));
+    assert!(!primitive_free(&world, &[0.0, 0.0, 0.0], 0.0, left));
+}
+
+#[test]
+fn open_ground_is_direct_from_the_first_tick() {
+    for networks in [false, true] {
+        let mut nav = navigator(PlannerKind::HybridAStar, networks);
+        let goal = Goal::new(6.0, 3.0, 1.0);
+        // No obstacles, then one well off the way.
+        for obstacles in [vec![], vec![Obstacle::new(-5.0, -5.0, 1.0)]] {
+            nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &obstacles)
+                .unwrap();
+            assert_eq!(nav.route(), &[goal]);
+            assert_eq!(nav.last_plan().unwrap().outcome, PlanOutcome::Direct);
+            assert_eq!(
+                nav.update(&at_rest(0.0, 0.0, 0.0), 0.0),
+                NavStep::Drive {
+                    target: goal,
+                    final_target: true
+                }
+            );
+        }
+    }
+}
+
+#[test]
+fn a_wall_is_in_the_way_and_the_route_goes_around_it() {
+    for (kind, networks) in COMBINATIONS {
+        let mut nav = navigator(kind, networks);
+        let goal = Goal::new(8.0, 0.0, 0.0);
+        let obstacles = wall();
+        nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &obstacles)
+            .unwrap();
+        let report = nav.last_plan().unwrap();
+        assert_eq!(
+            report.outcome,
+            PlanOutcome::Route,
+            "{kind:?} networks {networks}"
+        );
+        assert_path_clear(&nav, &obstacles, nav.settings().clearance_margin);
+        // Around the wall's end (|y| ≥ 3.2 + 0.6).
+        let widest = nav.path().iter().map(|q| q.y.abs()).fold(0.0, f64::max);
+        assert!(widest > 3.8, "path stays within |y| ≤ {widest}");
+        let route = nav.route().to_vec();
+        assert!(route.len() >= 3, "{route:?}");
+        assert_eq!(*route.last().unwrap(), goal);
+        // Consecutive subgoals are at most an edge / about the spacing apart.
+        let s = nav.settings();
+        for w in route.windows(2) {
+            let d = (w[1].x - w[0].x).hypot(w[1].y - w[0].y);
+            assert!(
+                d <= s.graph_edge_length.max(2.0 * s.subgoal_spacing + 1.0),
+                "{d}"
+            );
+        }
+        // The first tick drives to the first subgoal, not the goal.
+        match nav.update(&at_rest(0.0, 0.0, 0.0), 0.0) {
+            NavStep::Drive {
+                target,
+                final_target,
+            } => {
+                assert_eq!(target, route[0]);
+                assert!(!final_target);
+            }
+            other => panic!("{other:?}"),
+        }
+    }
+}
+
+#[test]
+fn a_gap_between_two_walls_is_taken() {
+    for (kind, networks) in COMBINATIONS {
+        let mut nav = navigator(kind, networks);
+        let goal = Goal::new(8.0, 0.0, 0.0);
+        let obstacles = gap();
+        nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &obstacles)
+            .unwrap();
+        assert_eq!(
+            nav.last_plan().unwrap().outcome,
+            PlanOutcome::Route,
+            "{kind:?}"
+        );
+        assert_path_clear(&nav, &obstacles, nav.settings().clearance_margin);
+        // The path, then the last leg to the goal (a goal shot's), crosses
+        // x = 4 between the gap's edges at 1 and 3.
+        let mut pts: Vec<(f64, f64)> = nav.path().iter().map(|q| (q.x, q.y)).collect();
+        pts.push((goal.x, goal.y));
+        let crossing = pts
+            .windows(2)
+            .find(|w| w[0].0 < 4.0 && w[1].0 >= 4.0)
+            .unwrap_or_else(|| panic!("{kind:?}: no crossing of x = 4: {pts:?}"));
+        let f = (4.0 - crossing[0].0) / (crossing[1].0 - crossing[0].0);
+        let y = crossing[0].1 + f * (crossing[1].1 - crossing[0].1);
+        assert!(
+            (y - GAP_Y).abs() < 1.0,
+            "{kind:?} crosses at y {y}: {crossing:?}"
+        );
+    }
+}
+
+#[test]
+fn an_enclosed_goal_has_no_route_and_aborts_on_the_first_tick() {
+    for (kind, networks) in COMBINATIONS {
+        let mut nav = navigator(kind, networks);
+        let goal = Goal::new(8.0, 0.0, 0.0);
+        nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &ring())
+            .unwrap();
+        let report = nav.last_plan().unwrap();
+        assert_eq!(report.outcome, PlanOutcome::NoRoute);
+        assert!(report.duration.as_secs_f64() < 0.5, "{report:?}");
+        assert_eq!(
+            nav.update(&at_rest(0.0, 0.0, 0.0), 0.0),
+            NavStep::Abort(AbortReason::NoRoute)
+        );
+        // It stays aborted.
+        assert_eq!(
+            nav.update(&at_rest(0.1, 0.0, 0.0), 0.2),
+            NavStep::Abort(AbortReason::NoRoute)
+        );
+    }
+}
+
+#[test]
+fn goals_and_starts_in_collision_are_rejected() {
+    let mut nav = navigator(PlannerKind::HybridAStar, false);
+    let obstacles = [Obstacle::new(5.0, 0.0, 1.0)];
+    // The goal's rear axle (4.8 − 1.2 = 3.6... no: front at 6.5, rear at 5.3) is inside.
+    let e = nav
+        .set_goal(
+            &at_rest(0.0, 0.0, 0.0),
+            Goal::new(6.5, 0.0, 0.0),
+            &obstacles,
+        )
+        .unwrap_err();
+    assert!(
+        matches!(e, NavError::GoalInCollision { obstacle: 0, .. }),
+        "{e}"
+    );
+    assert!(e.to_string().contains("goal in collision"));
+    let e = nav
+        .set_goal(
+            &at_rest(4.5, 0.0, 0.0),
+            Goal::new(9.0, 0.0, 0.0),
+            &obstacles,
+        )
+        .unwrap_err();
+    assert!(
+        matches!(e, NavError::StartInCollision { obstacle: 0, .. }),
+        "{e}"
+    );
+    assert!(nav.route().is_empty());
+    assert_eq!(
+        nav.update(&at_rest(0.0, 0.0, 0.0), 0.0),
+        NavStep::Abort(AbortReason::NoRoute)
+    );
+}
+
+#[test]
+fn subgoals_are_passed_within_the_radius_and_the_last_target_is_the_goal() {
+    let mut nav = navigator(PlannerKind::HybridAStar, false);
+    let goal = Goal::new(8.0, 0.0, 0.0);
+    nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &wall())
+        .unwrap();
+    let route = nav.route().to_vec();
+    let r = nav.settings().subgoal_radius;
+    let mut t = 0.0;
+    for (i, sub) in route.iter().enumerate() {
+        // Just outside the radius: still this target.
+        let outside = at_rest(sub.x + 1.01 * r, sub.y, sub.theta);
+        let inside = at_rest(sub.x + 0.99 * r, sub.y, sub.theta);
+        let last = i + 1 == route.len();
+        if !last {
+            assert!(
+                matches!(nav.update(&outside, t), NavStep::Drive { target, .. } if target == *sub)
+            );
+        }
+        t += 0.2;
+        let expected = if last { goal } else { route[i + 1] };
+        assert_eq!(
+            nav.update(&inside, t),
+            NavStep::Drive {
+                target: expected,
+                final_target: i + 2 >= route.len()
+            }
+        );
+        t += 0.2;
+    }
+}
+
+#[test]
+fn standing_still_aborts_after_the_timeout_but_holding_the_goal_does_not() {
+    let mut nav = navigator(PlannerKind::HybridAStar, false);
+    let goal = Goal::new(5.0, 0.0, 0.0);
+    let x = at_rest(0.0, 0.0, 0.0);
+    nav.set_goal(&x, goal, &[]).unwrap();
+    let timeout = nav.settings().progress.timeout;
+    let mut k = 0;
+    let aborted_at = loop {
+        let t = 100.0 + k as f64 * 0.2;
+        if let NavStep::Abort(r) = nav.update(&x, t) {
+            assert_eq!(r, AbortReason::NoProgress);
+            break t - 100.0;
+        }
+        k += 1;
+        assert!(k < 1000);
+    };
+    assert!((aborted_at - timeout).abs() < 0.2 + 1e-9, "{aborted_at}");
+    // Without obstacles there is nothing to replan around.
+    assert_eq!(nav.plans(), 1);
+
+    // At the goal, at rest: holding it for a minute is no stall.
+    nav.set_goal(&x, goal, &[]).unwrap();
+    let at_goal = at_rest(5.0, 0.02, 0.0);
+    for k in 0..300 {
+        assert!(matches!(
+            nav.update(&at_goal, k as f64 * 0.2),
+            NavStep::Drive { .. }
+        ));
+    }
+}
+
+#[test]
+fn a_stall_replans_from_the_current_state_then_aborts() {
+    let mut nav = navigator(PlannerKind::HybridAStar, false);
+    let s = nav.settings().clone();
+    let goal = Goal::new(8.0, 0.0, 0.0);
+    // Behind the wall with a route, the machine stuck at some pose off the route.
+    nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &wall())
+        .unwrap();
+    assert_eq!(nav.plans(), 1);
+    let stuck = at_rest(2.0, -1.0, 0.5);
+    let mut first_replan = None;
+    let mut aborted = None;
+    for k in 0..100 {
+        let t = k as f64 * 0.2;
+        let step = nav.update(&stuck, t);
+        if first_replan.is_none() && nav.plans() == 2 {
+            first_replan = Some(t);
+            let r = nav.last_plan().unwrap();
+            assert!(r.replan);
+            assert_eq!(r.outcome, PlanOutcome::Route);
+            // The new path starts where the machine is.
+            let p0 = nav.path()[0];
+            assert_eq!((p0.x, p0.y, p0.theta), (2.0, -1.0, 0.5));
+        }
+        if let NavStep::Abort(r) = step {
+            aborted = Some((t, r));
+            break;
+        }
+    }
+    let first = first_replan.expect("a replan");
+    assert!(
+        (first - s.replan_after).abs() < 0.2 + 1e-9,
+        "replan at {first}"
+    );
+    let (t, r) = aborted.expect("an abort");
+    assert_eq!(r, AbortReason::NoProgress);
+    // Replans do not extend the window.
+    assert!(
+        (t - s.progress.timeout).abs() < 0.2 + 1e-9,
+        "aborted at {t}"
+    );
+    assert!(nav.plans() as usize <= 1 + s.max_replans);
+}
+
+#[test]
+fn the_waypoint_graph_needs_the_networks_and_its_cost_scale_is_fitted() {
+    let s = NavigatorSettings {
+        planner: PlannerKind::WaypointGraph,
+        ..NavigatorSettings::default()
+    };
+    let e = Navigator::new(params(), s, None).err().unwrap();
+    assert!(e.to_string().contains("planner"), "{e}");
+    // The published critic's cost-to-go is close to proportional to the
+    // actor's time to the goal: the fit lands near the measured 0.22 s.
+    let (actor, critic) = trained();
+    let mut aws = ActorWorkspace::new(&actor);
+    let mut cws = CriticWorkspace::new(&critic);
+    let k = waypoint_graph::calibrate(&params(), &actor, &mut aws, &critic, &mut cws, 0.2, 0.2)
+        .unwrap();
+    assert!((0.15..0.3).contains(&k), "{k} s per unit of cost");
+}
+
+#[test]
+fn settings_are_validated_by_name() {
+    let s = NavigatorSettings {
+        replan_after: 12.0,
+        ..NavigatorSettings::default()
+    };
+    let e = Navigator::new(params(), s, None).err().unwrap();
+    assert!(e.to_string().contains("replan_after"), "{e}");
+    let s = NavigatorSettings {
+        grid_resolution: 0.5,
+        ..NavigatorSettings::default()
+    };
+    let e = Navigator::new(params(), s, None).err().unwrap();
+    assert!(e.to_string().contains("primitive_length"), "{e}");
+}

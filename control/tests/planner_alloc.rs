@@ -1,0 +1,78 @@
+//! The navigator allocates nothing after construction: not in `set_goal`
+//! (which plans), not in `update` (which may replan). One test in this binary,
+//! so no other test thread allocates while we count.
+
+mod common;
+
+use control::model::{Goal, MachineParams, State};
+use control::obstacle::Obstacle;
+use control::planner::{NavStep, Navigator, NavigatorSettings, PlanOutcome, PlannerKind};
+use control::weights::decode;
+use control::{Actor, Critic};
+
+#[global_allocator]
+static GLOBAL: common::CountingAllocator = common::CountingAllocator;
+
+/// The trained networks (a random actor never drives into the wall, so
+/// nothing would be in its way).
+fn trained() -> (Actor, Critic) {
+    let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../critic-weights/");
+    let read = |name: &str| {
+        let path = format!("{dir}{name}");
+        decode(&std::fs::read(&path).expect("weights file"), &path).expect("valid weights")
+    };
+    (
+        Actor::from_weights(read("actor.safetensors")).unwrap(),
+        Critic::from_weights(read("critic.safetensors")).unwrap(),
+    )
+}
+
+#[test]
+fn set_goal_and_update_do_not_allocate() {
+    let wall: Vec<Obstacle> = (-4..=4)
+        .map(|k| Obstacle::new(4.0, 0.8 * k as f64, 0.6))
+        .collect();
+    let goal = Goal::new(8.0, 0.0, 0.0);
+    let start = State::zeros();
+    for kind in [PlannerKind::HybridAStar, PlannerKind::WaypointGraph] {
+        for networks in [false, true] {
+            if kind == PlannerKind::WaypointGraph && !networks {
+                continue;
+            }
+            let settings = NavigatorSettings {
+                planner: kind,
+                ..NavigatorSettings::default()
+            };
+            let nets = networks.then(trained);
+            let mut nav = Navigator::new(MachineParams::default(), settings, nets).unwrap();
+            let before = common::allocations();
+            nav.set_goal(&start, goal, &wall).unwrap();
+            let planned = nav.last_plan().unwrap().outcome;
+            let mut steps = 0;
+            // Standing still behind the wall: replans, then the abort.
+            for k in 0..60 {
+                if let NavStep::Abort(_) = nav.update(&start, k as f64 * 0.2) {
+                    break;
+                }
+                steps += 1;
+            }
+            let replans = nav.plans();
+            // Open ground: direct.
+            nav.set_goal(&start, goal, &[]).unwrap();
+            for k in 0..50 {
+                let x = State::new(0.1 * k as f64, 0.0, 0.0, 0.0, 0.0, 0.5);
+                nav.update(&x, k as f64 * 0.2);
+            }
+            let after = common::allocations();
+            assert_eq!(planned, PlanOutcome::Route, "{kind:?} networks {networks}");
+            assert!(replans >= 2, "no replan happened");
+            assert!(steps > 10);
+            assert_eq!(
+                after - before,
+                0,
+                "{} allocations ({kind:?}, networks {networks})",
+                after - before
+            );
+        }
+    }
+}
