@@ -20,4 +20,5 @@ pub mod ocp;
 pub mod plots;
 pub mod report;
 pub mod results;
+pub mod routes;
 pub mod runner;

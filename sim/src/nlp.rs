@@ -116,10 +116,8 @@ impl ElementNlp {
     /// Largest violation of the variable and constraint bounds at `z`.
     pub fn max_violation(&mut self, z: &[f64]) -> f64 {
         let mut worst: f64 = 0.0;
-        for i in 0..self.n {
-            worst = worst
-                .max(self.z_lower[i] - z[i])
-                .max(z[i] - self.z_upper[i]);
+        for ((zi, lo), hi) in z.iter().zip(&self.z_lower).zip(&self.z_upper) {
+            worst = worst.max(lo - zi).max(zi - hi);
         }
         let mut g = vec![0.0; self.m];
         self.constraints(z, &mut g);

@@ -12,7 +12,8 @@ use std::time::Duration;
 use control::model::{
     env_step, goal_distance, ix, wrap_angle, Control, Goal, MachineParams, State,
 };
-use control::scenario::{Obstacle, Scenario};
+use control::obstacle::{AxlePoint, Obstacle};
+use control::scenario::Scenario;
 
 use crate::collocation::hermite_simpson;
 use crate::ipopt::{self, IpoptStatus, OptValue};
@@ -49,6 +50,8 @@ pub struct BaselineSettings {
     /// does not touch the stops between nodes (that made open-loop replays
     /// drift off the plan).
     pub state_margin: f64,
+    /// Footprint constraint points inside each interval (besides its nodes).
+    pub obstacle_samples: usize,
 }
 
 impl Default for BaselineSettings {
@@ -63,6 +66,7 @@ impl Default for BaselineSettings {
             tol: 1e-6,
             max_iter: 1000,
             state_margin: 0.97,
+            obstacle_samples: 1,
         }
     }
 }
@@ -172,36 +176,107 @@ impl Element for Interval {
     }
 }
 
-/// All obstacles at one node: (x − x_o)² + (y − y_o)² ≥ R².
-struct NodeObstacles {
-    vars: [usize; 2],
+/// The footprint (DESIGN §10) on one collocation interval: both axle points
+/// outside every circle, ‖q − o‖ − R ≥ 0, at the points τ ∈ (0, 1] of the
+/// interval's cubic Hermite interpolant
+///   x(τ) = h₀₀ x₀ + h₁₀ h f(x₀,u) + h₀₁ x₁ + h₁₁ h f(x₁,u)
+/// (τ = 1 is the node x₁; τ = ½ the Hermite–Simpson midpoint). Variables as
+/// [`Interval`]: (x₀, u, x₁) and, with a free final time, T.
+struct IntervalFootprint {
+    vars: Vec<usize>,
+    params: MachineParams,
+    h: Option<f64>,
+    intervals: usize,
+    taus: Vec<f64>,
     obstacles: Vec<Obstacle>,
 }
 
-impl Element for NodeObstacles {
+/// The interpolation points of [`IntervalFootprint`]: `interior` evenly spaced
+/// points inside the interval, and its end node.
+fn footprint_taus(interior: usize) -> Vec<f64> {
+    (1..=interior + 1)
+        .map(|i| i as f64 / (interior + 1) as f64)
+        .collect()
+}
+
+impl IntervalFootprint {
+    /// The interpolated state at τ and its Jacobian with respect to the
+    /// local variables (6 × nv, row-major).
+    fn point(&self, z: &[f64], tau: f64, jac: &mut [f64]) -> State {
+        let nv = self.vars.len();
+        let x0 = State::from_column_slice(&z[0..6]);
+        let u = Control::new(z[6], z[7]);
+        let x1 = State::from_column_slice(&z[8..14]);
+        let (h, dh_dt) = match self.h {
+            Some(h) => (h, 0.0),
+            None => (z[14] / self.intervals as f64, 1.0 / self.intervals as f64),
+        };
+        let (t2, t3) = (tau * tau, tau * tau * tau);
+        let h00 = 2.0 * t3 - 3.0 * t2 + 1.0;
+        let h10 = t3 - 2.0 * t2 + tau;
+        let h01 = -2.0 * t3 + 3.0 * t2;
+        let h11 = t3 - t2;
+        let p = &self.params;
+        let f0 = control::model::f_continuous(p, &x0, &u);
+        let f1 = control::model::f_continuous(p, &x1, &u);
+        let x = x0 * h00 + f0 * (h10 * h) + x1 * h01 + f1 * (h11 * h);
+        let a0 = crate::collocation::jacobian_x(p, &x0) * (h10 * h);
+        let a1 = crate::collocation::jacobian_x(p, &x1) * (h11 * h);
+        let b = crate::collocation::jacobian_u() * ((h10 + h11) * h);
+        let dh = (f0 * h10 + f1 * h11) * dh_dt;
+        jac[..6 * nv].fill(0.0);
+        for r in 0..6 {
+            let row = &mut jac[r * nv..(r + 1) * nv];
+            for c in 0..6 {
+                row[c] = a0[(r, c)];
+                row[8 + c] = a1[(r, c)];
+            }
+            row[r] += h00;
+            row[8 + r] += h01;
+            row[6] = b[(r, 0)];
+            row[7] = b[(r, 1)];
+            if nv == 15 {
+                row[14] = dh[r];
+            }
+        }
+        x
+    }
+}
+
+impl Element for IntervalFootprint {
     fn vars(&self) -> &[usize] {
         &self.vars
     }
 
     fn n_cons(&self) -> usize {
-        self.obstacles.len()
+        self.taus.len() * self.obstacles.len() * AxlePoint::ALL.len()
     }
 
     fn con_bounds(&self, lower: &mut [f64], upper: &mut [f64]) {
-        for (i, o) in self.obstacles.iter().enumerate() {
-            lower[i] = o.radius * o.radius;
-            upper[i] = INF;
-        }
+        lower.fill(0.0);
+        upper.fill(INF);
     }
 
     fn eval(&self, z: &[f64], obj: &mut f64, grad: &mut [f64], g: &mut [f64], jac: &mut [f64]) {
         *obj = 0.0;
         grad.fill(0.0);
-        for (i, o) in self.obstacles.iter().enumerate() {
-            let (dx, dy) = (z[0] - o.x, z[1] - o.y);
-            g[i] = dx * dx + dy * dy;
-            jac[2 * i] = 2.0 * dx;
-            jac[2 * i + 1] = 2.0 * dy;
+        let nv = self.vars.len();
+        let mut dx = [0.0; 6 * 15];
+        let mut row = 0;
+        for &tau in &self.taus {
+            let x = self.point(z, tau, &mut dx);
+            for o in &self.obstacles {
+                for point in AxlePoint::ALL {
+                    // ∂h/∂(x_f, y_f, θ, β), chained through ∂x(τ)/∂z.
+                    let (c, dc) = o.point_clearance(&self.params, point, &x);
+                    g[row] = c;
+                    let out = &mut jac[row * nv..(row + 1) * nv];
+                    for (j, o) in out.iter_mut().enumerate() {
+                        *o = (0..4).map(|i| dc[i] * dx[i * nv + j]).sum();
+                    }
+                    row += 1;
+                }
+            }
         }
     }
 }
@@ -294,17 +369,30 @@ fn fix_state(nlp: &mut ElementNlp, k: usize, x: &State) {
     }
 }
 
-fn obstacle_elements(
+/// Footprint constraints on every interval (its end node and `interior`
+/// points inside), with the same variables as the interval's defects.
+fn footprint_elements(
     elements: &mut Vec<Box<dyn Element>>,
+    p: &MachineParams,
     obstacles: &[Obstacle],
     k_intervals: usize,
+    h: Option<f64>,
+    interior: usize,
 ) {
     if obstacles.is_empty() {
         return;
     }
-    for k in 1..=k_intervals {
-        elements.push(Box::new(NodeObstacles {
-            vars: [xi(k), xi(k) + 1],
+    for k in 0..k_intervals {
+        let mut vars: Vec<usize> = (xi(k)..xi(k) + 14).collect();
+        if h.is_none() {
+            vars.push(8 * k_intervals + 6);
+        }
+        elements.push(Box::new(IntervalFootprint {
+            vars,
+            params: *p,
+            h,
+            intervals: k_intervals,
+            taus: footprint_taus(interior),
             obstacles: obstacles.to_vec(),
         }));
     }
@@ -337,7 +425,14 @@ pub fn baseline_nlp(
             cost: Some((*s, goal)),
         }));
     }
-    obstacle_elements(&mut elements, &sc.obstacles, k_intervals);
+    footprint_elements(
+        &mut elements,
+        p,
+        &sc.obstacles,
+        k_intervals,
+        Some(s.dt),
+        s.obstacle_samples,
+    );
     let mut nlp = ElementNlp::new(n, elements, s.hessian);
     set_model_bounds(&mut nlp, p, k_intervals, s.state_margin);
     fix_state(&mut nlp, 0, &admissible_start(p, &sc.start));
@@ -511,6 +606,14 @@ pub struct MinTimeSettings {
     /// Bounds of T [s].
     pub t_min: f64,
     pub t_max: f64,
+    /// Footprint constraint points inside each interval (besides its nodes).
+    pub obstacle_samples: usize,
+    /// Routes around the obstacles tried as initial guesses.
+    pub max_routes: usize,
+    /// Solves per scenario at most.
+    pub max_attempts: usize,
+    /// IPOPT's CPU-time limit per solve [s].
+    pub max_solve_seconds: f64,
 }
 
 impl Default for MinTimeSettings {
@@ -523,6 +626,10 @@ impl Default for MinTimeSettings {
             max_iter: 1000,
             t_min: 0.2,
             t_max: 60.0,
+            obstacle_samples: 1,
+            max_routes: 4,
+            max_attempts: 12,
+            max_solve_seconds: 20.0,
         }
     }
 }
@@ -552,7 +659,14 @@ pub fn min_time_nlp(
             cost: None,
         }));
     }
-    obstacle_elements(&mut elements, &sc.obstacles, k_intervals);
+    footprint_elements(
+        &mut elements,
+        p,
+        &sc.obstacles,
+        k_intervals,
+        None,
+        s.obstacle_samples,
+    );
     let kk = xi(k_intervals);
     elements.push(Box::new(TerminalSet {
         vars: [kk, kk + 1, kk + 2],
@@ -611,17 +725,50 @@ pub struct MinTime {
     pub attempts: usize,
 }
 
-/// Solves min-time from the given guesses plus straight-line guesses forward
-/// and in reverse; keeps the shortest feasible T.
-pub fn solve_min_time(
+/// Initial guesses of the min-time problem, most promising first: with
+/// obstacles, routes around each side of them ([`crate::routes`]), driven
+/// forward and, where the start or goal heading suits it, in reverse; then the
+/// callers' guesses (other methods' trajectories); then, unless a circle is
+/// in the way, straight lines forward and in reverse on both heading
+/// branches. Each route guess carries the
+/// route's length over v_max, a lower estimate of its time.
+pub fn min_time_guesses(
     p: &MachineParams,
     sc: &Scenario,
     s: &MinTimeSettings,
     guesses: &[Guess],
-) -> MinTime {
-    let mut solve_time = Duration::ZERO;
+) -> Vec<(Guess, f64)> {
+    let mut all: Vec<(Guess, f64)> = Vec::new();
+    for (i, route) in crate::routes::side_routes(sc, s.max_routes)
+        .iter()
+        .enumerate()
+    {
+        let estimate = route.length / p.v_max;
+        all.push((
+            crate::routes::route_guess(p, sc, route, false, 0.8 * p.v_max, 0.8 * p.a_max),
+            estimate,
+        ));
+        // Reverse along the two shortest routes when either end faces backwards.
+        let pts = &route.points;
+        let (n, m) = (pts.len(), pts.len().saturating_sub(1));
+        if i < 2 && n >= 2 {
+            let t0 = (pts[1][1] - pts[0][1]).atan2(pts[1][0] - pts[0][0]);
+            let t1 = (pts[m][1] - pts[m - 1][1]).atan2(pts[m][0] - pts[m - 1][0]);
+            let backwards =
+                |heading: f64, tangent: f64| wrap_angle(heading - tangent).abs() > 0.5 * PI;
+            if backwards(sc.start[ix::THETA], t0) || backwards(sc.goal.theta, t1) {
+                all.push((
+                    crate::routes::route_guess(p, sc, route, true, 0.8 * p.v_max, 0.8 * p.a_max),
+                    estimate,
+                ));
+            }
+        }
+    }
+    all.extend(guesses.iter().cloned().map(|g| (g, 0.0)));
+    if crate::routes::straight_blocked(sc, 0.0) && all.len() > guesses.len() {
+        return all;
+    }
     let dist = (sc.goal.x - sc.start[0]).hypot(sc.goal.y - sc.start[1]);
-    let mut all: Vec<Guess> = guesses.to_vec();
     let t_line = (dist / 0.7).max(3.0);
     for reverse in [false, true] {
         for &theta in &heading_branches(sc.start[ix::THETA], sc.goal.theta) {
@@ -629,47 +776,48 @@ pub fn solve_min_time(
             let k = 50;
             let z = straight_guess(sc, &goal, k, t_line / k as f64, 1.0, reverse);
             let (states, controls) = plan_from(&z, k);
-            all.push(Guess {
-                states,
-                controls,
-                dt: t_line / k as f64,
-                duration: t_line,
-            });
+            all.push((
+                Guess {
+                    states,
+                    controls,
+                    dt: t_line / k as f64,
+                    duration: t_line,
+                },
+                0.0,
+            ));
         }
     }
+    all
+}
+
+/// Solves min-time from [`min_time_guesses`] (at most `max_attempts` solves;
+/// a route whose length alone takes longer than the best time found is
+/// skipped) and keeps the shortest feasible T.
+pub fn solve_min_time(
+    p: &MachineParams,
+    sc: &Scenario,
+    s: &MinTimeSettings,
+    guesses: &[Guess],
+) -> MinTime {
+    let mut solve_time = Duration::ZERO;
+    let all = min_time_guesses(p, sc, s, guesses);
     let mut best: Option<(f64, Plan)> = None;
-    let attempts = all.len();
-    for g in &all {
-        if !(g.duration > 0.0) || g.states.len() < 2 {
+    let mut attempts = 0;
+    for (g, estimate) in &all {
+        if g.duration.is_nan() || g.duration <= 0.0 || g.states.len() < 2 {
             continue;
         }
-        let end = g.states[((g.duration / g.dt).round() as usize).min(g.states.len() - 1)];
-        let theta_goal = end[ix::THETA] + wrap_angle(sc.goal.theta - end[ix::THETA]);
-        let mut nlp = min_time_nlp(p, sc, s, theta_goal);
-        let mut z0 = guess_vector(g, s.intervals);
-        let x0 = admissible_start(p, &sc.start);
-        z0[..6].copy_from_slice(x0.as_slice());
-        let n = z0.len();
-        z0[n - 1] = z0[n - 1].clamp(s.t_min, s.t_max);
-        let r = ipopt::solve(&mut nlp, &z0, &ipopt_options(s.tol, s.max_iter));
-        solve_time += r.solve_time;
-        let violation = nlp.max_violation(&r.z);
-        if !(violation < 1e-5) || !r.objective.is_finite() {
+        if attempts >= s.max_attempts || best.as_ref().is_some_and(|(bt, _)| *estimate > *bt) {
             continue;
         }
-        let t = r.z[n - 1];
-        let h = t / s.intervals as f64;
-        let (states, controls) = plan_from(&r.z, s.intervals);
-        let plan = Plan {
-            status: r.status,
-            states,
-            controls,
-            dt: h,
-            objective: t,
-            violation,
-            solve_time: Duration::ZERO,
+        attempts += 1;
+        let (plan, time) = min_time_attempt(p, sc, s, g);
+        solve_time += time;
+        let Some(plan) = plan else {
+            continue;
         };
-        if best.as_ref().map_or(true, |(bt, _)| t < *bt) {
+        let t = plan.objective;
+        if best.as_ref().is_none_or(|(bt, _)| t < *bt) {
             best = Some((t, plan));
         }
     }
@@ -690,6 +838,55 @@ pub fn solve_min_time(
             attempts,
         },
     }
+}
+
+/// One min-time solve from guess `g` (goal heading on the branch nearest the
+/// guess's final heading): the plan when it is feasible (bound and constraint
+/// violation < 1e-5; `objective` is T), and the time spent.
+pub fn min_time_attempt(
+    p: &MachineParams,
+    sc: &Scenario,
+    s: &MinTimeSettings,
+    g: &Guess,
+) -> (Option<Plan>, Duration) {
+    let end = g.states[((g.duration / g.dt).round() as usize).min(g.states.len() - 1)];
+    let theta_goal = end[ix::THETA] + wrap_angle(sc.goal.theta - end[ix::THETA]);
+    let mut nlp = min_time_nlp(p, sc, s, theta_goal);
+    let mut z0 = guess_vector(g, s.intervals);
+    let x0 = admissible_start(p, &sc.start);
+    z0[..6].copy_from_slice(x0.as_slice());
+    let n = z0.len();
+    z0[n - 1] = z0[n - 1].clamp(s.t_min, s.t_max);
+    let mut options = ipopt_options(s.tol, s.max_iter);
+    options.push(("max_cpu_time", OptValue::Num(s.max_solve_seconds)));
+    let r = ipopt::solve(&mut nlp, &z0, &options);
+    let violation = nlp.max_violation(&r.z);
+    if std::env::var_os("WLNAV_MT_DEBUG").is_some() {
+        eprintln!(
+            "min-time {}: guess T {:.2} -> {} T {:.3} violation {:.1e} in {:.2} s",
+            sc.name,
+            g.duration,
+            r.status.name(),
+            r.z[n - 1],
+            violation,
+            r.solve_time.as_secs_f64()
+        );
+    }
+    if violation.is_nan() || violation >= 1e-5 || !r.objective.is_finite() {
+        return (None, r.solve_time);
+    }
+    let t = r.z[n - 1];
+    let (states, controls) = plan_from(&r.z, s.intervals);
+    let plan = Plan {
+        status: r.status,
+        states,
+        controls,
+        dt: t / s.intervals as f64,
+        objective: t,
+        violation,
+        solve_time: r.solve_time,
+    };
+    (Some(plan), r.solve_time)
 }
 
 /// Goal distance of the last state of a plan (for tests and diagnostics).

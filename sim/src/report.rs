@@ -395,7 +395,7 @@ pub fn paper(
         }
         for (k, (v, ev)) in variants.iter().zip(&variant_evals).enumerate() {
             // Plots show the horizon comparison and the delay; the other variants are in the table.
-            if !matches!(k, 0 | 1 | 2) {
+            if !matches!(k, 0..=2) {
                 continue;
             }
             let r = &ev.runs[i].runs[0].1;
@@ -427,7 +427,7 @@ fn kind_of(name: &str) -> &str {
     name.trim_end_matches(|c: char| c.is_ascii_digit())
 }
 
-/// 4. Work sites (DESIGN §10, issue 14): the MPC with the daemon's defaults
+/// Section 4, work sites (DESIGN §10, issue 14): the MPC with the daemon's defaults
 /// (global layer included) and the min-time bound with obstacles, per kind;
 /// footprint clearance on the plant's sub-steps.
 fn worksite_study(

@@ -265,3 +265,66 @@ fn the_navigator_takes_the_mpc_around_walls() {
         assert!(nav.abort.is_none());
     }
 }
+
+/// The min-time bound with obstacles is a bound (issue 14, item 7): on
+/// blocked scenarios (the project's `c_obstacles` and two of
+/// `obstacles200.csv`), no method evaluated beside it (MPC and actor with the
+/// committed weights, the baseline) converges before T* without touching an
+/// obstacle (clearance ≥ −5 mm; the actor does not see obstacles).
+#[test]
+fn no_method_beats_the_min_time_bound_among_obstacles() {
+    let nets = Networks::load(&manifest("../critic-weights")).unwrap();
+    let mut set = scenario::parse(
+        &std::fs::read_to_string(manifest("scenarios/obstacles.csv")).unwrap(),
+        "obstacles.csv",
+    )
+    .unwrap();
+    let more = scenario::parse(
+        &std::fs::read_to_string(manifest("scenarios/obstacles200.csv")).unwrap(),
+        "obstacles200.csv",
+    )
+    .unwrap();
+    set.extend(
+        more.into_iter()
+            .filter(|s| s.name == "circles003" || s.name == "gap000"),
+    );
+    assert_eq!(set.len(), 3);
+    let cfg = EvalConfig {
+        methods: vec![
+            Method::Mpc,
+            Method::Actor,
+            Method::Baseline,
+            Method::MinTime,
+        ],
+        jobs: 2,
+        progress: false,
+        ..Default::default()
+    };
+    let ev = sim::eval::evaluate(&cfg, &nets, &set).unwrap();
+    let mut compared = 0;
+    for sc in &set {
+        let rows: Vec<_> = ev.rows.iter().filter(|r| r.name == sc.name).collect();
+        let mt = rows.iter().find(|r| r.method == "min-time").unwrap();
+        assert!(mt.success, "min-time solves {}", sc.name);
+        let bound = mt.t_converge.unwrap();
+        for r in rows.iter().filter(|r| r.method != "min-time" && r.success) {
+            let t = r.t_converge.unwrap();
+            let clearance = r.min_clearance.unwrap();
+            eprintln!(
+                "{} {}: {t:.2} s (clearance {clearance:.3} m), T* {bound:.3} s",
+                sc.name, r.method
+            );
+            if clearance < -0.005 {
+                continue;
+            }
+            assert!(
+                t >= bound - 1e-3,
+                "{} beats T* on {}: {t} < {bound}",
+                r.method,
+                sc.name
+            );
+            compared += 1;
+        }
+    }
+    assert!(compared >= 4, "only {compared} runs reached their goals");
+}
