@@ -114,6 +114,9 @@ enum Command {
         /// Margin [m] the planned axle points keep from every circle (default: the daemon's).
         #[arg(long)]
         obstacle_margin: Option<f64>,
+        /// L1 penalty per metre of obstacle penetration (default: the daemon's).
+        #[arg(long)]
+        obstacle_slack_weight: Option<f64>,
         /// Plant input delay [s] (compensated by the MPC).
         #[arg(long, default_value_t = 0.0)]
         delay: f64,
@@ -219,6 +222,7 @@ fn main() -> Result<()> {
             sqp_iterations,
             step_length,
             obstacle_margin,
+            obstacle_slack_weight,
             delay,
             lag,
             duration,
@@ -255,6 +259,7 @@ fn main() -> Result<()> {
                 sqp_iterations: sqp_iterations.unwrap_or(d.sqp_iterations),
                 step_length: step_length.unwrap_or(d.step_length),
                 obstacle_margin: obstacle_margin.unwrap_or(d.obstacle_margin),
+                obstacle_slack_weight: obstacle_slack_weight.unwrap_or(d.obstacle_slack_weight),
                 ..cfg.mpc
             };
             cfg.mpc.validate()?;

@@ -345,11 +345,13 @@ pub fn run_mpc(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run> 
                 rec.update_ms.push(t0.elapsed().as_secs_f64() * 1e3);
                 rec.record_plan(nav, &mut plans_seen, now);
                 match step {
-                    NavStep::Drive { target, .. } => {
-                        if mpc.goal() != Some(target) {
-                            mpc.set_goal(target, &sc.obstacles)?;
-                        }
-                    }
+                    // The first target starts from an actor roll-out; later
+                    // ones (subgoal switches, replans) keep the plan.
+                    NavStep::Drive { target, .. } => match mpc.goal() {
+                        None => mpc.set_goal(target, &sc.obstacles)?,
+                        Some(g) if g != target => mpc.retarget(target)?,
+                        Some(_) => {}
+                    },
                     NavStep::Abort(reason) => {
                         rec.abort = Some(reason);
                         rec.aborted_at = Some(now);

@@ -218,6 +218,21 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
         self.n_obstacles = obstacles.len();
         Ok(())
     }
+
+    /// Moves the target to `goal` and keeps the plan as the next warm start:
+    /// for the global layer's subgoals (DESIGN §10), where the plan towards
+    /// the previous subgoal is collision-free and an actor roll-out towards
+    /// the new one (which knows no obstacles) may run through a circle: one
+    /// real-time iteration from such a point can leave the plan inside it.
+    /// Without a goal yet this is [`Self::set_goal`] with no obstacles change.
+    pub fn retarget(&mut self, goal: Goal) -> Result<(), MpcError> {
+        let keep = self.has_plan && self.goal.is_some();
+        let n = self.n_obstacles;
+        let obstacles = self.obstacles;
+        self.set_goal(goal, &obstacles[..n])?;
+        self.has_plan = keep;
+        Ok(())
+    }
 }
 
 /// QP values at a nominal point (identity cost blocks, the dynamics' Jacobians
