@@ -509,20 +509,52 @@ fn plan_from(z: &[f64], k_intervals: usize) -> (Vec<State>, Vec<Control>) {
     (states, controls)
 }
 
-/// Solves the baseline (DESIGN §8): on the nearest heading branch, and also on
-/// the other one when the goal heading is more than 135° away; the lower
-/// objective among feasible solutions wins.
+/// Solves the baseline (DESIGN §8): from a straight-line guess on the nearest
+/// heading branch, and also on the other one when the goal heading is more
+/// than 135° away; when a circle blocks the straight line, from routes around
+/// the obstacles first. The lower objective among feasible solutions wins.
 pub fn solve_baseline(p: &MachineParams, sc: &Scenario, s: &BaselineSettings) -> Plan {
     let mut solve_time = Duration::ZERO;
     let k_intervals = (s.horizon / s.dt).round() as usize;
+    let start_state = admissible_start(p, &sc.start);
+    // (goal-heading branch, initial guess), tried in order.
+    let mut candidates: Vec<(f64, Vec<f64>)> = Vec::new();
+    // A straight line through a circle leaves IPOPT infeasible: with the
+    // way blocked, start on the two shortest routes around ([`crate::routes`]),
+    // driven within the horizon and then resting at the goal.
+    if crate::routes::straight_blocked(sc, 0.0) {
+        for route in crate::routes::side_routes(sc, 2) {
+            let g = crate::routes::route_guess(p, sc, &route, false, 0.6 * p.v_max, 0.5 * p.a_max);
+            if g.duration >= s.horizon {
+                continue;
+            }
+            let end = g.states.last().expect("non-empty")[ix::THETA];
+            let held = Guess {
+                duration: s.horizon,
+                ..g
+            };
+            let mut z0 = guess_vector(&held, k_intervals);
+            z0.pop();
+            candidates.push((end + wrap_angle(sc.goal.theta - end), z0));
+        }
+    }
     let branches = heading_branches(sc.start[ix::THETA], sc.goal.theta);
     let far = wrap_angle(sc.goal.theta - sc.start[ix::THETA]).abs() > 0.75 * PI;
-    let mut best: Option<Plan> = None;
+    let routes = candidates.len();
     for &theta_goal in branches.iter().take(if far { 2 } else { 1 }) {
         let goal = Goal::new(sc.goal.x, sc.goal.y, theta_goal);
+        candidates.push((
+            theta_goal,
+            straight_guess(sc, &goal, k_intervals, s.dt, 0.6, false),
+        ));
+    }
+    let mut best: Option<Plan> = None;
+    for (i, (theta_goal, mut z0)) in candidates.into_iter().enumerate() {
+        // Straight guesses only when no route guess gave a feasible plan.
+        if i >= routes && routes > 0 && best.as_ref().is_some_and(|b| !rank(b).0) {
+            break;
+        }
         let mut nlp = baseline_nlp(p, sc, s, theta_goal);
-        let mut z0 = straight_guess(sc, &goal, k_intervals, s.dt, 0.6, false);
-        let start_state = admissible_start(p, &sc.start);
         z0[..6].copy_from_slice(start_state.as_slice());
         let r = ipopt::solve(&mut nlp, &z0, &ipopt_options(s.tol, s.max_iter));
         solve_time += r.solve_time;
@@ -545,7 +577,7 @@ pub fn solve_baseline(p: &MachineParams, sc: &Scenario, s: &BaselineSettings) ->
             best = Some(plan);
         }
     }
-    let mut plan = best.expect("at least one branch solved");
+    let mut plan = best.expect("at least one guess solved");
     plan.solve_time = solve_time;
     plan
 }
