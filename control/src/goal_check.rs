@@ -140,8 +140,13 @@ mod tests {
         // The circle holds the rear axle only.
         let o = Obstacle::new(3.8, 0.1, 0.3);
         assert!(o.clearance_of([5.0, 0.0]) > 0.5);
-        let e = check_goal(&p, None, &Goal::new(5.0, 0.0, 0.0), &[Obstacle::new(-9.0, 0.0, 1.0), o])
-            .unwrap_err();
+        let e = check_goal(
+            &p,
+            None,
+            &Goal::new(5.0, 0.0, 0.0),
+            &[Obstacle::new(-9.0, 0.0, 1.0), o],
+        )
+        .unwrap_err();
         match e {
             GoalConflict::GoalInCollision {
                 index,
@@ -156,7 +161,10 @@ mod tests {
         }
         let text = e.to_string();
         assert!(text.starts_with("goal-in-collision"), "{text}");
-        assert!(text.contains("obstacle 1") && text.contains("rear axle"), "{text}");
+        assert!(
+            text.contains("obstacle 1") && text.contains("rear axle"),
+            "{text}"
+        );
         // Turned around, the same goal position puts the rear axle on the other side.
         assert_eq!(
             check_goal(&p, None, &Goal::new(5.0, 0.0, std::f64::consts::PI), &[o]),
@@ -180,7 +188,10 @@ mod tests {
         ));
         // On the edge is allowed (the MPC's constraint is distance ≥ r).
         let edge = Obstacle::new(5.5, 0.0, 0.5);
-        assert_eq!(check_goal(&p, None, &Goal::new(5.0, 0.0, 0.0), &[edge]), Ok(()));
+        assert_eq!(
+            check_goal(&p, None, &Goal::new(5.0, 0.0, 0.0), &[edge]),
+            Ok(())
+        );
     }
 
     #[test]

@@ -419,10 +419,7 @@ impl ControlLoop {
                         flags = (flags & !fault_flags::FALLBACK_PLAN) | fault_flags::SOLVE_FAILED;
                         self.ctx.goals.lock().abort_active(Abort::new(
                             AbortReason::Fault,
-                            format!(
-                                "fault: solve failed {} ticks in a row",
-                                self.fallback_count
-                            ),
+                            format!("fault: solve failed {} ticks in a row", self.fallback_count),
                         ));
                         self.disengage();
                         shown = None;

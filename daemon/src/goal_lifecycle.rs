@@ -419,11 +419,18 @@ mod tests {
     fn reached_goal_succeeds_once_and_then_holds() {
         let mut l = ready(&at(0.0));
         l.on_request(&set_goal(1, 5.0, 0.0, &[]), false).unwrap();
-        assert!(matches!(l.on_tick(tick(0.2, Some(&moving(2.0, 1.0)))), TickPlan::Track(g) if g.request_id == 1));
+        assert!(
+            matches!(l.on_tick(tick(0.2, Some(&moving(2.0, 1.0)))), TickPlan::Track(g) if g.request_id == 1)
+        );
         assert!(drain(&mut l).is_empty());
         // Inside the tolerance but still moving: not yet.
-        assert!(matches!(l.on_tick(tick(0.4, Some(&moving(4.95, 0.3)))), TickPlan::Track(_)));
-        assert!(matches!(l.on_tick(tick(0.6, Some(&moving(4.97, 0.01)))), TickPlan::Hold(g) if g.request_id == 1));
+        assert!(matches!(
+            l.on_tick(tick(0.4, Some(&moving(4.95, 0.3)))),
+            TickPlan::Track(_)
+        ));
+        assert!(
+            matches!(l.on_tick(tick(0.6, Some(&moving(4.97, 0.01)))), TickPlan::Hold(g) if g.request_id == 1)
+        );
         assert_eq!(
             drain(&mut l),
             [(1, GoalOutcome::Succeeded, AbortReason::None, 1)]
@@ -431,9 +438,13 @@ mod tests {
         // Holding: no second report, whatever happens to the reached goal.
         for k in 0..100 {
             let t = 0.8 + 0.2 * k as f64;
-            assert!(matches!(l.on_tick(tick(t, Some(&at(4.97)))), TickPlan::Hold(_)));
+            assert!(matches!(
+                l.on_tick(tick(t, Some(&at(4.97)))),
+                TickPlan::Hold(_)
+            ));
         }
-        l.on_request(&ValidRequest::Cancel { request_id: 2 }, false).unwrap();
+        l.on_request(&ValidRequest::Cancel { request_id: 2 }, false)
+            .unwrap();
         assert_eq!(l.on_tick(tick(30.0, Some(&at(4.97)))), TickPlan::NoGoal);
         assert!(drain(&mut l).is_empty());
     }
@@ -443,13 +454,18 @@ mod tests {
         let mut l = ready(&at(0.0));
         l.on_request(&set_goal(7, 5.0, 0.0, &[]), false).unwrap();
         l.on_tick(tick(0.2, Some(&moving(1.0, 1.0))));
-        l.on_request(&ValidRequest::Cancel { request_id: 8 }, false).unwrap();
-        assert_eq!(l.on_tick(tick(0.4, Some(&moving(1.2, 1.0)))), TickPlan::NoGoal);
+        l.on_request(&ValidRequest::Cancel { request_id: 8 }, false)
+            .unwrap();
+        assert_eq!(
+            l.on_tick(tick(0.4, Some(&moving(1.2, 1.0)))),
+            TickPlan::NoGoal
+        );
         let o = l.next_outcome().unwrap();
         assert_eq!((o.request_id, o.outcome), (7, GoalOutcome::Cancelled));
         assert!(o.text.contains("request 8"), "{}", o.text);
         // A second cancel has nothing to end.
-        l.on_request(&ValidRequest::Cancel { request_id: 9 }, false).unwrap();
+        l.on_request(&ValidRequest::Cancel { request_id: 9 }, false)
+            .unwrap();
         assert!(l.next_outcome().is_none());
     }
 
@@ -461,7 +477,9 @@ mod tests {
         // Two goals before the next tick: 1 is preempted by 2, 2 by 3 (never driven).
         l.on_request(&set_goal(2, 6.0, 0.0, &[]), false).unwrap();
         l.on_request(&set_goal(3, 7.0, 0.0, &[]), false).unwrap();
-        assert!(matches!(l.on_tick(tick(0.4, Some(&moving(1.2, 1.0)))), TickPlan::Track(g) if g.request_id == 3 && g.generation == 3));
+        assert!(
+            matches!(l.on_tick(tick(0.4, Some(&moving(1.2, 1.0)))), TickPlan::Track(g) if g.request_id == 3 && g.generation == 3)
+        );
         assert_eq!(
             drain(&mut l),
             [
@@ -507,12 +525,18 @@ mod tests {
         l.on_tick(tick(0.0, Some(&at(0.0))));
         l.on_request(&set_goal(1, 5.0, 0.0, &[]), false).unwrap();
         for k in 1..=9 {
-            assert!(matches!(l.on_tick(tick(0.2 * k as f64, Some(&at(0.0)))), TickPlan::Track(_)));
+            assert!(matches!(
+                l.on_tick(tick(0.2 * k as f64, Some(&at(0.0)))),
+                TickPlan::Track(_)
+            ));
         }
         l.on_request(&set_goal(2, 5.0, 0.0, &[]), false).unwrap();
         // 1.8 s of the old window have passed; the new goal gets its own 2 s.
         for k in 10..=19 {
-            assert!(matches!(l.on_tick(tick(0.2 * k as f64, Some(&at(0.0)))), TickPlan::Track(g) if g.request_id == 2), "k {k}");
+            assert!(
+                matches!(l.on_tick(tick(0.2 * k as f64, Some(&at(0.0)))), TickPlan::Track(g) if g.request_id == 2),
+                "k {k}"
+            );
         }
         assert_eq!(l.on_tick(tick(4.0, Some(&at(0.0)))), TickPlan::NoGoal);
     }
@@ -529,17 +553,30 @@ mod tests {
         let o = l.next_outcome().unwrap();
         assert_eq!(
             (o.request_id, o.outcome, o.abort_reason, o.text.as_str()),
-            (1, GoalOutcome::Aborted, AbortReason::Fault, "fault: pose stale")
+            (
+                1,
+                GoalOutcome::Aborted,
+                AbortReason::Fault,
+                "fault: pose stale"
+            )
         );
         // While the fault blocks, goals are not accepted.
-        let r = l.on_request(&set_goal(2, 5.0, 0.0, &[]), false).unwrap_err();
+        let r = l
+            .on_request(&set_goal(2, 5.0, 0.0, &[]), false)
+            .unwrap_err();
         assert_eq!(r.code, RejectCode::NotReady);
         assert!(r.text.contains("pose stale"), "{}", r.text);
         // A reached goal is dropped by a fault without a second outcome.
         l.on_tick(tick(0.6, Some(&at(4.98))));
         l.on_request(&set_goal(3, 5.0, 0.0, &[]), false).unwrap();
-        assert!(matches!(l.on_tick(tick(0.8, Some(&at(4.98)))), TickPlan::Hold(_)));
-        assert_eq!(drain(&mut l), [(3, GoalOutcome::Succeeded, AbortReason::None, 2)]);
+        assert!(matches!(
+            l.on_tick(tick(0.8, Some(&at(4.98)))),
+            TickPlan::Hold(_)
+        ));
+        assert_eq!(
+            drain(&mut l),
+            [(3, GoalOutcome::Succeeded, AbortReason::None, 2)]
+        );
         let here = at(4.98);
         let mut t = tick(1.0, Some(&here));
         t.abort = Some(Abort::new(AbortReason::Shutdown, "daemon shutting down"));
@@ -554,8 +591,14 @@ mod tests {
         l.on_tick(tick(0.2, Some(&moving(1.0, 1.0))));
         l.abort_active(Abort::new(AbortReason::Fault, "solver failed"));
         l.abort_active(Abort::new(AbortReason::Fault, "solver failed"));
-        assert_eq!(drain(&mut l), [(5, GoalOutcome::Aborted, AbortReason::Fault, 1)]);
-        assert_eq!(l.on_tick(tick(0.4, Some(&moving(1.1, 0.8)))), TickPlan::NoGoal);
+        assert_eq!(
+            drain(&mut l),
+            [(5, GoalOutcome::Aborted, AbortReason::Fault, 1)]
+        );
+        assert_eq!(
+            l.on_tick(tick(0.4, Some(&moving(1.1, 0.8)))),
+            TickPlan::NoGoal
+        );
     }
 
     #[test]
@@ -564,20 +607,37 @@ mod tests {
         l.on_request(&set_goal(1, 5.0, 0.0, &[]), false).unwrap();
         // The rear axle at the goal (3.8, 0) is inside; the front axle (5, 0) is not.
         let r = l
-            .on_request(&set_goal(2, 5.0, 0.0, &[WireObstacle::new(3.8, 0.0, 0.4)]), false)
+            .on_request(
+                &set_goal(2, 5.0, 0.0, &[WireObstacle::new(3.8, 0.0, 0.4)]),
+                false,
+            )
             .unwrap_err();
         assert_eq!(r.code, RejectCode::GoalInCollision);
-        assert!(r.text.contains("obstacle 0") && r.text.contains("rear"), "{}", r.text);
+        assert!(
+            r.text.contains("obstacle 0") && r.text.contains("rear"),
+            "{}",
+            r.text
+        );
         // An obstacle on the machine itself (at the origin).
         let r = l
             .on_request(
-                &set_goal(3, 5.0, 3.0, &[WireObstacle::new(9.0, 9.0, 1.0), WireObstacle::new(0.1, 0.0, 0.5)]),
+                &set_goal(
+                    3,
+                    5.0,
+                    3.0,
+                    &[
+                        WireObstacle::new(9.0, 9.0, 1.0),
+                        WireObstacle::new(0.1, 0.0, 0.5),
+                    ],
+                ),
                 false,
             )
             .unwrap_err();
         assert_eq!(r.code, RejectCode::MachineInCollision);
         assert!(r.text.contains("obstacle 1"), "{}", r.text);
-        assert!(matches!(l.on_tick(tick(0.2, Some(&at(0.0)))), TickPlan::Track(g) if g.request_id == 1));
+        assert!(
+            matches!(l.on_tick(tick(0.2, Some(&at(0.0)))), TickPlan::Track(g) if g.request_id == 1)
+        );
         assert!(l.next_outcome().is_none(), "rejected goals have no outcome");
     }
 
@@ -586,28 +646,40 @@ mod tests {
         let mut l = ready(&at(0.0));
         l.on_request(&set_goal(1, 5.0, 0.0, &[]), false).unwrap();
         l.on_tick(tick(0.2, Some(&moving(1.0, 1.0))));
-        l.on_request(&ValidRequest::Stop { request_id: 2 }, false).unwrap();
+        l.on_request(&ValidRequest::Stop { request_id: 2 }, false)
+            .unwrap();
         assert!(l.operator_stop());
-        assert_eq!(drain(&mut l), [(1, GoalOutcome::Cancelled, AbortReason::None, 1)]);
+        assert_eq!(
+            drain(&mut l),
+            [(1, GoalOutcome::Cancelled, AbortReason::None, 1)]
+        );
         for k in 0..20 {
             l.on_tick(tick(0.4 + 0.2 * k as f64, Some(&at(1.0))));
-            let r = l.on_request(&set_goal(10 + k, 5.0, 0.0, &[]), false).unwrap_err();
+            let r = l
+                .on_request(&set_goal(10 + k, 5.0, 0.0, &[]), false)
+                .unwrap_err();
             assert_eq!(r.code, RejectCode::NotReady);
             assert!(r.text.contains("stopped by an operator"), "{}", r.text);
         }
         // Cancel does not release the latch; resume does.
-        l.on_request(&ValidRequest::Cancel { request_id: 3 }, false).unwrap();
+        l.on_request(&ValidRequest::Cancel { request_id: 3 }, false)
+            .unwrap();
         assert!(l.operator_stop());
-        l.on_request(&ValidRequest::Resume { request_id: 4 }, false).unwrap();
+        l.on_request(&ValidRequest::Resume { request_id: 4 }, false)
+            .unwrap();
         assert!(!l.operator_stop());
         l.on_request(&set_goal(5, 5.0, 0.0, &[]), false).unwrap();
-        assert!(matches!(l.on_tick(tick(5.0, Some(&at(1.0)))), TickPlan::Track(g) if g.request_id == 5));
+        assert!(
+            matches!(l.on_tick(tick(5.0, Some(&at(1.0)))), TickPlan::Track(g) if g.request_id == 5)
+        );
     }
 
     #[test]
     fn goals_wait_for_data_and_shutdown_rejects_and_aborts() {
         let mut l = GoalLifecycle::new(settings(10.0));
-        let r = l.on_request(&set_goal(1, 5.0, 0.0, &[]), false).unwrap_err();
+        let r = l
+            .on_request(&set_goal(1, 5.0, 0.0, &[]), false)
+            .unwrap_err();
         assert_eq!(r.code, RejectCode::NotReady);
         l.on_tick(tick(0.0, Some(&at(0.0))));
         l.on_request(&set_goal(1, 5.0, 0.0, &[]), false).unwrap();
@@ -617,7 +689,10 @@ mod tests {
         let mut t = tick(0.2, Some(&here));
         t.abort = Some(Abort::new(AbortReason::Shutdown, "daemon shutting down"));
         assert_eq!(l.on_tick(t), TickPlan::NoGoal);
-        assert_eq!(drain(&mut l), [(1, GoalOutcome::Aborted, AbortReason::Shutdown, 1)]);
+        assert_eq!(
+            drain(&mut l),
+            [(1, GoalOutcome::Aborted, AbortReason::Shutdown, 1)]
+        );
     }
 
     #[test]

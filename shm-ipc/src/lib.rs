@@ -223,9 +223,9 @@ pub use endpoint::{
 };
 pub use error::{BoxedSource, ClientError, IpcError};
 pub use msg::{
-    fault_flags, pose_flags, AbortReason, Command, GoalKind, GoalOutcome, GoalReply,
-    GoalRequest, MachineState, Mode, Obstacle, Pose2, PoseEstimate, RejectCode, Telemetry,
-    MAX_OBSTACLES, MAX_ROUTE, MAX_TRAJECTORY, REASON_TEXT_CAPACITY,
+    fault_flags, pose_flags, AbortReason, Command, GoalKind, GoalOutcome, GoalReply, GoalRequest,
+    MachineState, Mode, Obstacle, Pose2, PoseEstimate, RejectCode, Telemetry, MAX_OBSTACLES,
+    MAX_ROUTE, MAX_TRAJECTORY, REASON_TEXT_CAPACITY,
 };
 pub use validate::{heapless_obstacles, GoalValidator, RejectReason, ValidRequest, Workspace};
 

@@ -153,12 +153,20 @@ fn tracker_maps_each_outcome_to_its_exit_code_and_ignores_other_goals_outcomes()
         let ours = with_outcome(sample(3, 8, Mode::Tracking, 3.0), 7, outcome, reason);
         let status = tr.update(&ours).clone();
         let o = status.outcome().expect("an outcome");
-        assert_eq!((o.outcome, o.abort_reason, o.text.as_str()), (outcome, reason, "because"));
+        assert_eq!(
+            (o.outcome, o.abort_reason, o.text.as_str()),
+            (outcome, reason, "because")
+        );
         assert_eq!(exit::for_status(&status), code, "{outcome:?}");
     }
     // A goal that never became active still gets its outcome (superseded at once).
     let mut tr = GoalTracker::new(9, Pose2::default());
-    let t = with_outcome(sample(5, 10, Mode::Tracking, 3.0), 9, GoalOutcome::Preempted, AbortReason::None);
+    let t = with_outcome(
+        sample(5, 10, Mode::Tracking, 3.0),
+        9,
+        GoalOutcome::Preempted,
+        AbortReason::None,
+    );
     assert_eq!(exit::for_status(tr.update(&t)), exit::PREEMPTED);
     // Giving up without an outcome.
     let mut tr = GoalTracker::new(9, Pose2::default());

@@ -5,9 +5,9 @@ use core::mem::{align_of, offset_of, size_of};
 
 use iceoryx2::prelude::ZeroCopySend;
 use shm_ipc::{
-    pose_flags, AbortReason, Command, GoalKind, GoalOutcome, GoalReply, GoalRequest,
-    MachineState, Mode, Obstacle, Pose2, PoseEstimate, RejectCode, Telemetry, MAX_OBSTACLES,
-    MAX_ROUTE, MAX_TRAJECTORY, REASON_TEXT_CAPACITY,
+    pose_flags, AbortReason, Command, GoalKind, GoalOutcome, GoalReply, GoalRequest, MachineState,
+    Mode, Obstacle, Pose2, PoseEstimate, RejectCode, Telemetry, MAX_OBSTACLES, MAX_ROUTE,
+    MAX_TRAJECTORY, REASON_TEXT_CAPACITY,
 };
 
 /// The bytes of a padding-free POD value.
@@ -56,9 +56,19 @@ fn sizes_alignments_and_offsets() {
     assert_eq!(size_of::<PoseEstimate>(), 8 + 4 + 4 + 3 * 8 + 9 * 8);
     assert_eq!(
         size_of::<Telemetry>(),
-        3 * 8 + 6 * 4 + 4 * 8 + 48 + 24 + 16 + MAX_TRAJECTORY * 48
-            + 8 + 4 * 4 + REASON_TEXT_CAPACITY
-            + 2 * 4 + 24 + MAX_ROUTE * 24
+        3 * 8
+            + 6 * 4
+            + 4 * 8
+            + 48
+            + 24
+            + 16
+            + MAX_TRAJECTORY * 48
+            + 8
+            + 4 * 4
+            + REASON_TEXT_CAPACITY
+            + 2 * 4
+            + 24
+            + MAX_ROUTE * 24
     );
 
     assert_eq!(offset_of!(GoalRequest, obstacles), 40);
@@ -214,7 +224,10 @@ fn telemetry_bytes() {
 fn telemetry_outcome_subgoal_and_route_bytes() {
     let mut t = Telemetry::ZERO;
     let b = bytes(&t);
-    assert!(b[2136..].iter().all(|&x| x == 0), "no outcome, no route: zeros");
+    assert!(
+        b[2136..].iter().all(|&x| x == 0),
+        "no outcome, no route: zeros"
+    );
     t.set_outcome(
         0xAABB,
         GoalOutcome::Aborted,
@@ -235,9 +248,15 @@ fn telemetry_outcome_subgoal_and_route_bytes() {
     assert_eq!(&b[2160..2171], b"no approach");
     assert!(b[2171..2288].iter().all(|&x| x == 0), "zero-filled text");
     assert_eq!((u32_at(b, 2288), u32_at(b, 2292)), (1, 16));
-    assert_eq!((f64_at(b, 2296), f64_at(b, 2304), f64_at(b, 2312)), (1.0, 2.0, 0.5));
+    assert_eq!(
+        (f64_at(b, 2296), f64_at(b, 2304), f64_at(b, 2312)),
+        (1.0, 2.0, 0.5)
+    );
     // route[k] at 2320 + 24 k
-    assert_eq!((f64_at(b, 2320 + 24 * 15), f64_at(b, 2320 + 24 * 15 + 8)), (15.0, -15.0));
+    assert_eq!(
+        (f64_at(b, 2320 + 24 * 15), f64_at(b, 2320 + 24 * 15 + 8)),
+        (15.0, -15.0)
+    );
     assert_eq!(t.outcome(), Ok(GoalOutcome::Aborted));
     assert_eq!(t.abort_reason(), Ok(AbortReason::NoProgress));
     assert_eq!(t.outcome_text(), "no approach");
@@ -252,7 +271,13 @@ fn telemetry_outcome_subgoal_and_route_bytes() {
     assert!(t.outcome_text().starts_with("no approach"));
     assert_eq!((t.outcome(), t.abort_reason()), (Err(42), Err(42)));
     // A long text is cut at a character boundary.
-    t.set_outcome(1, GoalOutcome::Cancelled, AbortReason::None, 4, &"é".repeat(100));
+    t.set_outcome(
+        1,
+        GoalOutcome::Cancelled,
+        AbortReason::None,
+        4,
+        &"é".repeat(100),
+    );
     assert_eq!(t.outcome_text_len, 128);
     assert_eq!(t.outcome_text().chars().count(), 64);
 }

@@ -245,7 +245,11 @@ fn goal_wait_exit_codes_follow_the_outcome_and_stop_latches_until_resume() {
     assert_eq!(o.status.code(), Some(0), "{}", text(&o));
     let o = first.wait_with_output().expect("wait");
     assert_eq!(o.status.code(), Some(6), "{}", text(&o));
-    assert!(text(&o).contains("preempted: preempted by request"), "{}", text(&o));
+    assert!(
+        text(&o).contains("preempted: preempted by request"),
+        "{}",
+        text(&o)
+    );
 
     // Cancelled by an operator stop: exit 5; the stop latches.
     let second = wait_in_background(&p, &["20", "-2", "0"], &[]);
@@ -254,18 +258,39 @@ fn goal_wait_exit_codes_follow_the_outcome_and_stop_latches_until_resume() {
     assert_eq!(o.status.code(), Some(0), "{}", text(&o));
     let o = second.wait_with_output().expect("wait");
     assert_eq!(o.status.code(), Some(5), "{}", text(&o));
-    assert!(text(&o).contains("cancelled: stopped by an operator"), "{}", text(&o));
+    assert!(
+        text(&o).contains("cancelled: stopped by an operator"),
+        "{}",
+        text(&o)
+    );
     let o = wlnav(&["--prefix", &p, "goal", "5", "0", "0"]);
     assert_eq!(o.status.code(), Some(1), "{}", text(&o));
-    assert!(text(&o).contains("rejected (not-ready): stopped by an operator"), "{}", text(&o));
+    assert!(
+        text(&o).contains("rejected (not-ready): stopped by an operator"),
+        "{}",
+        text(&o)
+    );
     let o = wlnav(&["--prefix", &p, "resume"]);
     assert_eq!(o.status.code(), Some(0), "{}", text(&o));
     assert!(text(&o).contains("resume: accepted"), "{}", text(&o));
 
     // A goal whose footprint is in an obstacle: rejected at once, exit 1.
-    let o = wlnav(&["--prefix", &p, "goal", "5", "0", "0", "--obstacle", "3.8,0,0.4"]);
+    let o = wlnav(&[
+        "--prefix",
+        &p,
+        "goal",
+        "5",
+        "0",
+        "0",
+        "--obstacle",
+        "3.8,0,0.4",
+    ]);
     assert_eq!(o.status.code(), Some(1), "{}", text(&o));
-    assert!(text(&o).contains("rejected (goal-in-collision)"), "{}", text(&o));
+    assert!(
+        text(&o).contains("rejected (goal-in-collision)"),
+        "{}",
+        text(&o)
+    );
 
     // After resume a goal is accepted again; cancel it: exit 5.
     let third = wait_in_background(&p, &["20", "3", "0"], &[]);
@@ -274,6 +299,10 @@ fn goal_wait_exit_codes_follow_the_outcome_and_stop_latches_until_resume() {
     assert_eq!(o.status.code(), Some(0), "{}", text(&o));
     let o = third.wait_with_output().expect("wait");
     assert_eq!(o.status.code(), Some(5), "{}", text(&o));
-    assert!(text(&o).contains("cancelled: cancelled by request"), "{}", text(&o));
+    assert!(
+        text(&o).contains("cancelled: cancelled by request"),
+        "{}",
+        text(&o)
+    );
     d.stop();
 }

@@ -11,8 +11,8 @@ use e2e::{binaries, SimDaemon};
 use shm_ipc::cli::commands::{follow, FollowEnd, FollowOptions};
 use shm_ipc::cli::follow::GoalTracker;
 use shm_ipc::{
-    fault_flags, AbortReason, Client, ClientError, GoalOutcome, GoalRequest, Mode, Obstacle,
-    Pose2, RejectCode, Telemetry, MAX_OBSTACLES,
+    fault_flags, AbortReason, Client, ClientError, GoalOutcome, GoalRequest, Mode, Obstacle, Pose2,
+    RejectCode, Telemetry, MAX_OBSTACLES,
 };
 
 const REPLY: Duration = Duration::from_secs(2);
@@ -512,9 +512,17 @@ fn an_enclosed_goal_ends_aborted_within_15_s_with_the_machine_at_rest() {
     assert_eq!(outcomes.len(), 1, "exactly one outcome");
     let o = outcomes[0];
     assert_eq!(o.outcome_request_id, id);
-    assert_eq!(o.outcome(), Ok(GoalOutcome::Aborted), "{}", o.outcome_text());
+    assert_eq!(
+        o.outcome(),
+        Ok(GoalOutcome::Aborted),
+        "{}",
+        o.outcome_text()
+    );
     assert!(
-        matches!(o.abort_reason(), Ok(AbortReason::NoProgress | AbortReason::NoRoute)),
+        matches!(
+            o.abort_reason(),
+            Ok(AbortReason::NoProgress | AbortReason::NoRoute)
+        ),
         "{}",
         o.outcome_text()
     );
@@ -527,6 +535,10 @@ fn an_enclosed_goal_ends_aborted_within_15_s_with_the_machine_at_rest() {
         o.outcome_text(),
         secs(rest.tick)
     );
-    assert!(secs(rest.tick) <= 15.0, "at rest only after {:.1} s", secs(rest.tick));
+    assert!(
+        secs(rest.tick) <= 15.0,
+        "at rest only after {:.1} s",
+        secs(rest.tick)
+    );
     d.stop();
 }

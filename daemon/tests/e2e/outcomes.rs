@@ -5,7 +5,9 @@
 
 use std::time::{Duration, Instant};
 
-use shm_ipc::{fault_flags, AbortReason, GoalOutcome, Mode, Obstacle, Pose2, RejectCode, Telemetry};
+use shm_ipc::{
+    fault_flags, AbortReason, GoalOutcome, Mode, Obstacle, Pose2, RejectCode, Telemetry,
+};
 
 use crate::common::*;
 
@@ -21,7 +23,11 @@ fn at_rest(t: &Telemetry) -> bool {
 
 fn accepted(d: &Running, goal: Pose2, obstacles: &[Obstacle]) -> u64 {
     let (id, reply) = d.request_goal(goal, obstacles);
-    assert!(reply.is_accepted(), "goal rejected: {}", reply.reason_text());
+    assert!(
+        reply.is_accepted(),
+        "goal rejected: {}",
+        reply.reason_text()
+    );
     id
 }
 
@@ -45,15 +51,27 @@ fn a_goal_whose_footprint_is_in_an_obstacle_is_rejected_at_once() {
     // An obstacle around the machine itself (at the origin).
     let (id2, reply) = d.request_goal(Pose2::new(5.0, 3.0, 0.0), &[Obstacle::new(0.2, 0.0, 0.5)]);
     assert_eq!(reply.reject_code(), Ok(RejectCode::MachineInCollision));
-    assert!(reply.reason_text().contains("obstacle 0"), "{}", reply.reason_text());
+    assert!(
+        reply.reason_text().contains("obstacle 0"),
+        "{}",
+        reply.reason_text()
+    );
     // The same goal without the obstacles is fine; it then ends once (cancelled).
     let ok = accepted(&d, Pose2::new(5.0, 0.0, 0.0), &[]);
     d.record_until(&mut log, T, "tracking", |t| t.goal_request_id == ok);
-    assert!(d.client.cancel(Duration::from_secs(2)).unwrap().is_accepted());
-    d.record_until(&mut log, T, "at rest", |t| mode(t) == Mode::Idle && at_rest(t));
+    assert!(d
+        .client
+        .cancel(Duration::from_secs(2))
+        .unwrap()
+        .is_accepted());
+    d.record_until(&mut log, T, "at rest", |t| {
+        mode(t) == Mode::Idle && at_rest(t)
+    });
     let ended = assert_each_ends_once(&log, &[ok]);
     assert_eq!(ended[0].outcome(), Ok(GoalOutcome::Cancelled));
-    assert!(log.iter().all(|t| t.outcome_request_id != id && t.outcome_request_id != id2));
+    assert!(log
+        .iter()
+        .all(|t| t.outcome_request_id != id && t.outcome_request_id != id2));
     d.stop();
 }
 
@@ -69,15 +87,24 @@ fn a_newer_goal_preempts_the_old_one_reported_once_with_the_old_id() {
     let switched = d.record_until(&mut log, T, "tracking B", |t| {
         t.goal_request_id == b && mode(t) == Mode::Tracking
     });
-    d.record_until(&mut log, T, "10 more ticks", |t| t.tick >= switched.tick + 10);
+    d.record_until(&mut log, T, "10 more ticks", |t| {
+        t.tick >= switched.tick + 10
+    });
     let ended = assert_each_ends_once(&log, &[a]);
     let o = ended[0];
     assert_eq!(o.outcome(), Ok(GoalOutcome::Preempted));
     assert_eq!(o.abort_reason(), Ok(AbortReason::None));
-    assert!(o.outcome_text().contains(&b.to_string()), "{}", o.outcome_text());
+    assert!(
+        o.outcome_text().contains(&b.to_string()),
+        "{}",
+        o.outcome_text()
+    );
     // Preempting does not stop the machine: B is driven from the same tick.
     assert_eq!(o.goal_request_id, b);
-    assert!(log.iter().all(|t| t.outcome_request_id != b), "B has not ended");
+    assert!(
+        log.iter().all(|t| t.outcome_request_id != b),
+        "B has not ended"
+    );
     d.stop();
 }
 
@@ -89,11 +116,16 @@ fn cancel_ends_the_goal_cancelled_and_the_machine_comes_to_rest() {
     d.record_until(&mut log, T, "driving", |t| t.command.v > 0.3);
     let r = d.client.cancel(Duration::from_secs(2)).unwrap();
     assert!(r.is_accepted());
-    d.record_until(&mut log, T, "idle at rest", |t| mode(t) == Mode::Idle && at_rest(t));
+    d.record_until(&mut log, T, "idle at rest", |t| {
+        mode(t) == Mode::Idle && at_rest(t)
+    });
     let ended = assert_each_ends_once(&log, &[a]);
     assert_eq!(ended[0].outcome(), Ok(GoalOutcome::Cancelled));
     assert!(ended[0].outcome_text().contains("cancelled by request"));
-    assert_eq!(ended[0].goal_active, 0, "the goal is dropped on the outcome's tick");
+    assert_eq!(
+        ended[0].goal_active, 0,
+        "the goal is dropped on the outcome's tick"
+    );
     d.stop();
 }
 
@@ -113,7 +145,11 @@ fn a_reached_goal_succeeds_exactly_once() {
     let o = ended[0];
     assert_eq!(o.outcome(), Ok(GoalOutcome::Succeeded));
     assert_eq!(o.tick, reached.tick, "reported on the tick it was reached");
-    assert_eq!((o.goal_request_id, o.goal_active), (a, 1), "the goal is held");
+    assert_eq!(
+        (o.goal_request_id, o.goal_active),
+        (a, 1),
+        "the goal is held"
+    );
     assert!(o.pose_error_xy < 0.1, "{}", o.pose_error_xy);
     d.stop();
 }
@@ -132,15 +168,27 @@ fn an_unreachable_goal_aborts_without_progress_and_the_machine_comes_to_rest() {
     let ended = d.record_until(&mut log, Duration::from_secs(60), "aborted", |t| {
         t.outcome_request_id == a
     });
-    d.record_until(&mut log, T, "idle at rest", |t| mode(t) == Mode::Idle && at_rest(t));
+    d.record_until(&mut log, T, "idle at rest", |t| {
+        mode(t) == Mode::Idle && at_rest(t)
+    });
     let o = assert_each_ends_once(&log, &[a])[0];
     assert_eq!(o.outcome(), Ok(GoalOutcome::Aborted));
-    assert_eq!(o.abort_reason(), Ok(AbortReason::NoProgress), "{}", o.outcome_text());
-    assert!(o.outcome_text().contains("no approach"), "{}", o.outcome_text());
+    assert_eq!(
+        o.abort_reason(),
+        Ok(AbortReason::NoProgress),
+        "{}",
+        o.outcome_text()
+    );
+    assert!(
+        o.outcome_text().contains("no approach"),
+        "{}",
+        o.outcome_text()
+    );
     let secs = (ended.tick - first.tick) as f64 * 0.2;
     assert!(secs < 12.0, "aborted after {secs:.1} s");
     assert!(
-        log.iter().any(|t| t.goal_request_id == a && t.state.v_f > 0.2),
+        log.iter()
+            .any(|t| t.goal_request_id == a && t.state.v_f > 0.2),
         "the machine drove towards the goal first"
     );
     let report = d.stop();
@@ -175,7 +223,11 @@ fn an_operator_stop_latches_until_resume() {
     }
     let idle = d.record_until(&mut log, T, "a sample", |_| true);
     assert_ne!(idle.fault_flags & fault_flags::STOP_REQUESTED, 0);
-    assert!(d.client.resume(Duration::from_secs(2)).unwrap().is_accepted());
+    assert!(d
+        .client
+        .resume(Duration::from_secs(2))
+        .unwrap()
+        .is_accepted());
     let b = accepted(&d, Pose2::new(5.0, 2.0, 0.0), &[]);
     let driving = d.record_until(&mut log, T, "tracking after resume", |t| {
         t.goal_request_id == b && mode(t) == Mode::Tracking
@@ -183,7 +235,11 @@ fn an_operator_stop_latches_until_resume() {
     assert_eq!(driving.fault_flags & fault_flags::STOP_REQUESTED, 0);
     let o = assert_each_ends_once(&log, &[a])[0];
     assert_eq!(o.outcome(), Ok(GoalOutcome::Cancelled));
-    assert!(o.outcome_text().contains("operator"), "{}", o.outcome_text());
+    assert!(
+        o.outcome_text().contains("operator"),
+        "{}",
+        o.outcome_text()
+    );
     d.stop();
 }
 
@@ -217,10 +273,20 @@ fn every_accepted_goal_ends_exactly_once() {
     // Rejected requests end nothing and have no outcome.
     let (bad, reply) = d.request_goal(Pose2::new(9.0, -1.0, 0.0), &[Obstacle::new(9.0, -1.0, 0.5)]);
     assert!(!reply.is_accepted());
-    assert!(d.client.cancel(Duration::from_secs(2)).unwrap().is_accepted());
-    d.record_until(&mut log, T, "idle at rest", |t| mode(t) == Mode::Idle && at_rest(t));
+    assert!(d
+        .client
+        .cancel(Duration::from_secs(2))
+        .unwrap()
+        .is_accepted());
+    d.record_until(&mut log, T, "idle at rest", |t| {
+        mode(t) == Mode::Idle && at_rest(t)
+    });
     // A second cancel has nothing to end.
-    assert!(d.client.cancel(Duration::from_secs(2)).unwrap().is_accepted());
+    assert!(d
+        .client
+        .cancel(Duration::from_secs(2))
+        .unwrap()
+        .is_accepted());
     ids.extend([a, b, c]);
     expect.extend([
         GoalOutcome::Preempted,
@@ -231,8 +297,14 @@ fn every_accepted_goal_ends_exactly_once() {
     let f = accepted(&d, Pose2::new(-8.0, 0.0, 0.0), &[]);
     d.record_until(&mut log, T, "F driven", |t| t.goal_request_id == f);
     assert!(d.client.stop(Duration::from_secs(2)).unwrap().is_accepted());
-    d.record_until(&mut log, T, "stopped at rest", |t| mode(t) == Mode::Idle && at_rest(t));
-    assert!(d.client.resume(Duration::from_secs(2)).unwrap().is_accepted());
+    d.record_until(&mut log, T, "stopped at rest", |t| {
+        mode(t) == Mode::Idle && at_rest(t)
+    });
+    assert!(d
+        .client
+        .resume(Duration::from_secs(2))
+        .unwrap()
+        .is_accepted());
     ids.push(f);
     expect.push(GoalOutcome::Cancelled);
 

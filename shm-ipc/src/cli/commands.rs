@@ -153,7 +153,10 @@ pub fn outcome_line(tracker: &GoalTracker, tick_s: f64) -> String {
         tick.and_then(|t| tracker.ticks_since_start(t))
             .map(|n| n as f64 * tick_s)
     };
-    let fmt_s = |s: Option<f64>| s.map(|s| format!("{s:.1} s")).unwrap_or_else(|| "? s".into());
+    let fmt_s = |s: Option<f64>| {
+        s.map(|s| format!("{s:.1} s"))
+            .unwrap_or_else(|| "? s".into())
+    };
     match tracker.status() {
         GoalStatus::Ended(o) if tracker.status().is_succeeded() => format!(
             "succeeded: converged (DESIGN §7, < 0.1) after {}, reported after {} ({} ticks): {}",
