@@ -17,6 +17,7 @@
 //! [loop]
 //! rate_hz = 5.0
 //! pose_timeout = 0.5   # s: older pose -> controlled stop
+//! progress_timeout = 10.0  # s without approach -> goal aborted (no-progress)
 //! ...
 //! [can]
 //! backend = "sim"      # or "socketcan"
@@ -37,6 +38,7 @@
 use std::path::{Path, PathBuf};
 
 use control::mpc::MpcSettings;
+use control::progress::ProgressSettings;
 use control::{MachineParams, PlantConfig};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
@@ -171,6 +173,12 @@ pub struct LoopConfig {
     pub reach_tolerance: f64,
     /// … and |v_f| is below this [m/s]. Default 0.05.
     pub reach_speed: f64,
+    /// A goal whose error ‖(x_f − x_g, y_f − y_g, e_θ)‖ has not shrunk by
+    /// `progress_min_approach` for this long [s] is aborted (`no-progress`) and the
+    /// machine brought to rest (DESIGN §10, Nav2's progress checker). Default 10.
+    pub progress_timeout: f64,
+    /// How much closer counts as progress [m and rad combined]. Default 0.1.
+    pub progress_min_approach: f64,
     /// A machine state beyond its bound by more than this fraction of the bound is
     /// implausible (treated like a stale one). Default 0.2.
     pub plausibility_margin: f64,
@@ -194,6 +202,8 @@ impl Default for LoopConfig {
             can_max_lost: 2,
             reach_tolerance: control::model::SUCCESS_TOLERANCE,
             reach_speed: 0.05,
+            progress_timeout: ProgressSettings::default().timeout,
+            progress_min_approach: ProgressSettings::default().min_approach,
             plausibility_margin: 0.2,
             shutdown_timeout: 5.0,
             rest_speed: 0.02,
@@ -206,6 +216,14 @@ impl LoopConfig {
     /// Tick period [s].
     pub fn period(&self) -> f64 {
         1.0 / self.rate_hz
+    }
+
+    /// The progress checker's settings.
+    pub fn progress(&self) -> ProgressSettings {
+        ProgressSettings {
+            timeout: self.progress_timeout,
+            min_approach: self.progress_min_approach,
+        }
     }
 }
 
@@ -246,7 +264,7 @@ impl Default for CanConfig {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct IpcSection {
-    /// Service-name prefix: services are `{prefix}/v1/goal|pose|telemetry`.
+    /// Service-name prefix: services are `{prefix}/v2/goal|pose|telemetry`.
     pub prefix: String,
     /// Goals must lie inside this rectangle [m].
     pub workspace: WorkspaceConfig,
@@ -293,7 +311,7 @@ pub struct SimConfig {
     pub time_scale: f64,
     /// Machine-state frames per (daemon) second. Default 50.
     pub state_rate_hz: f64,
-    /// Pose estimates published on `{prefix}/v1/pose` per second. Default 20.
+    /// Pose estimates published on `{prefix}/v2/pose` per second. Default 20.
     pub pose_rate_hz: f64,
     /// Publish pose estimates (the built-in localization). Default true.
     pub publish_pose: bool,
@@ -469,6 +487,8 @@ impl Config {
         check_positive("loop.state_timeout", l.state_timeout)?;
         check_positive("loop.reach_tolerance", l.reach_tolerance)?;
         check_positive("loop.reach_speed", l.reach_speed)?;
+        check_positive("loop.progress_timeout", l.progress_timeout)?;
+        check_positive("loop.progress_min_approach", l.progress_min_approach)?;
         check_non_negative("loop.plausibility_margin", l.plausibility_margin)?;
         check_non_negative("loop.shutdown_timeout", l.shutdown_timeout)?;
         check_positive("loop.rest_speed", l.rest_speed)?;
@@ -550,6 +570,17 @@ impl Config {
         )
     }
 
+    /// What the goal lifecycle decides with: the machine's footprint, the reach test,
+    /// the progress checker.
+    pub fn lifecycle_settings(&self) -> crate::goal_lifecycle::LifecycleSettings {
+        crate::goal_lifecycle::LifecycleSettings {
+            machine: self.machine,
+            reach_tolerance: self.control.reach_tolerance,
+            reach_speed: self.control.reach_speed,
+            progress: self.control.progress(),
+        }
+    }
+
     /// The configuration as TOML (for `--print-config`).
     pub fn to_toml(&self) -> String {
         toml::to_string_pretty(self).unwrap_or_else(|e| format!("# cannot serialise: {e}\n"))
@@ -583,6 +614,7 @@ mod tests {
         assert!(err("[loop]\nrate_hz = -1\n").contains("`loop.rate_hz`"));
         assert!(err("[loop]\nrate_hz = 10\n").contains("`loop.rate_hz`"));
         assert!(err("[mpc]\nhorizon = 0\n").contains("`mpc.horizon`"));
+        assert!(err("[loop]\nprogress_timeout = 0\n").contains("`loop.progress_timeout`"));
         assert!(err("[machine]\nv_max = 0\n").contains("`machine.v_max`"));
         assert!(err("[sim.plant]\ndelay = -1\n").contains("`sim.plant.delay`"));
         assert!(err("[sim]\ntime_scale = 0\n").contains("`sim.time_scale`"));

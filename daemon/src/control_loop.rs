@@ -3,14 +3,17 @@
 //! next one; missed deadlines are skipped and counted as overruns).
 //!
 //! Per tick:
-//! 1. newest goal request (from the IPC task), newest pose (from `{prefix}/v1/pose`),
-//!    newest machine state and CAN integrity counters (from the CAN I/O task);
+//! 1. newest pose (from `{prefix}/v2/pose`), newest machine state and CAN integrity
+//!    counters (from the CAN I/O task);
 //! 2. staleness and plausibility checks;
-//! 3. the mode decision (below);
+//! 3. the goal lifecycle's tick ([`crate::goal_lifecycle`]: the goal to drive, and
+//!    whether it ended: succeeded, aborted on a fault or for lack of progress), then
+//!    the mode decision (below);
 //! 4. while tracking: the MPC step (which propagates the measured state over the
 //!    actuator delay, `mpc.delay`, with the commands already sent, then solves);
 //! 5. the command, through the stop ramp when stopping, to the CAN I/O task;
-//! 6. telemetry on `{prefix}/v1/telemetry`; WATCHDOG=1 if the tick was healthy.
+//! 6. telemetry on `{prefix}/v2/telemetry`, with at most one goal outcome (the oldest
+//!    not yet reported); WATCHDOG=1 if the tick was healthy.
 //!
 //! Safety (DESIGN §6): a controlled stop — velocities ramped to zero at no more
 //! than the machine's acceleration limits (β̈_max, a_max) from the last command —
@@ -18,17 +21,18 @@
 //! persistent CAN integrity failures (consecutive rejected frames ≥
 //! `loop.can_bad_frames_stop`; single ones are counted and flagged), a failed or
 //! non-finite solve that persists beyond `loop.fallback_ticks` ticks on the
-//! shifted plan, a stop or cancel request, and shutdown. A fault drops the goal: the
-//! machine stays stopped until a new goal arrives after the fault has cleared.
+//! shifted plan, a stop or cancel request, no progress towards the goal, and
+//! shutdown. A fault drops the goal (outcome `aborted`, reason `fault`): the machine
+//! stays stopped until a new goal arrives after the fault has cleared.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
-use control::model::{goal_distance, ix, pose_error};
-use control::mpc::Obstacle;
-use control::{Goal, MachineParams, State};
+use control::model::{ix, pose_error};
+use control::{MachineParams, State};
 use shm_ipc::{
-    fault_flags, DaemonEndpoint, MachineState as IpcState, Mode, Pose2, Telemetry, ValidRequest,
+    fault_flags, AbortReason, DaemonEndpoint, GoalOutcome, MachineState as IpcState, Mode, Pose2,
+    Telemetry,
 };
 use tokio::sync::mpsc;
 
@@ -37,7 +41,8 @@ use crate::can_io::{CanShared, CanSnapshot, OutCommand, RejectKind};
 use crate::clock::DaemonClock;
 use crate::config::Config;
 use crate::controller::{Controller, PlanStatus};
-use crate::ipc::GoalSlot;
+use crate::goal_lifecycle::{Abort, AcceptedGoal, TickInput, TickPlan};
+use crate::ipc::{fault_names, SharedGoals};
 use crate::notify::Notifier;
 use crate::stats::LoopStats;
 
@@ -62,21 +67,12 @@ pub struct LoopContext {
     pub can: Arc<CanShared>,
     /// CAN send side.
     pub commands: mpsc::Sender<OutCommand>,
-    /// Goals from the IPC task.
-    pub goals: Arc<GoalSlot>,
+    /// The goal lifecycle, shared with the IPC task.
+    pub goals: Arc<SharedGoals>,
     /// Set to request a controlled stop and exit.
     pub shutdown: Arc<AtomicBool>,
     /// Loop statistics, shared with the reporter.
     pub stats: Arc<std::sync::Mutex<LoopStats>>,
-}
-
-#[derive(Debug, Clone, Copy)]
-struct ActiveGoal {
-    goal: Goal,
-    obstacles: [Obstacle; shm_ipc::MAX_OBSTACLES],
-    n_obstacles: usize,
-    request_id: u64,
-    reached: bool,
 }
 
 /// The loop's state between ticks.
@@ -85,11 +81,11 @@ pub struct ControlLoop {
     controller: Box<dyn Controller>,
     notifier: Notifier,
     params: MachineParams,
-    goal: Option<ActiveGoal>,
-    goal_seq: u64,
-    /// The controller has the current goal and a consistent command history.
-    controller_engaged: bool,
-    stop_requested: bool,
+    /// The goal generation the controller plans for, with a consistent command
+    /// history (None: re-plan before the next step).
+    engaged_generation: Option<u64>,
+    /// Outcomes dropped so far (logged when it grows).
+    dropped_outcomes: u64,
     /// Faults that hold until a new goal (solver failure).
     latched: u32,
     last_cmd: [f64; 2],
@@ -126,10 +122,8 @@ impl ControlLoop {
             controller,
             notifier,
             params,
-            goal: None,
-            goal_seq: 0,
-            controller_engaged: false,
-            stop_requested: false,
+            engaged_generation: None,
+            dropped_outcomes: 0,
             latched: 0,
             last_cmd: [0.0; 2],
             pose: None,
@@ -198,56 +192,8 @@ impl ControlLoop {
         }
     }
 
-    /// Applies the newest goal request, if any.
-    fn take_goal(&mut self) {
-        let Some(req) = self.ctx.goals.take_newer(&mut self.goal_seq) else {
-            return;
-        };
-        match req {
-            ValidRequest::SetGoal {
-                request_id,
-                goal,
-                obstacles,
-            } => {
-                let mut obs = [Obstacle::default(); shm_ipc::MAX_OBSTACLES];
-                for (dst, o) in obs.iter_mut().zip(obstacles.iter()) {
-                    *dst = Obstacle::new(o.x, o.y, o.r);
-                }
-                tracing::info!(
-                    "new goal {request_id}: ({:.2}, {:.2}, {:.2}) with {} obstacle(s)",
-                    goal.x,
-                    goal.y,
-                    goal.heading,
-                    obstacles.len()
-                );
-                self.goal = Some(ActiveGoal {
-                    goal: Goal::new(goal.x, goal.y, goal.heading),
-                    obstacles: obs,
-                    n_obstacles: obstacles.len(),
-                    request_id,
-                    reached: false,
-                });
-                self.controller_engaged = false;
-                self.stop_requested = false;
-                self.latched = 0;
-                self.fallback_count = 0;
-            }
-            ValidRequest::Cancel { request_id } => {
-                tracing::info!("cancel {request_id}: controlled stop");
-                self.drop_goal();
-                self.stop_requested = false;
-            }
-            ValidRequest::Stop { request_id } => {
-                tracing::info!("stop request {request_id}: controlled stop");
-                self.drop_goal();
-                self.stop_requested = true;
-            }
-        }
-    }
-
-    fn drop_goal(&mut self) {
-        self.goal = None;
-        self.controller_engaged = false;
+    fn disengage(&mut self) {
+        self.engaged_generation = None;
         self.fallback_count = 0;
     }
 
@@ -287,7 +233,6 @@ impl ControlLoop {
         t.timestamp_ns = shm_ipc::monotonic_now_ns();
         let mut solve_time = None;
 
-        self.take_goal();
         let shutting_down = self.ctx.shutdown.load(Ordering::Relaxed)
             || (cfg.max_ticks > 0 && self.tick > cfg.max_ticks);
         if shutting_down && self.shutdown_started.is_none() {
@@ -372,10 +317,48 @@ impl ControlLoop {
             t.state = IpcState::from_array(a);
         }
 
-        self.ctx
-            .goals
-            .set_blocking_faults(stop_faults | self.latched);
         self.seen_data |= x.is_some();
+
+        // The goal lifecycle: what to drive, and whether the goal ended.
+        let abort = if shutting_down {
+            Some(Abort::new(AbortReason::Shutdown, "daemon shutting down"))
+        } else if stop_faults | self.latched != 0 {
+            Some(Abort::new(
+                AbortReason::Fault,
+                format!("fault: {}", fault_names(stop_faults | self.latched)),
+            ))
+        } else if machine_blocked {
+            Some(Abort::new(
+                AbortReason::Fault,
+                format!(
+                    "fault: machine status {:?}",
+                    state.map(|s| s.status).unwrap_or(MachineStatus::Fault)
+                ),
+            ))
+        } else {
+            None
+        };
+        let (plan, operator_stop) = {
+            let mut goals = self.ctx.goals.lock();
+            let plan = goals.on_tick(TickInput {
+                now: start,
+                state: x.as_ref(),
+                abort,
+                blocking_faults: stop_faults | self.latched,
+            });
+            (plan, goals.operator_stop())
+        };
+        if operator_stop {
+            flags |= fault_flags::STOP_REQUESTED;
+        }
+        // The goal shown in telemetry (dropped again if tracking fails below).
+        let mut shown: Option<AcceptedGoal> = match plan {
+            TickPlan::NoGoal => None,
+            TickPlan::Hold(g) | TickPlan::Track(g) => Some(g),
+        };
+        if !matches!(plan, TickPlan::Track(_)) {
+            self.disengage();
+        }
 
         // Mode decision.
         let (mode, mut cmd, drive_mode);
@@ -383,20 +366,12 @@ impl ControlLoop {
             mode = Mode::Stopping;
             cmd = self.ramp_down();
             drive_mode = DriveMode::Stop;
-            self.drop_goal();
         } else if !self.seen_data && x.is_none() {
             // Waiting for the first pose and machine state.
             mode = Mode::Startup;
             cmd = self.ramp_down();
             drive_mode = DriveMode::Hold;
         } else if stop_faults != 0 || self.latched != 0 {
-            if self.goal.is_some() {
-                tracing::warn!(
-                    "fault {:#x}: controlled stop, goal dropped",
-                    stop_faults | self.latched
-                );
-            }
-            self.drop_goal();
             flags |= self.latched;
             mode = Mode::Fault;
             cmd = self.ramp_down();
@@ -405,66 +380,58 @@ impl ControlLoop {
                 // The solver fault has been shown through the whole stop; clear it.
                 self.latched = 0;
             }
-        } else if self.goal.is_none() || machine_blocked {
-            if machine_blocked && self.goal.is_some() {
-                tracing::warn!("machine status {:?}: goal dropped", state.map(|s| s.status));
-                self.drop_goal();
-            }
-            if self.stop_requested {
-                flags |= fault_flags::STOP_REQUESTED;
-            }
-            cmd = self.ramp_down();
-            if cmd == [0.0, 0.0] {
-                mode = Mode::Idle;
-                drive_mode = DriveMode::Hold;
-            } else {
-                mode = Mode::Stopping;
-                drive_mode = DriveMode::Stop;
-            }
         } else {
-            // A goal, fresh data, no fault. x is Some here (both inputs fresh).
-            let x = x.unwrap_or_else(State::zeros);
-            let mut g = self.goal.unwrap_or_else(|| unreachable!());
-            if !g.reached
-                && goal_distance(&x, &g.goal) < cfg.reach_tolerance
-                && x[ix::V].abs() < cfg.reach_speed
-            {
-                g.reached = true;
-                self.controller_engaged = false;
-                tracing::info!("goal {} reached", g.request_id);
-            }
-            if g.reached {
-                mode = Mode::Reached;
-                cmd = self.ramp_down();
-                drive_mode = if cmd == [0.0, 0.0] {
-                    DriveMode::Hold
-                } else {
-                    DriveMode::Stop
-                };
-            } else {
-                let (c, f, st) = self.track(&x, &g, &mut t);
-                flags |= f;
-                solve_time = st;
-                if self.fallback_count > cfg.fallback_ticks {
-                    tracing::error!(
-                        "solver failed {} ticks in a row: controlled stop",
-                        self.fallback_count
-                    );
-                    self.latched |= fault_flags::SOLVE_FAILED;
-                    // This tick stops instead of driving on the fallback plan.
-                    flags = (flags & !fault_flags::FALLBACK_PLAN) | fault_flags::SOLVE_FAILED;
-                    self.drop_goal();
-                    mode = Mode::Fault;
+            match plan {
+                TickPlan::NoGoal => {
+                    // No goal (none sent, or it ended) or the machine not in automatic
+                    // mode: come to rest.
                     cmd = self.ramp_down();
-                    drive_mode = DriveMode::Fault;
-                } else {
-                    mode = Mode::Tracking;
-                    cmd = c;
-                    drive_mode = DriveMode::Drive;
+                    if cmd == [0.0, 0.0] {
+                        mode = Mode::Idle;
+                        drive_mode = DriveMode::Hold;
+                    } else {
+                        mode = Mode::Stopping;
+                        drive_mode = DriveMode::Stop;
+                    }
                 }
-            }
-            if let Some(goal) = self.goal.as_mut() {
-                goal.reached = g.reached;
+                TickPlan::Hold(_) => {
+                    mode = Mode::Reached;
+                    cmd = self.ramp_down();
+                    drive_mode = if cmd == [0.0, 0.0] {
+                        DriveMode::Hold
+                    } else {
+                        DriveMode::Stop
+                    };
+                }
+                TickPlan::Track(g) => {
+                    // Fresh data and no fault: x is Some here.
+                    let x = x.unwrap_or_else(State::zeros);
+                    let (c, f, st) = self.track(&x, &g, &mut t);
+                    flags |= f;
+                    solve_time = st;
+                    if self.fallback_count > cfg.fallback_ticks {
+                        tracing::error!(
+                            "solver failed {} ticks in a row: controlled stop",
+                            self.fallback_count
+                        );
+                        self.latched |= fault_flags::SOLVE_FAILED;
+                        // This tick stops instead of driving on the fallback plan.
+                        flags = (flags & !fault_flags::FALLBACK_PLAN) | fault_flags::SOLVE_FAILED;
+                        self.ctx.goals.lock().abort_active(Abort::new(
+                            AbortReason::Fault,
+                            format!("fault: solve failed {} ticks in a row", self.fallback_count),
+                        ));
+                        self.disengage();
+                        shown = None;
+                        mode = Mode::Fault;
+                        cmd = self.ramp_down();
+                        drive_mode = DriveMode::Fault;
+                    } else {
+                        mode = Mode::Tracking;
+                        cmd = c;
+                        drive_mode = DriveMode::Drive;
+                    }
+                }
             }
         }
 
@@ -508,7 +475,7 @@ impl ControlLoop {
             }
         };
         self.last_cmd = cmd;
-        let detail = match (&self.goal, mode) {
+        let detail = match (&shown, mode) {
             (Some(g), _) => format!(
                 "goal ({:.2}, {:.2}, {:.2})",
                 g.goal.x, g.goal.y, g.goal.theta
@@ -523,7 +490,7 @@ impl ControlLoop {
         t.fault_flags = flags;
         t.command.beta_dot = cmd[0];
         t.command.v = cmd[1];
-        if let Some(g) = &self.goal {
+        if let Some(g) = &shown {
             t.goal_active = 1;
             t.goal = Pose2::new(g.goal.x, g.goal.y, g.goal.theta);
             t.goal_request_id = g.request_id;
@@ -533,6 +500,7 @@ impl ControlLoop {
                 t.pose_error_heading = e[1];
             }
         }
+        self.report_outcome(&mut t);
         if let Err(e) = self.ctx.endpoint.publish_telemetry(&t) {
             tracing::warn!("telemetry: {e}");
         }
@@ -544,26 +512,57 @@ impl ControlLoop {
         }
     }
 
+    /// Puts the oldest goal outcome not yet reported (if any) on this tick's telemetry.
+    fn report_outcome(&mut self, t: &mut Telemetry) {
+        let (outcome, dropped) = {
+            let mut goals = self.ctx.goals.lock();
+            (goals.next_outcome(), goals.dropped_outcomes())
+        };
+        if dropped > self.dropped_outcomes {
+            tracing::warn!(
+                "{} goal outcome(s) dropped: goals ended faster than one per tick",
+                dropped - self.dropped_outcomes
+            );
+            self.dropped_outcomes = dropped;
+        }
+        let Some(o) = outcome else {
+            return;
+        };
+        let name = match o.outcome {
+            GoalOutcome::Aborted => format!("aborted ({})", o.abort_reason.name()),
+            other => other.name().to_owned(),
+        };
+        tracing::info!("goal {} {name}: {}", o.request_id, o.text);
+        t.set_outcome(o.request_id, o.outcome, o.abort_reason, o.seq, &o.text);
+    }
+
     /// One tracking tick: the MPC step, with the fallback on the shifted plan.
     fn track(
         &mut self,
         x: &State,
-        g: &ActiveGoal,
+        g: &AcceptedGoal,
         t: &mut Telemetry,
     ) -> ([f64; 2], u32, Option<f64>) {
         let mut flags = 0;
-        if !self.controller_engaged {
+        if self.engaged_generation != Some(g.generation) {
+            tracing::info!(
+                "goal {}: ({:.2}, {:.2}, {:.2}) with {} obstacle(s)",
+                g.request_id,
+                g.goal.x,
+                g.goal.y,
+                g.goal.theta,
+                g.obstacles().len()
+            );
             self.controller.reset();
-            if let Err(e) = self
-                .controller
-                .set_goal(g.goal, &g.obstacles[..g.n_obstacles])
-            {
+            self.latched = 0;
+            self.fallback_count = 0;
+            if let Err(e) = self.controller.set_goal(g.goal, g.obstacles()) {
                 // Validated goals cannot fail here; treat it as a solver failure.
                 tracing::error!("controller refused the goal: {e}");
                 self.fallback_count = u32::MAX / 2;
                 return (self.ramp_down(), fault_flags::SOLVE_FAILED, None);
             }
-            self.controller_engaged = true;
+            self.engaged_generation = Some(g.generation);
             self.fallback_plan.clear();
             self.fallback_age = 0;
         }

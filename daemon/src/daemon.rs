@@ -26,7 +26,7 @@ use crate::clock::DaemonClock;
 use crate::config::{CanBackend, Config};
 use crate::control_loop::{ControlLoop, ExitReason, LoopContext};
 use crate::controller::{self, ControllerFactory, LoadError};
-use crate::ipc::{self, GoalSlot};
+use crate::ipc::{self, SharedGoals};
 use crate::notify::Notifier;
 use crate::sim::{self, SimHandle, SimLog};
 use crate::stats::{self, LoopStats};
@@ -225,7 +225,7 @@ async fn run_async(
         config.control.can_max_lost,
     ));
 
-    let goals = Arc::new(GoalSlot::default());
+    let goals = Arc::new(SharedGoals::new(config.lifecycle_settings()));
     let stats = Arc::new(Mutex::new(LoopStats::new()));
     let ctx = LoopContext {
         config: config.clone(),

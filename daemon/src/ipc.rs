@@ -1,45 +1,32 @@
-//! Goal requests over iceoryx2: a tokio task serves `{prefix}/v1/goal`, validates
+//! Goal requests over iceoryx2: a tokio task serves `{prefix}/v2/goal`, validates
 //! each request with [`shm_ipc::GoalValidator`] (finite, inside the configured
-//! workspace, ≤ 8 obstacles with positive radius, goal not inside an obstacle),
-//! answers at once with accept or a reason, and puts every valid request into the
-//! [`GoalSlot`]: the newest valid request wins, an invalid one leaves the slot (the
-//! previous goal) untouched.
+//! workspace, ≤ 8 obstacles with positive radius), hands it to the goal lifecycle in
+//! [`SharedGoals`] (operator stop latch, faults, footprint check, outcomes of the goals
+//! it ends; [`crate::goal_lifecycle`]), and answers at once with accept or a reason. A
+//! rejected request leaves the current goal untouched.
 //!
 //! The task sleeps on the goal event service's file descriptor (tokio `AsyncFd`),
 //! with a slow periodic pass as a safety net against a peer that sends without
 //! notifying.
 
 use std::os::fd::{AsRawFd, RawFd};
-use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Duration;
 
-use shm_ipc::{fault_flags, DaemonEndpoint, GoalReply, GoalValidator, RejectCode, ValidRequest};
+use shm_ipc::{fault_flags, DaemonEndpoint, GoalReply, GoalValidator};
 use tokio::io::unix::AsyncFd;
 use tokio::sync::Notify;
 
-/// The newest valid goal request, with a sequence number so the control thread
-/// sees every change exactly once.
-#[derive(Debug)]
-pub struct GoalSlot {
-    inner: Mutex<(u64, Option<ValidRequest>)>,
-    requests: std::sync::atomic::AtomicU64,
-    rejected: std::sync::atomic::AtomicU64,
-    blocking_faults: AtomicU32,
-}
+use crate::goal_lifecycle::{GoalLifecycle, LifecycleSettings};
 
-impl Default for GoalSlot {
-    fn default() -> Self {
-        Self {
-            inner: Mutex::default(),
-            requests: Default::default(),
-            rejected: Default::default(),
-            // Until the first tick has seen fresh data.
-            blocking_faults: AtomicU32::new(
-                fault_flags::POSE_STALE | fault_flags::MACHINE_STATE_STALE,
-            ),
-        }
-    }
+/// The goal lifecycle, shared by the IPC task (requests, answered at once) and the
+/// control thread (one tick at a time), with request counters.
+#[derive(Debug)]
+pub struct SharedGoals {
+    lifecycle: Mutex<GoalLifecycle>,
+    requests: AtomicU64,
+    rejected: AtomicU64,
 }
 
 /// Names of the fault bits, for reject reasons and logs.
@@ -63,29 +50,20 @@ pub fn fault_names(flags: u32) -> String {
     names.join(", ")
 }
 
-impl GoalSlot {
-    /// Faults that keep the daemon from accepting goals (set by the control loop
-    /// every tick; 0 = goals welcome).
-    pub fn set_blocking_faults(&self, flags: u32) {
-        self.blocking_faults.store(flags, Ordering::Relaxed);
-    }
-
-    /// Stores `req` as the newest.
-    pub fn put(&self, req: ValidRequest) {
-        let mut g = self.inner.lock().unwrap_or_else(|p| p.into_inner());
-        g.0 += 1;
-        g.1 = Some(req);
-    }
-
-    /// The newest request if its sequence number is past `seen`.
-    pub fn take_newer(&self, seen: &mut u64) -> Option<ValidRequest> {
-        let g = self.inner.lock().unwrap_or_else(|p| p.into_inner());
-        if g.0 > *seen {
-            *seen = g.0;
-            g.1.clone()
-        } else {
-            None
+impl SharedGoals {
+    /// No goal yet; goals wait for the first fresh pose and machine state.
+    pub fn new(settings: LifecycleSettings) -> Self {
+        Self {
+            lifecycle: Mutex::new(GoalLifecycle::new(settings)),
+            requests: AtomicU64::new(0),
+            rejected: AtomicU64::new(0),
         }
+    }
+
+    /// The lifecycle, locked. Held only for a request or a tick's decisions, never
+    /// across I/O; a panic elsewhere does not poison it for the loop.
+    pub fn lock(&self) -> MutexGuard<'_, GoalLifecycle> {
+        self.lifecycle.lock().unwrap_or_else(|p| p.into_inner())
     }
 
     /// Requests served (accepted + rejected).
@@ -111,7 +89,7 @@ impl AsRawFd for Fd {
 pub async fn serve_goals(
     endpoint: Arc<DaemonEndpoint>,
     validator: GoalValidator,
-    slot: Arc<GoalSlot>,
+    goals: Arc<SharedGoals>,
     stopping: Arc<AtomicBool>,
     stop: Arc<Notify>,
 ) {
@@ -132,34 +110,26 @@ pub async fn serve_goals(
             tracing::warn!("goal events: {e}");
         }
         let shutting_down = stopping.load(Ordering::Relaxed);
-        let blocking = slot.blocking_faults.load(Ordering::Relaxed);
         let result = endpoint.serve_goals(|req| {
-            slot.requests.fetch_add(1, Ordering::Relaxed);
+            goals.requests.fetch_add(1, Ordering::Relaxed);
             let (valid, reply) = validator.validate_and_reply(req);
-            match valid {
-                Ok(ValidRequest::SetGoal { .. }) if shutting_down => {
-                    slot.rejected.fetch_add(1, Ordering::Relaxed);
-                    GoalReply::reject(
-                        req.request_id,
-                        RejectCode::NotReady,
-                        "daemon is shutting down",
-                    )
-                }
-                Ok(ValidRequest::SetGoal { .. }) if blocking != 0 => {
-                    slot.rejected.fetch_add(1, Ordering::Relaxed);
-                    let text = format!("fault active: {}", fault_names(blocking));
-                    tracing::info!("goal request {}: rejected: {text}", req.request_id);
-                    GoalReply::reject(req.request_id, RejectCode::NotReady, &text)
-                }
+            let decided = valid.map_err(|reason| (reason.code(), reason.to_string()));
+            let decided = decided.and_then(|v| {
+                goals
+                    .lock()
+                    .on_request(&v, shutting_down)
+                    .map(|()| v)
+                    .map_err(|r| (r.code, r.text))
+            });
+            match decided {
                 Ok(v) => {
                     tracing::debug!("goal request {}: accepted {:?}", req.request_id, v);
-                    slot.put(v);
                     reply
                 }
-                Err(reason) => {
-                    slot.rejected.fetch_add(1, Ordering::Relaxed);
-                    tracing::info!("goal request {}: rejected: {reason}", req.request_id);
-                    reply
+                Err((code, text)) => {
+                    goals.rejected.fetch_add(1, Ordering::Relaxed);
+                    tracing::info!("goal request {}: rejected: {text}", req.request_id);
+                    GoalReply::reject(req.request_id, code, &text)
                 }
             }
         });

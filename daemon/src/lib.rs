@@ -4,7 +4,8 @@
 //!
 //! Modules, in data-flow order: [`config`] → [`controller`] (weights, MPC) →
 //! [`can`] (codec, buses) / [`sim`] (simulated machine) → [`can_io`] (CAN task) →
-//! [`ipc`] (goal server) → [`control_loop`] (the tick) → [`notify`] (systemd) →
+//! [`ipc`] (goal server) → [`goal_lifecycle`] (accept, reject, outcomes) →
+//! [`control_loop`] (the tick) → [`notify`] (systemd) →
 //! [`daemon`] (wiring). See `daemon/README.md` for the command line and the
 //! configuration keys.
 
@@ -15,6 +16,7 @@ pub mod config;
 pub mod control_loop;
 pub mod controller;
 pub mod daemon;
+pub mod goal_lifecycle;
 pub mod ipc;
 pub mod logging;
 pub mod notify;

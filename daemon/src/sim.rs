@@ -9,7 +9,7 @@
 //!   configured delay, velocity lag and acceleration limits;
 //! * sends machine-state frames (β, β̇, v_f, status, alive, CRC) at
 //!   `sim.state_rate_hz`, with the configured measurement noise;
-//! * publishes pose estimates on `{prefix}/v1/pose` at `sim.pose_rate_hz` (the
+//! * publishes pose estimates on `{prefix}/v2/pose` at `sim.pose_rate_hz` (the
 //!   built-in localization), so the default set-up needs nothing else;
 //! * injects the faults of `[sim.faults]` (CRC bursts, frozen alive counter,
 //!   pose or state dropouts);

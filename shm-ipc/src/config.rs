@@ -5,20 +5,22 @@ use crate::error::IpcError;
 /// The default service-name prefix.
 pub const DEFAULT_PREFIX: &str = "wlnav";
 /// The wire-format version embedded in every service name. Bumped whenever a payload
-/// layout changes, so an old peer fails to find the service instead of misreading bytes.
-pub const API_VERSION: &str = "v1";
+/// layout changes, so an old peer fails to find the service instead of misreading bytes
+/// (v2: goal outcomes, subgoal and route in telemetry, resume request, footprint reject
+/// codes).
+pub const API_VERSION: &str = "v2";
 
 /// The three service names for one prefix. Each name is used twice: once for the data
 /// service (request-response or publish-subscribe) and once for its paired event service;
 /// iceoryx2 tells services apart by name *and* messaging pattern.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct ServiceNames {
-    /// `{prefix}/v1/goal`: request-response [`crate::GoalRequest`] → [`crate::GoalReply`],
+    /// `{prefix}/v2/goal`: request-response [`crate::GoalRequest`] → [`crate::GoalReply`],
     /// plus event.
     pub goal: String,
-    /// `{prefix}/v1/pose`: publish-subscribe [`crate::PoseEstimate`], plus event.
+    /// `{prefix}/v2/pose`: publish-subscribe [`crate::PoseEstimate`], plus event.
     pub pose: String,
-    /// `{prefix}/v1/telemetry`: publish-subscribe [`crate::Telemetry`], plus event.
+    /// `{prefix}/v2/telemetry`: publish-subscribe [`crate::Telemetry`], plus event.
     pub telemetry: String,
 }
 

@@ -33,13 +33,13 @@ pub type IpcService = ipc_threadsafe::Service;
 /// ids it does not care about (the goal event service carries both directions); they are
 /// only wake-ups, the data is always read from the data service.
 pub mod event_ids {
-    /// A client sent a [`crate::GoalRequest`] (on `{prefix}/v1/goal`).
+    /// A client sent a [`crate::GoalRequest`] (on `{prefix}/v2/goal`).
     pub const GOAL_REQUEST: usize = 1;
-    /// The daemon sent a [`crate::GoalReply`] (on `{prefix}/v1/goal`).
+    /// The daemon sent a [`crate::GoalReply`] (on `{prefix}/v2/goal`).
     pub const GOAL_REPLY: usize = 2;
-    /// A [`crate::PoseEstimate`] was published (on `{prefix}/v1/pose`).
+    /// A [`crate::PoseEstimate`] was published (on `{prefix}/v2/pose`).
     pub const POSE: usize = 3;
-    /// A [`crate::Telemetry`] sample was published (on `{prefix}/v1/telemetry`).
+    /// A [`crate::Telemetry`] sample was published (on `{prefix}/v2/telemetry`).
     pub const TELEMETRY: usize = 4;
 }
 
@@ -741,9 +741,15 @@ impl Client {
         self.request(&GoalRequest::cancel(self.next_request_id()), timeout)
     }
 
-    /// Asks the daemon for a controlled stop.
+    /// Asks the daemon for a controlled stop. The stop latches: goals are rejected until
+    /// [`Client::resume`].
     pub fn stop(&self, timeout: Duration) -> Result<GoalReply, ClientError> {
         self.request(&GoalRequest::stop(self.next_request_id()), timeout)
+    }
+
+    /// Releases an operator stop: goals are accepted again.
+    pub fn resume(&self, timeout: Duration) -> Result<GoalReply, ClientError> {
+        self.request(&GoalRequest::resume(self.next_request_id()), timeout)
     }
 
     /// Publishes a pose estimate (the publisher is created on first use) and wakes the

@@ -7,11 +7,13 @@
 //! * [`DaemonEndpoint`]: the daemon's side (serve goal requests, publish [`Telemetry`],
 //!   read [`PoseEstimate`]s, wait on events).
 //! * [`Client`]: everyone else (send a goal and get accept/reject with a reason, cancel,
-//!   stop, publish poses, [`Client::subscribe_telemetry`]).
+//!   stop, resume, publish poses, [`Client::subscribe_telemetry`]).
 //! * [`GoalValidator`]: finite numbers, inside the workspace, ≤ 8 obstacles with positive
-//!   radius, goal not inside an obstacle; rejections carry a [`RejectReason`].
+//!   radius; rejections carry a [`RejectReason`]. (The footprint checks against the
+//!   obstacles need the machine and are the daemon's.)
 //! * `cli` (default feature `cli`; the daemon uses `default-features = false`): the `wlnav`
-//!   command-line client (goal, cancel, stop, watch, record to MCAP, demo) as a library,
+//!   command-line client (goal, cancel, stop, resume, watch, record to MCAP, demo) as a
+//!   library,
 //!   so tests reach it; `src/bin/wlnav.rs` only parses arguments.
 //!
 //! ```no_run
@@ -33,9 +35,9 @@
 //!
 //! | service name | pattern | payload | paired event service (same name) |
 //! |---|---|---|---|
-//! | `P/v1/goal` | request-response | [`GoalRequest`] → [`GoalReply`] | event id 1 after a request, 2 after a reply |
-//! | `P/v1/pose` | publish-subscribe | [`PoseEstimate`] | event id 3 after each sample |
-//! | `P/v1/telemetry` | publish-subscribe | [`Telemetry`] (one per control tick) | event id 4 after each sample |
+//! | `P/v2/goal` | request-response | [`GoalRequest`] → [`GoalReply`] | event id 1 after a request, 2 after a reply |
+//! | `P/v2/pose` | publish-subscribe | [`PoseEstimate`] | event id 3 after each sample |
+//! | `P/v2/telemetry` | publish-subscribe | [`Telemetry`] (one per control tick) | event id 4 after each sample |
 //!
 //! iceoryx2 has no async API, so every data service has an event service of the **same
 //! name** (iceoryx2 distinguishes services by name and messaging pattern). A sender
@@ -52,7 +54,7 @@
 //! are empty (`()`, size 0). Each payload is registered under the type name given below
 //! (the `type_name` iceoryx2 compares when opening; in C++ set `IOX2_TYPE_NAME` to it).
 //!
-//! ## Payload layout (wire format v1)
+//! ## Payload layout (wire format v2)
 //!
 //! All payloads are `#[repr(C)]`, little-endian (the host's; shared memory never leaves the
 //! host), 8-byte aligned, without pointers and **without implicit padding** (spare bytes
@@ -66,33 +68,33 @@
 //!
 //! | struct (type name) | size | fields (offset: type name \[unit\]) |
 //! |---|---|---|
-//! | `Pose2` (`wlnav::v1::Pose2`) | 24 | 0: f64 x \[m\]; 8: f64 y \[m\]; 16: f64 heading \[rad\] |
-//! | `Obstacle` (`wlnav::v1::Obstacle`) | 24 | 0: f64 x \[m\]; 8: f64 y \[m\]; 16: f64 r \[m\] |
-//! | `MachineState` (`wlnav::v1::MachineState`) | 48 | 0: f64 x_f \[m\]; 8: f64 y_f \[m\]; 16: f64 theta_f \[rad\]; 24: f64 beta \[rad\]; 32: f64 beta_dot \[rad/s\]; 40: f64 v_f \[m/s\] |
-//! | `Command` (`wlnav::v1::Command`) | 16 | 0: f64 beta_dot \[rad/s\]; 8: f64 v \[m/s\] |
+//! | `Pose2` (`wlnav::v2::Pose2`) | 24 | 0: f64 x \[m\]; 8: f64 y \[m\]; 16: f64 heading \[rad\] |
+//! | `Obstacle` (`wlnav::v2::Obstacle`) | 24 | 0: f64 x \[m\]; 8: f64 y \[m\]; 16: f64 r \[m\] |
+//! | `MachineState` (`wlnav::v2::MachineState`) | 48 | 0: f64 x_f \[m\]; 8: f64 y_f \[m\]; 16: f64 theta_f \[rad\]; 24: f64 beta \[rad\]; 32: f64 beta_dot \[rad/s\]; 40: f64 v_f \[m/s\] |
+//! | `Command` (`wlnav::v2::Command`) | 16 | 0: f64 beta_dot \[rad/s\]; 8: f64 v \[m/s\] |
 //!
-//! [`GoalRequest`] (`wlnav::v1::GoalRequest`), 232 bytes:
+//! [`GoalRequest`] (`wlnav::v2::GoalRequest`), 232 bytes:
 //!
 //! | offset | type | field | meaning |
 //! |---|---|---|---|
 //! | 0 | u64 | request_id | chosen by the client, echoed in the reply |
-//! | 8 | u32 | kind | 1 set goal, 2 cancel, 3 stop ([`GoalKind`]) |
+//! | 8 | u32 | kind | 1 set goal, 2 cancel, 3 stop (latches), 4 resume ([`GoalKind`]) |
 //! | 12 | u32 | obstacle_count | 0..=8 valid entries in `obstacles` |
 //! | 16 | Pose2 | goal | front-axle goal pose (set goal only) |
 //! | 40 | Obstacle\[8\] | obstacles | circular obstacles, radius already inflated; unused entries zero |
 //!
-//! [`GoalReply`] (`wlnav::v1::GoalReply`), 152 bytes:
+//! [`GoalReply`] (`wlnav::v2::GoalReply`), 152 bytes:
 //!
 //! | offset | type | field | meaning |
 //! |---|---|---|---|
 //! | 0 | u64 | request_id | the request answered |
 //! | 8 | u32 | accepted | 1 accepted, 0 rejected |
-//! | 12 | u32 | reason_code | [`RejectCode`]: 0 none, 1 non-finite, 2 out of workspace, 3 too many obstacles, 4 bad obstacle radius, 5 goal inside obstacle, 6 unknown kind, 7 not ready, 8 other |
+//! | 12 | u32 | reason_code | [`RejectCode`]: 0 none, 1 non-finite, 2 out of workspace, 3 too many obstacles, 4 bad obstacle radius, 5 goal-in-collision, 6 unknown kind, 7 not ready, 8 other, 9 machine-in-collision |
 //! | 16 | u32 | reason_len | valid bytes in `reason` (≤ 128) |
 //! | 20 | u32 | _reserved | 0 |
 //! | 24 | u8\[128\] | reason | UTF-8 text, zero-filled after `reason_len` |
 //!
-//! [`PoseEstimate`] (`wlnav::v1::PoseEstimate`), 112 bytes:
+//! [`PoseEstimate`] (`wlnav::v2::PoseEstimate`), 112 bytes:
 //!
 //! | offset | type | field | meaning |
 //! |---|---|---|---|
@@ -104,7 +106,7 @@
 //! | 32 | f64 | heading | front-body heading θ_f \[rad\] |
 //! | 40 | f64\[9\] | covariance | row-major 3×3 of (x, y, heading) \[m², m·rad, rad²\] |
 //!
-//! [`Telemetry`] (`wlnav::v1::Telemetry`), 2136 bytes:
+//! [`Telemetry`] (`wlnav::v2::Telemetry`), 2704 bytes:
 //!
 //! | offset | type | field | meaning |
 //! |---|---|---|---|
@@ -125,6 +127,46 @@
 //! | 128 | Pose2 | goal | active goal |
 //! | 152 | Command | command | (β̇_cmd, v_cmd) sent this tick |
 //! | 168 | MachineState\[41\] | trajectory | planned x₀..x_N |
+//! | 2136 | u64 | outcome_request_id | request id of the goal that ended this tick, 0 if none |
+//! | 2144 | u32 | outcome | [`GoalOutcome`]: 0 none, 1 succeeded, 2 cancelled, 3 preempted, 4 aborted |
+//! | 2148 | u32 | abort_reason | [`AbortReason`] (aborted only, else 0): 1 no-progress, 2 no-route, 3 goal-in-collision, 4 fault, 5 shutdown |
+//! | 2152 | u32 | outcome_seq | 1, 2, … per ended goal since daemon start; 0 if none |
+//! | 2156 | u32 | outcome_text_len | valid bytes in `outcome_text` (≤ 128) |
+//! | 2160 | u8\[128\] | outcome_text | UTF-8 reason, zero-filled after `outcome_text_len` |
+//! | 2288 | u32 | subgoal_active | 1 if `subgoal` is valid (global layer) |
+//! | 2292 | u32 | route_len | valid entries in `route` (≤ 16) |
+//! | 2296 | Pose2 | subgoal | the intermediate goal the MPC drives to |
+//! | 2320 | Pose2\[16\] | route | global route towards the goal, rest zero |
+//!
+//! ## Goal lifecycle
+//!
+//! A set-goal request is answered at once: accepted, or rejected with a [`RejectCode`] and
+//! a text. Besides the request's own checks ([`GoalValidator`]) the daemon rejects a goal
+//! whose footprint (both axle points at the goal pose with β = 0) lies inside an obstacle
+//! (`goal-in-collision`), a request one of whose obstacles contains the machine's current
+//! footprint (`machine-in-collision`), and any goal while it is not ready (`not-ready`:
+//! starting, faulted, shutting down, or stopped by an operator).
+//!
+//! The newest accepted goal wins. **Every accepted goal ends in exactly one outcome**,
+//! reported in exactly one telemetry sample: `outcome`, `abort_reason`,
+//! `outcome_request_id` (the ended goal's id, not the active one's) and `outcome_text`.
+//! `succeeded` when reached (the machine then holds, mode `reached`); `cancelled` by a
+//! cancel or stop request; `preempted` by a newer goal (also a goal superseded before the
+//! daemon's next tick took it up); `aborted` with a reason: `no-progress` (the error to the
+//! goal did not shrink by 0.1 for `loop.progress_timeout`, default 10 s), `no-route`,
+//! `goal-in-collision`, `fault` (the fault is named), `shutdown`. After every outcome but
+//! `succeeded` the goal is dropped and the machine brought to rest (controlled stop).
+//!
+//! A tick carries at most one outcome. Goals that end together (a flood of goals within
+//! one tick) are reported on consecutive ticks in the order they ended; up to 32 wait, and
+//! beyond that the oldest are dropped. `outcome_seq` numbers ended goals consecutively, so
+//! a gap tells a reader it missed one (its subscriber buffer of 16 samples overflowed, or
+//! the daemon dropped it). A client waiting for its goal matches `outcome_request_id`.
+//!
+//! **Operator stop latches** (DESIGN §11): after a stop request (kind 3) every set-goal is
+//! rejected with `not-ready` ("stopped by an operator …") and telemetry shows fault bit
+//! `STOP_REQUESTED`, until a resume request (kind 4). Cancel, stop and resume are always
+//! accepted.
 //!
 //! A C declaration that matches byte for byte:
 //!
@@ -143,7 +185,12 @@
 //!                  uint32_t mode, fault_flags, goal_active, trajectory_len, qp_iterations, sqp_iterations;
 //!                  double solve_time_us, cost, pose_error_xy, pose_error_heading;
 //!                  wlnav_state state; wlnav_pose2 goal; wlnav_command command;
-//!                  wlnav_state trajectory[41]; } wlnav_telemetry;    /* 2136 */
+//!                  wlnav_state trajectory[41];
+//!                  uint64_t outcome_request_id;
+//!                  uint32_t outcome, abort_reason, outcome_seq, outcome_text_len;
+//!                  uint8_t outcome_text[128];
+//!                  uint32_t subgoal_active, route_len;
+//!                  wlnav_pose2 subgoal, route[16]; } wlnav_telemetry; /* 2704 */
 //! ```
 //!
 //! ## Start-up clean-up
@@ -176,9 +223,9 @@ pub use endpoint::{
 };
 pub use error::{BoxedSource, ClientError, IpcError};
 pub use msg::{
-    fault_flags, pose_flags, Command, GoalKind, GoalReply, GoalRequest, MachineState, Mode,
-    Obstacle, Pose2, PoseEstimate, RejectCode, Telemetry, MAX_OBSTACLES, MAX_TRAJECTORY,
-    REASON_TEXT_CAPACITY,
+    fault_flags, pose_flags, AbortReason, Command, GoalKind, GoalOutcome, GoalReply, GoalRequest,
+    MachineState, Mode, Obstacle, Pose2, PoseEstimate, RejectCode, Telemetry, MAX_OBSTACLES,
+    MAX_ROUTE, MAX_TRAJECTORY, REASON_TEXT_CAPACITY,
 };
 pub use validate::{heapless_obstacles, GoalValidator, RejectReason, ValidRequest, Workspace};
 

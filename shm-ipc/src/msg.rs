@@ -8,7 +8,9 @@
 //! every language and contains no uninitialised bytes.
 //!
 //! The layout is documented in the crate root and frozen by the compile-time assertions at
-//! the bottom of this file; changing it requires a new service version (`v2`).
+//! the bottom of this file; changing it requires a new service version (now `v2`: v2 added
+//! goal outcomes, the subgoal and route to [`Telemetry`], the resume request and the
+//! footprint reject codes).
 
 use core::mem::{align_of, offset_of, size_of};
 
@@ -19,14 +21,40 @@ pub const MAX_OBSTACLES: usize = 8;
 /// Maximum number of states in the planned trajectory of a telemetry sample
 /// (x₀..x_N for horizons up to N = 40).
 pub const MAX_TRAJECTORY: usize = 41;
-/// Capacity in bytes of the UTF-8 reject reason text in a [`GoalReply`].
+/// Capacity in bytes of the UTF-8 reason texts: the reject reason of a [`GoalReply`] and
+/// the outcome reason of a [`Telemetry`] sample.
 pub const REASON_TEXT_CAPACITY: usize = 128;
+/// Maximum number of poses in the global route of a telemetry sample.
+pub const MAX_ROUTE: usize = 16;
+
+/// Copies `text` into `buf`, cut at a character boundary to fit, zero-filling the rest;
+/// returns the number of bytes stored.
+fn write_reason(buf: &mut [u8; REASON_TEXT_CAPACITY], text: &str) -> u32 {
+    let mut end = text.len().min(REASON_TEXT_CAPACITY);
+    while !text.is_char_boundary(end) {
+        end -= 1;
+    }
+    buf.fill(0);
+    buf[..end].copy_from_slice(&text.as_bytes()[..end]);
+    end as u32
+}
+
+/// The UTF-8 text of `len` bytes of `buf`. Never fails: an out-of-range length is clamped
+/// and invalid UTF-8 from a foreign peer is cut at the first bad byte.
+fn read_reason(buf: &[u8; REASON_TEXT_CAPACITY], len: u32) -> &str {
+    let bytes = &buf[..(len as usize).min(REASON_TEXT_CAPACITY)];
+    match core::str::from_utf8(bytes) {
+        Ok(s) => s,
+        // `valid_up_to` is a char boundary by definition, so this cannot fail.
+        Err(e) => core::str::from_utf8(&bytes[..e.valid_up_to()]).unwrap_or(""),
+    }
+}
 
 /// A planar pose: position in metres, heading in radians (world frame, counter-clockwise
 /// from the x axis).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("wlnav::v1::Pose2")]
+#[type_name("wlnav::v2::Pose2")]
 pub struct Pose2 {
     /// x [m]
     pub x: f64,
@@ -52,7 +80,7 @@ impl Pose2 {
 /// machine's own radius, DESIGN §5).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("wlnav::v1::Obstacle")]
+#[type_name("wlnav::v2::Obstacle")]
 pub struct Obstacle {
     /// Centre x [m]
     pub x: f64,
@@ -73,7 +101,7 @@ impl Obstacle {
 /// angle and rate, front speed.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("wlnav::v1::MachineState")]
+#[type_name("wlnav::v2::MachineState")]
 pub struct MachineState {
     /// Front-axle centre x [m]
     pub x_f: f64,
@@ -128,7 +156,7 @@ impl MachineState {
 /// The velocity command sent to the machine's low-level controller.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("wlnav::v1::Command")]
+#[type_name("wlnav::v2::Command")]
 pub struct Command {
     /// Commanded articulation rate β̇_cmd [rad/s]
     pub beta_dot: f64,
@@ -143,10 +171,16 @@ pub enum GoalKind {
     /// Drive to [`GoalRequest::goal`] avoiding [`GoalRequest::obstacles`]; replaces any
     /// previous goal (the newest valid goal wins).
     SetGoal = 1,
-    /// Drop the current goal and come to a controlled stop; new goals are accepted again.
+    /// Drop the current goal (outcome `cancelled`) and come to a controlled stop; new goals
+    /// are accepted again.
     Cancel = 2,
-    /// Controlled stop now (like cancel, but also meant for operators: "stop the machine").
+    /// Operator stop: drop the current goal (outcome `cancelled`), controlled stop, and
+    /// **latch**: later goals are rejected with [`RejectCode::NotReady`] ("stopped by an
+    /// operator") until a [`GoalKind::Resume`].
     Stop = 3,
+    /// Release the latch of an operator stop; goals are accepted again. Does not start
+    /// anything by itself (the dropped goal stays dropped). Accepted when nothing is latched.
+    Resume = 4,
 }
 
 impl GoalKind {
@@ -164,20 +198,22 @@ impl TryFrom<u32> for GoalKind {
             1 => Ok(Self::SetGoal),
             2 => Ok(Self::Cancel),
             3 => Ok(Self::Stop),
+            4 => Ok(Self::Resume),
             other => Err(other),
         }
     }
 }
 
-/// Request on `{prefix}/v1/goal` (request-response). 232 bytes, alignment 8.
+/// Request on `{prefix}/v2/goal` (request-response). 232 bytes, alignment 8.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("wlnav::v1::GoalRequest")]
+#[type_name("wlnav::v2::GoalRequest")]
 pub struct GoalRequest {
     /// Chosen by the client, echoed in [`GoalReply::request_id`]; also reported in telemetry
     /// as the id of the active goal. 0 is allowed but means "unidentified".
     pub request_id: u64,
-    /// A [`GoalKind`] code (1 set goal, 2 cancel, 3 stop); 0 and others are rejected.
+    /// A [`GoalKind`] code (1 set goal, 2 cancel, 3 stop, 4 resume); 0 and others are
+    /// rejected.
     pub kind: u32,
     /// Number of valid entries at the front of [`GoalRequest::obstacles`]; > 8 is rejected.
     pub obstacle_count: u32,
@@ -206,9 +242,14 @@ impl GoalRequest {
         Self::empty(request_id, GoalKind::Cancel)
     }
 
-    /// A stop request.
+    /// A stop request (latches until [`GoalRequest::resume`]).
     pub const fn stop(request_id: u64) -> Self {
         Self::empty(request_id, GoalKind::Stop)
+    }
+
+    /// A resume request (releases an operator stop).
+    pub const fn resume(request_id: u64) -> Self {
+        Self::empty(request_id, GoalKind::Resume)
     }
 
     const fn empty(request_id: u64, kind: GoalKind) -> Self {
@@ -234,7 +275,8 @@ impl GoalRequest {
 
 /// Why a goal request was rejected. Sent on the wire as a `u32` ([`GoalReply::reason_code`]).
 ///
-/// Codes 1–5 are produced by [`crate::GoalValidator`]; the others by the daemon itself.
+/// Codes 1–4 and 6 are produced by [`crate::GoalValidator`] (the request alone); the others
+/// by the daemon, which also knows the machine's geometry and state.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 #[repr(u32)]
 pub enum RejectCode {
@@ -248,14 +290,19 @@ pub enum RejectCode {
     TooManyObstacles = 3,
     /// An obstacle radius is zero, negative or not finite.
     BadObstacle = 4,
-    /// The goal position lies inside an obstacle.
-    GoalInsideObstacle = 5,
+    /// `goal-in-collision`: the machine's footprint at the goal (both axle points, goal pose
+    /// with β = 0) lies inside an obstacle; the text names the obstacle.
+    GoalInCollision = 5,
     /// The request kind code is unknown.
     UnknownKind = 6,
-    /// The daemon is not ready to drive (starting up, faulted, or stopped by an operator).
+    /// The daemon is not ready to drive (starting up, faulted, shutting down, or stopped by
+    /// an operator until a resume request); the text says which.
     NotReady = 7,
     /// Any other daemon-side reason; see the text.
     Other = 8,
+    /// `machine-in-collision`: an obstacle of the request contains the machine's current
+    /// footprint (an axle point inside its circle); the text names the obstacle.
+    MachineInCollision = 9,
 }
 
 impl RejectCode {
@@ -275,19 +322,20 @@ impl TryFrom<u32> for RejectCode {
             2 => Self::OutOfWorkspace,
             3 => Self::TooManyObstacles,
             4 => Self::BadObstacle,
-            5 => Self::GoalInsideObstacle,
+            5 => Self::GoalInCollision,
             6 => Self::UnknownKind,
             7 => Self::NotReady,
             8 => Self::Other,
+            9 => Self::MachineInCollision,
             other => return Err(other),
         })
     }
 }
 
-/// Reply on `{prefix}/v1/goal`. 152 bytes, alignment 8.
+/// Reply on `{prefix}/v2/goal`. 152 bytes, alignment 8.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("wlnav::v1::GoalReply")]
+#[type_name("wlnav::v2::GoalReply")]
 pub struct GoalReply {
     /// The [`GoalRequest::request_id`] this answers.
     pub request_id: u64,
@@ -328,12 +376,7 @@ impl GoalReply {
             _reserved: 0,
             reason: [0; REASON_TEXT_CAPACITY],
         };
-        let mut end = message.len().min(REASON_TEXT_CAPACITY);
-        while !message.is_char_boundary(end) {
-            end -= 1;
-        }
-        reply.reason[..end].copy_from_slice(&message.as_bytes()[..end]);
-        reply.reason_len = end as u32;
+        reply.reason_len = write_reason(&mut reply.reason, message);
         reply
     }
 
@@ -350,13 +393,7 @@ impl GoalReply {
     /// The reason text. Never fails: an out-of-range length is clamped and invalid UTF-8
     /// from a foreign peer is cut at the first bad byte.
     pub fn reason_text(&self) -> &str {
-        let len = (self.reason_len as usize).min(REASON_TEXT_CAPACITY);
-        let bytes = &self.reason[..len];
-        match core::str::from_utf8(bytes) {
-            Ok(s) => s,
-            // `valid_up_to` is a char boundary by definition, so this cannot fail.
-            Err(e) => core::str::from_utf8(&bytes[..e.valid_up_to()]).unwrap_or(""),
-        }
+        read_reason(&self.reason, self.reason_len)
     }
 }
 
@@ -368,11 +405,11 @@ pub mod pose_flags {
     pub const COVARIANCE_VALID: u32 = 1 << 1;
 }
 
-/// Published on `{prefix}/v1/pose` by localization (or the simulated backend). 112 bytes,
+/// Published on `{prefix}/v2/pose` by localization (or the simulated backend). 112 bytes,
 /// alignment 8.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("wlnav::v1::PoseEstimate")]
+#[type_name("wlnav::v2::PoseEstimate")]
 pub struct PoseEstimate {
     /// Measurement time in nanoseconds of `CLOCK_MONOTONIC` on this host (shared memory means
     /// same host, so all processes share that clock); see [`crate::monotonic_now_ns`]. The
@@ -459,6 +496,114 @@ impl TryFrom<u32> for Mode {
     }
 }
 
+/// How a goal ended (DESIGN §10). Sent on the wire as a `u32` ([`Telemetry::outcome`]).
+///
+/// Every accepted goal ends in exactly one outcome, reported in exactly one telemetry
+/// sample together with the goal's request id and a reason text.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[repr(u32)]
+pub enum GoalOutcome {
+    /// No goal ended this tick.
+    None = 0,
+    /// `succeeded`: the goal was reached (DESIGN §7 test, at rest); the machine holds.
+    Succeeded = 1,
+    /// `cancelled`: a cancel or an operator stop request ended the goal.
+    Cancelled = 2,
+    /// `preempted`: a newer goal replaced it (the newest valid goal wins).
+    Preempted = 3,
+    /// `aborted`: the daemon gave up; [`Telemetry::abort_reason`] says why.
+    Aborted = 4,
+}
+
+impl GoalOutcome {
+    /// The wire code.
+    pub const fn code(self) -> u32 {
+        self as u32
+    }
+
+    /// The outcome's name as used in logs, texts and the CLI (`succeeded`, `cancelled`, …).
+    pub const fn name(self) -> &'static str {
+        match self {
+            Self::None => "none",
+            Self::Succeeded => "succeeded",
+            Self::Cancelled => "cancelled",
+            Self::Preempted => "preempted",
+            Self::Aborted => "aborted",
+        }
+    }
+}
+
+impl TryFrom<u32> for GoalOutcome {
+    type Error = u32;
+    /// Decodes a wire code; the unknown code is returned as the error.
+    fn try_from(v: u32) -> Result<Self, u32> {
+        Ok(match v {
+            0 => Self::None,
+            1 => Self::Succeeded,
+            2 => Self::Cancelled,
+            3 => Self::Preempted,
+            4 => Self::Aborted,
+            other => return Err(other),
+        })
+    }
+}
+
+/// Why a goal was aborted. Sent on the wire as a `u32` ([`Telemetry::abort_reason`]); 0
+/// unless the outcome is [`GoalOutcome::Aborted`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[repr(u32)]
+pub enum AbortReason {
+    /// Not aborted.
+    None = 0,
+    /// `no-progress`: the error to the goal did not shrink for the configured time
+    /// (`loop.progress_timeout`, default 10 s; Nav2's progress checker).
+    NoProgress = 1,
+    /// `no-route`: the global layer found no collision-free route.
+    NoRoute = 2,
+    /// `goal-in-collision`: the goal turned out to be in collision after it was accepted.
+    GoalInCollision = 3,
+    /// `fault`: a fault stopped the machine (stale pose or machine state, CAN integrity,
+    /// solver failure, machine not in automatic mode); the text names it.
+    Fault = 4,
+    /// `shutdown`: the daemon is shutting down (SIGTERM, SIGINT).
+    Shutdown = 5,
+}
+
+impl AbortReason {
+    /// The wire code.
+    pub const fn code(self) -> u32 {
+        self as u32
+    }
+
+    /// The reason's name as used in logs, texts and the CLI (`no-progress`, …).
+    pub const fn name(self) -> &'static str {
+        match self {
+            Self::None => "none",
+            Self::NoProgress => "no-progress",
+            Self::NoRoute => "no-route",
+            Self::GoalInCollision => "goal-in-collision",
+            Self::Fault => "fault",
+            Self::Shutdown => "shutdown",
+        }
+    }
+}
+
+impl TryFrom<u32> for AbortReason {
+    type Error = u32;
+    /// Decodes a wire code; the unknown code is returned as the error.
+    fn try_from(v: u32) -> Result<Self, u32> {
+        Ok(match v {
+            0 => Self::None,
+            1 => Self::NoProgress,
+            2 => Self::NoRoute,
+            3 => Self::GoalInCollision,
+            4 => Self::Fault,
+            5 => Self::Shutdown,
+            other => return Err(other),
+        })
+    }
+}
+
 /// Bits of [`Telemetry::fault_flags`].
 pub mod fault_flags {
     /// No pose received yet, or the newest is older than the configured limit.
@@ -475,17 +620,17 @@ pub mod fault_flags {
     pub const FALLBACK_PLAN: u32 = 1 << 5;
     /// The previous tick missed its deadline.
     pub const OVERRUN: u32 = 1 << 6;
-    /// An operator stop request is active.
+    /// An operator stop is latched: goals are rejected until a resume request.
     pub const STOP_REQUESTED: u32 = 1 << 7;
     /// The CAN bus reported an error or is off.
     pub const CAN_BUS: u32 = 1 << 8;
 }
 
-/// Published on `{prefix}/v1/telemetry` by the daemon once per control tick. 2136 bytes,
+/// Published on `{prefix}/v2/telemetry` by the daemon once per control tick. 2704 bytes,
 /// alignment 8.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("wlnav::v1::Telemetry")]
+#[type_name("wlnav::v2::Telemetry")]
 pub struct Telemetry {
     /// Control tick counter since daemon start.
     pub tick: u64,
@@ -521,6 +666,27 @@ pub struct Telemetry {
     pub command: Command,
     /// Planned trajectory x₀..x_N, `trajectory_len` valid entries, rest zero.
     pub trajectory: [MachineState; MAX_TRAJECTORY],
+    /// The request id of the goal that ended this tick (0 when `outcome` is 0).
+    pub outcome_request_id: u64,
+    /// A [`GoalOutcome`] code: non-zero on exactly one tick per accepted goal.
+    pub outcome: u32,
+    /// An [`AbortReason`] code when `outcome` is aborted, else 0.
+    pub abort_reason: u32,
+    /// Sequence number of this outcome (1, 2, … since daemon start; 0 when `outcome` is 0).
+    /// A reader that sees a gap missed an outcome.
+    pub outcome_seq: u32,
+    /// Number of valid bytes in `outcome_text` (≤ 128).
+    pub outcome_text_len: u32,
+    /// UTF-8 reason text of the outcome, `outcome_text_len` bytes, rest zero.
+    pub outcome_text: [u8; REASON_TEXT_CAPACITY],
+    /// 1 if `subgoal` holds the intermediate goal the MPC drives to (global layer), else 0.
+    pub subgoal_active: u32,
+    /// Number of valid poses at the front of `route` (≤ 16); 0 without a global route.
+    pub route_len: u32,
+    /// The current subgoal of the global route (meaningful only if `subgoal_active` = 1).
+    pub subgoal: Pose2,
+    /// The global route: `route_len` poses from the machine towards the goal, rest zero.
+    pub route: [Pose2; MAX_ROUTE],
 }
 
 impl Telemetry {
@@ -546,6 +712,16 @@ impl Telemetry {
             v: 0.0,
         },
         trajectory: [MachineState::ZERO; MAX_TRAJECTORY],
+        outcome_request_id: 0,
+        outcome: GoalOutcome::None as u32,
+        abort_reason: AbortReason::None as u32,
+        outcome_seq: 0,
+        outcome_text_len: 0,
+        outcome_text: [0; REASON_TEXT_CAPACITY],
+        subgoal_active: 0,
+        route_len: 0,
+        subgoal: Pose2::new(0.0, 0.0, 0.0),
+        route: [Pose2::new(0.0, 0.0, 0.0); MAX_ROUTE],
     };
 
     /// The decoded mode, or the unknown wire code.
@@ -572,6 +748,59 @@ impl Telemetry {
     /// The active goal, if any.
     pub fn active_goal(&self) -> Option<Pose2> {
         (self.goal_active != 0).then_some(self.goal)
+    }
+
+    /// Reports the end of goal `request_id` on this sample: outcome, abort reason (give
+    /// [`AbortReason::None`] unless aborted), sequence number and reason text (cut at a
+    /// character boundary to [`REASON_TEXT_CAPACITY`] bytes).
+    pub fn set_outcome(
+        &mut self,
+        request_id: u64,
+        outcome: GoalOutcome,
+        abort_reason: AbortReason,
+        seq: u32,
+        text: &str,
+    ) {
+        self.outcome_request_id = request_id;
+        self.outcome = outcome.code();
+        self.abort_reason = abort_reason.code();
+        self.outcome_seq = seq;
+        self.outcome_text_len = write_reason(&mut self.outcome_text, text);
+    }
+
+    /// The decoded outcome of this sample, or the unknown wire code.
+    pub fn outcome(&self) -> Result<GoalOutcome, u32> {
+        GoalOutcome::try_from(self.outcome)
+    }
+
+    /// The decoded abort reason, or the unknown wire code.
+    pub fn abort_reason(&self) -> Result<AbortReason, u32> {
+        AbortReason::try_from(self.abort_reason)
+    }
+
+    /// The outcome's reason text (clamped and UTF-8-safe like [`GoalReply::reason_text`]).
+    pub fn outcome_text(&self) -> &str {
+        read_reason(&self.outcome_text, self.outcome_text_len)
+    }
+
+    /// The current subgoal of the global route, if any.
+    pub fn active_subgoal(&self) -> Option<Pose2> {
+        (self.subgoal_active != 0).then_some(self.subgoal)
+    }
+
+    /// The valid part of the global route (clamped to [`MAX_ROUTE`]).
+    pub fn route(&self) -> &[Pose2] {
+        &self.route[..(self.route_len as usize).min(MAX_ROUTE)]
+    }
+
+    /// Copies `poses` into the route (at most [`MAX_ROUTE`], the rest zeroed) and sets the
+    /// length. Returns how many were stored.
+    pub fn set_route(&mut self, poses: &[Pose2]) -> usize {
+        let n = poses.len().min(MAX_ROUTE);
+        self.route[..n].copy_from_slice(&poses[..n]);
+        self.route[n..].fill(Pose2::new(0.0, 0.0, 0.0));
+        self.route_len = n as u32;
+        n
     }
 }
 
@@ -632,7 +861,7 @@ const _: () = assert!(offset_of!(PoseEstimate, y) == 24);
 const _: () = assert!(offset_of!(PoseEstimate, heading) == 32);
 const _: () = assert!(offset_of!(PoseEstimate, covariance) == 40);
 
-const _: () = assert!(size_of::<Telemetry>() == 2136 && align_of::<Telemetry>() == 8);
+const _: () = assert!(size_of::<Telemetry>() == 2704 && align_of::<Telemetry>() == 8);
 const _: () = assert!(offset_of!(Telemetry, tick) == 0);
 const _: () = assert!(offset_of!(Telemetry, timestamp_ns) == 8);
 const _: () = assert!(offset_of!(Telemetry, goal_request_id) == 16);
@@ -650,3 +879,13 @@ const _: () = assert!(offset_of!(Telemetry, state) == 80);
 const _: () = assert!(offset_of!(Telemetry, goal) == 128);
 const _: () = assert!(offset_of!(Telemetry, command) == 152);
 const _: () = assert!(offset_of!(Telemetry, trajectory) == 168);
+const _: () = assert!(offset_of!(Telemetry, outcome_request_id) == 2136);
+const _: () = assert!(offset_of!(Telemetry, outcome) == 2144);
+const _: () = assert!(offset_of!(Telemetry, abort_reason) == 2148);
+const _: () = assert!(offset_of!(Telemetry, outcome_seq) == 2152);
+const _: () = assert!(offset_of!(Telemetry, outcome_text_len) == 2156);
+const _: () = assert!(offset_of!(Telemetry, outcome_text) == 2160);
+const _: () = assert!(offset_of!(Telemetry, subgoal_active) == 2288);
+const _: () = assert!(offset_of!(Telemetry, route_len) == 2292);
+const _: () = assert!(offset_of!(Telemetry, subgoal) == 2296);
+const _: () = assert!(offset_of!(Telemetry, route) == 2320);

@@ -1,7 +1,12 @@
 //! Goal validation: the daemon calls [`GoalValidator::validate`] on every request so that
 //! nothing malformed ever reaches the MPC, and the sender learns why in plain words.
+//!
+//! These checks need the request alone. Geometry against the obstacles (the machine's
+//! footprint at the goal and now, DESIGN §10) needs the machine's dimensions and state and
+//! is the daemon's ([`crate::RejectCode::GoalInCollision`],
+//! [`crate::RejectCode::MachineInCollision`]).
 
-use crate::msg::{GoalKind, GoalReply, GoalRequest, Obstacle, Pose2, RejectCode, MAX_OBSTACLES};
+use crate::msg::{GoalKind, GoalReply, GoalRequest, Pose2, RejectCode, MAX_OBSTACLES};
 
 /// An axis-aligned rectangle of the world frame inside which goals may lie [m].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -100,21 +105,6 @@ pub enum RejectReason {
         /// The offending radius [m]
         r: f64,
     },
-    /// The goal position lies inside an obstacle, so it can never be reached.
-    #[error(
-        "goal ({x:.3}, {y:.3}) m lies inside obstacle {index} at ({:.3}, {:.3}) m, r = {:.3} m",
-        obstacle.x, obstacle.y, obstacle.r
-    )]
-    GoalInsideObstacle {
-        /// Goal x [m]
-        x: f64,
-        /// Goal y [m]
-        y: f64,
-        /// Obstacle index
-        index: usize,
-        /// The obstacle
-        obstacle: Obstacle,
-    },
     /// The request kind code is not one of [`GoalKind`].
     #[error("unknown request kind {0}")]
     UnknownKind(u32),
@@ -128,7 +118,6 @@ impl RejectReason {
             Self::OutOfWorkspace { .. } => RejectCode::OutOfWorkspace,
             Self::TooManyObstacles { .. } => RejectCode::TooManyObstacles,
             Self::BadObstacleRadius { .. } => RejectCode::BadObstacle,
-            Self::GoalInsideObstacle { .. } => RejectCode::GoalInsideObstacle,
             Self::UnknownKind(_) => RejectCode::UnknownKind,
         }
     }
@@ -156,11 +145,28 @@ pub enum ValidRequest {
         /// The request id
         request_id: u64,
     },
-    /// Controlled stop.
+    /// Controlled stop, latched until a resume.
     Stop {
         /// The request id
         request_id: u64,
     },
+    /// Release an operator stop.
+    Resume {
+        /// The request id
+        request_id: u64,
+    },
+}
+
+impl ValidRequest {
+    /// The request id.
+    pub fn request_id(&self) -> u64 {
+        match self {
+            Self::SetGoal { request_id, .. }
+            | Self::Cancel { request_id }
+            | Self::Stop { request_id }
+            | Self::Resume { request_id } => *request_id,
+        }
+    }
 }
 
 /// A fixed-capacity obstacle list so validation never allocates (it runs on the daemon's
@@ -218,15 +224,16 @@ impl GoalValidator {
     }
 
     /// Validates one request. Checks run in a fixed order (kind, obstacle count, finiteness,
-    /// workspace, obstacle radii, goal inside obstacle) so the reported reason is
-    /// deterministic when several apply. Cancel and stop are always valid: the goal fields
-    /// of such a request are ignored, and refusing to stop over garbage there would be unsafe.
+    /// workspace, obstacle radii) so the reported reason is deterministic when several
+    /// apply. Cancel, stop and resume are always valid: the goal fields of such a request
+    /// are ignored, and refusing to stop over garbage there would be unsafe.
     pub fn validate(&self, req: &GoalRequest) -> Result<ValidRequest, RejectReason> {
         let request_id = req.request_id;
         let kind = req.kind().map_err(RejectReason::UnknownKind)?;
         match kind {
             GoalKind::Cancel => return Ok(ValidRequest::Cancel { request_id }),
             GoalKind::Stop => return Ok(ValidRequest::Stop { request_id }),
+            GoalKind::Resume => return Ok(ValidRequest::Resume { request_id }),
             GoalKind::SetGoal => {}
         }
         let obstacles = req.obstacles().ok_or(RejectReason::TooManyObstacles {
@@ -260,18 +267,6 @@ impl GoalValidator {
             // `!(r > 0)` also catches NaN.
             if !(o.r > 0.0 && o.r.is_finite()) {
                 return Err(RejectReason::BadObstacleRadius { index, r: o.r });
-            }
-        }
-        for (index, o) in obstacles.iter().enumerate() {
-            // Strictly inside: the MPC's constraint is distance ≥ r, so a goal exactly on the
-            // (inflated) boundary is still reachable.
-            if (g.x - o.x).hypot(g.y - o.y) < o.r {
-                return Err(RejectReason::GoalInsideObstacle {
-                    x: g.x,
-                    y: g.y,
-                    index,
-                    obstacle: *o,
-                });
             }
         }
         let obstacles = heapless_obstacles::Obstacles::from_slice(obstacles).ok_or(

@@ -6,8 +6,10 @@
 use clap::Parser;
 use shm_ipc::cli::follow::{GoalStatus, GoalTracker};
 use shm_ipc::cli::record::TelemetryWriter;
-use shm_ipc::cli::{view, Cli, Command};
-use shm_ipc::{fault_flags, MachineState, Mode, Obstacle, Pose2, Telemetry};
+use shm_ipc::cli::{exit, view, Cli, Command};
+use shm_ipc::{
+    fault_flags, AbortReason, GoalOutcome, MachineState, Mode, Obstacle, Pose2, Telemetry,
+};
 
 fn parse(args: &[&str]) -> Result<Cli, String> {
     Cli::try_parse_from(std::iter::once("wlnav").chain(args.iter().copied()))
@@ -95,8 +97,13 @@ fn sample(tick: u64, request_id: u64, mode: Mode, err_xy: f64) -> Telemetry {
     t
 }
 
+fn with_outcome(mut t: Telemetry, id: u64, outcome: GoalOutcome, reason: AbortReason) -> Telemetry {
+    t.set_outcome(id, outcome, reason, 1, "because");
+    t
+}
+
 #[test]
-fn tracker_follows_only_its_goal_and_reports_times() {
+fn tracker_follows_only_its_goal_and_ends_with_its_outcome() {
     let mut tr = GoalTracker::new(7, Pose2::new(5.0, 0.0, 0.0));
     assert_eq!(
         *tr.update(&sample(10, 3, Mode::Reached, 0.0)),
@@ -107,36 +114,67 @@ fn tracker_follows_only_its_goal_and_reports_times() {
         GoalStatus::Active
     );
     tr.update(&sample(20, 7, Mode::Tracking, 0.05));
+    // Mode reached alone is not the end: the outcome is.
     assert_eq!(
-        *tr.update(&sample(25, 7, Mode::Reached, 0.01)),
-        GoalStatus::Reached
+        *tr.update(&sample(24, 7, Mode::Reached, 0.01)),
+        GoalStatus::Active
     );
+    let done = with_outcome(
+        sample(25, 7, Mode::Reached, 0.01),
+        7,
+        GoalOutcome::Succeeded,
+        AbortReason::None,
+    );
+    assert!(tr.update(&done).is_succeeded());
     assert_eq!(tr.first_tick, Some(11));
     assert_eq!(tr.converged_tick, Some(20));
     assert_eq!(tr.reached_tick, Some(25));
+    assert_eq!(exit::for_status(tr.status()), exit::OK);
     // Final: later samples change nothing.
-    assert_eq!(
-        *tr.update(&sample(26, 0, Mode::Idle, 0.0)),
-        GoalStatus::Reached
-    );
+    tr.update(&sample(26, 0, Mode::Idle, 0.0));
+    assert!(tr.status().is_succeeded());
 }
 
 #[test]
-fn tracker_reports_faults_supersession_and_drops() {
-    let mut tr = GoalTracker::new(7, Pose2::default());
-    tr.update(&sample(1, 7, Mode::Tracking, 3.0));
-    let mut f = sample(2, 7, Mode::Fault, 3.0);
-    f.fault_flags = fault_flags::POSE_STALE;
-    match tr.update(&f) {
-        GoalStatus::Failed(why) => assert!(why.contains("pose-stale"), "{why}"),
-        s => panic!("{s:?}"),
+fn tracker_maps_each_outcome_to_its_exit_code_and_ignores_other_goals_outcomes() {
+    for (outcome, reason, code) in [
+        (GoalOutcome::Succeeded, AbortReason::None, exit::OK),
+        (GoalOutcome::Aborted, AbortReason::NoProgress, exit::ABORTED),
+        (GoalOutcome::Aborted, AbortReason::Fault, exit::ABORTED),
+        (GoalOutcome::Cancelled, AbortReason::None, exit::CANCELLED),
+        (GoalOutcome::Preempted, AbortReason::None, exit::PREEMPTED),
+    ] {
+        let mut tr = GoalTracker::new(7, Pose2::default());
+        tr.update(&sample(1, 7, Mode::Tracking, 3.0));
+        // Another goal's outcome on the same tick stream is not ours.
+        let other = with_outcome(sample(2, 7, Mode::Tracking, 3.0), 6, outcome, reason);
+        assert_eq!(*tr.update(&other), GoalStatus::Active);
+        // Ours may come when the telemetry already shows the next goal (preempted).
+        let ours = with_outcome(sample(3, 8, Mode::Tracking, 3.0), 7, outcome, reason);
+        let status = tr.update(&ours).clone();
+        let o = status.outcome().expect("an outcome");
+        assert_eq!(
+            (o.outcome, o.abort_reason, o.text.as_str()),
+            (outcome, reason, "because")
+        );
+        assert_eq!(exit::for_status(&status), code, "{outcome:?}");
     }
-    let mut tr = GoalTracker::new(7, Pose2::default());
-    tr.update(&sample(1, 7, Mode::Tracking, 3.0));
-    match tr.update(&sample(2, 8, Mode::Tracking, 3.0)) {
-        GoalStatus::Failed(why) => assert!(why.contains("superseded"), "{why}"),
-        s => panic!("{s:?}"),
-    }
+    // A goal that never became active still gets its outcome (superseded at once).
+    let mut tr = GoalTracker::new(9, Pose2::default());
+    let t = with_outcome(
+        sample(5, 10, Mode::Tracking, 3.0),
+        9,
+        GoalOutcome::Preempted,
+        AbortReason::None,
+    );
+    assert_eq!(exit::for_status(tr.update(&t)), exit::PREEMPTED);
+    // Giving up without an outcome.
+    let mut tr = GoalTracker::new(9, Pose2::default());
+    tr.lose_telemetry("silence");
+    assert_eq!(exit::for_status(tr.status()), exit::ERROR);
+    let mut tr = GoalTracker::new(9, Pose2::default());
+    tr.time_out("too long");
+    assert_eq!(exit::for_status(tr.status()), exit::TIMED_OUT);
     // An overrun alone does not end a goal.
     let mut tr = GoalTracker::new(7, Pose2::default());
     let mut o = sample(1, 7, Mode::Tracking, 3.0);
@@ -153,6 +191,13 @@ fn views_show_mode_goal_and_faults() {
     assert!(line.starts_with("tick 42 tracking"), "{line}");
     assert!(line.contains("goal  5.00  0.00"), "{line}");
     assert!(line.contains("faults can-crc,overrun"), "{line}");
+    assert!(!line.contains("outcome"), "{line}");
+    let ended = with_outcome(t, 6, GoalOutcome::Aborted, AbortReason::NoProgress);
+    let line = view::line(&ended);
+    assert!(
+        line.ends_with("| outcome aborted (no-progress) of request 6: because"),
+        "{line}"
+    );
     let header = view::table_header();
     let row = view::table_row(&t);
     assert!(header.contains("mode") && row.contains("tracking"));

@@ -102,14 +102,14 @@ fn goal_request_is_answered_by_server_thread() {
     );
 
     // Each rejection reason survives the trip with its code and text.
-    let inside = client
+    let bad_radius = client
         .set_goal(
             Pose2::new(2.0, 1.0, 0.0),
-            &[Obstacle::new(2.0, 1.0, 0.5)],
+            &[Obstacle::new(2.0, 1.0, -0.5)],
             TIMEOUT,
         )
         .expect("reply");
-    assert_eq!(inside.reject_code(), Ok(RejectCode::GoalInsideObstacle));
+    assert_eq!(bad_radius.reject_code(), Ok(RejectCode::BadObstacle));
     let outside = client
         .set_goal(Pose2::new(1e4, 0.0, 0.0), &[], TIMEOUT)
         .expect("reply");
@@ -148,7 +148,7 @@ fn no_daemon_is_reported_not_hung() {
     let client = Client::new(&unique_config("no_daemon")).expect("client");
     let start = Instant::now();
     match client.set_goal(Pose2::new(1.0, 0.0, 0.0), &[], TIMEOUT) {
-        Err(ClientError::NoDaemon { service }) => assert!(service.ends_with("/v1/goal")),
+        Err(ClientError::NoDaemon { service }) => assert!(service.ends_with("/v2/goal")),
         other => panic!("expected NoDaemon, got {other:?}"),
     }
     assert!(start.elapsed() < Duration::from_secs(1));

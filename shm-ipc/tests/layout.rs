@@ -5,8 +5,9 @@ use core::mem::{align_of, offset_of, size_of};
 
 use iceoryx2::prelude::ZeroCopySend;
 use shm_ipc::{
-    pose_flags, Command, GoalKind, GoalReply, GoalRequest, MachineState, Mode, Obstacle, Pose2,
-    PoseEstimate, RejectCode, Telemetry, MAX_OBSTACLES, MAX_TRAJECTORY,
+    pose_flags, AbortReason, Command, GoalKind, GoalOutcome, GoalReply, GoalRequest, MachineState,
+    Mode, Obstacle, Pose2, PoseEstimate, RejectCode, Telemetry, MAX_OBSTACLES, MAX_ROUTE,
+    MAX_TRAJECTORY, REASON_TEXT_CAPACITY,
 };
 
 /// The bytes of a padding-free POD value.
@@ -44,7 +45,7 @@ fn sizes_alignments_and_offsets() {
         (size_of::<PoseEstimate>(), align_of::<PoseEstimate>()),
         (112, 8)
     );
-    assert_eq!((size_of::<Telemetry>(), align_of::<Telemetry>()), (2136, 8));
+    assert_eq!((size_of::<Telemetry>(), align_of::<Telemetry>()), (2704, 8));
 
     // No implicit padding: the sizes are the sums of the fields.
     assert_eq!(
@@ -55,7 +56,19 @@ fn sizes_alignments_and_offsets() {
     assert_eq!(size_of::<PoseEstimate>(), 8 + 4 + 4 + 3 * 8 + 9 * 8);
     assert_eq!(
         size_of::<Telemetry>(),
-        3 * 8 + 6 * 4 + 4 * 8 + 48 + 24 + 16 + MAX_TRAJECTORY * 48
+        3 * 8
+            + 6 * 4
+            + 4 * 8
+            + 48
+            + 24
+            + 16
+            + MAX_TRAJECTORY * 48
+            + 8
+            + 4 * 4
+            + REASON_TEXT_CAPACITY
+            + 2 * 4
+            + 24
+            + MAX_ROUTE * 24
     );
 
     assert_eq!(offset_of!(GoalRequest, obstacles), 40);
@@ -63,16 +76,19 @@ fn sizes_alignments_and_offsets() {
     assert_eq!(offset_of!(PoseEstimate, covariance), 40);
     assert_eq!(offset_of!(Telemetry, state), 80);
     assert_eq!(offset_of!(Telemetry, trajectory), 168);
+    assert_eq!(offset_of!(Telemetry, outcome_request_id), 2136);
+    assert_eq!(offset_of!(Telemetry, outcome_text), 2160);
+    assert_eq!(offset_of!(Telemetry, route), 2320);
 }
 
 #[test]
 fn type_names_are_stable() {
     // iceoryx2 compares these when a peer opens a service; C++ peers set IOX2_TYPE_NAME.
     unsafe {
-        assert_eq!(GoalRequest::type_name(), "wlnav::v1::GoalRequest");
-        assert_eq!(GoalReply::type_name(), "wlnav::v1::GoalReply");
-        assert_eq!(PoseEstimate::type_name(), "wlnav::v1::PoseEstimate");
-        assert_eq!(Telemetry::type_name(), "wlnav::v1::Telemetry");
+        assert_eq!(GoalRequest::type_name(), "wlnav::v2::GoalRequest");
+        assert_eq!(GoalReply::type_name(), "wlnav::v2::GoalReply");
+        assert_eq!(PoseEstimate::type_name(), "wlnav::v2::PoseEstimate");
+        assert_eq!(Telemetry::type_name(), "wlnav::v2::Telemetry");
     }
 }
 
@@ -106,11 +122,13 @@ fn goal_request_bytes() {
     assert!(b[88..].iter().all(|&x| x == 0));
     assert_eq!(u32_at(bytes(&GoalRequest::cancel(1)), 8), 2);
     assert_eq!(u32_at(bytes(&GoalRequest::stop(1)), 8), 3);
+    assert_eq!(u32_at(bytes(&GoalRequest::resume(1)), 8), 4);
+    assert_eq!(GoalKind::try_from(4), Ok(GoalKind::Resume));
 }
 
 #[test]
 fn goal_reply_bytes() {
-    let r = GoalReply::reject(99, RejectCode::GoalInsideObstacle, "inside");
+    let r = GoalReply::reject(99, RejectCode::GoalInCollision, "inside");
     let b = bytes(&r);
     assert_eq!(u64_at(b, 0), 99);
     assert_eq!(u32_at(b, 8), 0);
@@ -125,6 +143,10 @@ fn goal_reply_bytes() {
     let a = GoalReply::accept(7);
     assert_eq!(u32_at(bytes(&a), 8), 1);
     assert_eq!(u32_at(bytes(&a), 12), 0);
+    let m = GoalReply::reject(1, RejectCode::MachineInCollision, "on the machine");
+    assert_eq!(u32_at(bytes(&m), 12), 9);
+    assert_eq!(RejectCode::try_from(9), Ok(RejectCode::MachineInCollision));
+    assert_eq!(RejectCode::try_from(10), Err(10));
 }
 
 #[test]
@@ -196,4 +218,66 @@ fn telemetry_bytes() {
     assert_eq!(t.trajectory().len(), MAX_TRAJECTORY);
     t.mode = 77;
     assert_eq!(t.mode(), Err(77));
+}
+
+#[test]
+fn telemetry_outcome_subgoal_and_route_bytes() {
+    let mut t = Telemetry::ZERO;
+    let b = bytes(&t);
+    assert!(
+        b[2136..].iter().all(|&x| x == 0),
+        "no outcome, no route: zeros"
+    );
+    t.set_outcome(
+        0xAABB,
+        GoalOutcome::Aborted,
+        AbortReason::NoProgress,
+        3,
+        "no approach",
+    );
+    t.subgoal_active = 1;
+    t.subgoal = Pose2::new(1.0, 2.0, 0.5);
+    let route: Vec<_> = (0..MAX_ROUTE + 3)
+        .map(|i| Pose2::new(i as f64, -(i as f64), 0.25))
+        .collect();
+    assert_eq!(t.set_route(&route), MAX_ROUTE);
+    let b = bytes(&t);
+    assert_eq!(u64_at(b, 2136), 0xAABB);
+    assert_eq!((u32_at(b, 2144), u32_at(b, 2148)), (4, 1));
+    assert_eq!((u32_at(b, 2152), u32_at(b, 2156)), (3, 11));
+    assert_eq!(&b[2160..2171], b"no approach");
+    assert!(b[2171..2288].iter().all(|&x| x == 0), "zero-filled text");
+    assert_eq!((u32_at(b, 2288), u32_at(b, 2292)), (1, 16));
+    assert_eq!(
+        (f64_at(b, 2296), f64_at(b, 2304), f64_at(b, 2312)),
+        (1.0, 2.0, 0.5)
+    );
+    // route[k] at 2320 + 24 k
+    assert_eq!(
+        (f64_at(b, 2320 + 24 * 15), f64_at(b, 2320 + 24 * 15 + 8)),
+        (15.0, -15.0)
+    );
+    assert_eq!(t.outcome(), Ok(GoalOutcome::Aborted));
+    assert_eq!(t.abort_reason(), Ok(AbortReason::NoProgress));
+    assert_eq!(t.outcome_text(), "no approach");
+    assert_eq!(t.route().len(), MAX_ROUTE);
+    // Corrupt values from a foreign peer are clamped or reported, never trusted.
+    t.route_len = u32::MAX;
+    t.outcome_text_len = u32::MAX;
+    t.outcome = 42;
+    t.abort_reason = 42;
+    assert_eq!(t.route().len(), MAX_ROUTE);
+    assert_eq!(t.outcome_text().len(), REASON_TEXT_CAPACITY);
+    assert!(t.outcome_text().starts_with("no approach"));
+    assert_eq!((t.outcome(), t.abort_reason()), (Err(42), Err(42)));
+    // A long text is cut at a character boundary.
+    t.set_outcome(
+        1,
+        GoalOutcome::Cancelled,
+        AbortReason::None,
+        4,
+        &"é".repeat(100),
+    );
+    assert_eq!(t.outcome_text_len, 128);
+    assert_eq!(t.outcome_text().chars().count(), 64);
 }

@@ -82,9 +82,9 @@ fn crashed_daemon_is_cleaned_up() {
 #[test]
 fn service_names_and_prefix_rules() {
     let names = ServiceNames::new("wlnav").expect("default");
-    assert_eq!(names.goal, "wlnav/v1/goal");
-    assert_eq!(names.pose, "wlnav/v1/pose");
-    assert_eq!(names.telemetry, "wlnav/v1/telemetry");
+    assert_eq!(names.goal, "wlnav/v2/goal");
+    assert_eq!(names.pose, "wlnav/v2/pose");
+    assert_eq!(names.telemetry, "wlnav/v2/telemetry");
     assert_eq!(IpcConfig::default().prefix, "wlnav");
     assert!(validate_prefix("site-3/loader_1.b").is_ok());
     for bad in [

@@ -7,7 +7,9 @@ use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::{Duration, Instant};
 
 use control::MachineParams;
-use shm_ipc::{Client, IpcConfig, Pose2, Telemetry, TelemetrySubscriber};
+use shm_ipc::{
+    Client, GoalReply, GoalRequest, IpcConfig, Obstacle, Pose2, Telemetry, TelemetrySubscriber,
+};
 use wlnavd::can::DriveMode;
 use wlnavd::config::{Config, CostKind};
 use wlnavd::controller::ControllerFactory;
@@ -94,6 +96,42 @@ impl Running {
             }
             std::thread::sleep(Duration::from_millis(50));
         }
+    }
+
+    /// Sends one goal request (waiting until the daemon has seen its first data, when it
+    /// still rejects everything as not ready); its id and the reply.
+    pub fn request_goal(&self, goal: Pose2, obstacles: &[Obstacle]) -> (u64, GoalReply) {
+        let deadline = Instant::now() + Duration::from_secs(20);
+        loop {
+            let id = self.client.next_request_id();
+            let req = GoalRequest::set_goal(id, goal, obstacles).expect("≤ 8 obstacles");
+            let reply = self
+                .client
+                .request(&req, Duration::from_secs(2))
+                .expect("reply");
+            let starting = !reply.is_accepted()
+                && reply.reason_text().contains("stale")
+                && Instant::now() < deadline;
+            if !starting {
+                return (id, reply);
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+
+    /// Like [`Running::wait_for`], appending every sample seen to `log` (so a test can
+    /// check the whole run afterwards); returns the matching sample.
+    pub fn record_until(
+        &self,
+        log: &mut Vec<Telemetry>,
+        timeout: Duration,
+        what: &str,
+        pred: impl FnMut(&Telemetry) -> bool,
+    ) -> Telemetry {
+        let seen = self.wait_for(timeout, what, pred);
+        let last = *seen.last().expect("a sample");
+        log.extend(seen);
+        last
     }
 
     /// Telemetry samples until `pred` holds (returns all samples seen, the matching
@@ -206,4 +244,78 @@ pub fn first_command(log: &SimLog, t: f64, mode: DriveMode) -> Option<usize> {
     log.commands
         .iter()
         .position(|c| c.time >= t && c.command.mode == mode)
+}
+
+/// The samples of `log` that report an outcome.
+pub fn outcome_samples(log: &[Telemetry]) -> Vec<&Telemetry> {
+    log.iter().filter(|t| t.outcome != 0).collect()
+}
+
+/// Asserts that `log` holds every tick between its first and last sample (so an
+/// outcome missing from it was never published, not merely unseen).
+pub fn assert_every_tick(log: &[Telemetry]) {
+    for w in log.windows(2) {
+        assert_eq!(
+            w[1].tick,
+            w[0].tick + 1,
+            "telemetry lost between ticks {} and {}",
+            w[0].tick,
+            w[1].tick
+        );
+    }
+}
+
+/// Asserts that each of `accepted` has exactly one outcome in `log`, that nothing else
+/// has one, and that the outcomes are numbered 1, 2, … without gaps or repeats. Returns
+/// the outcome sample of each accepted id, in the order given.
+pub fn assert_each_ends_once<'a>(log: &'a [Telemetry], accepted: &[u64]) -> Vec<&'a Telemetry> {
+    assert_every_tick(log);
+    let outcomes = outcome_samples(log);
+    for w in outcomes.windows(2) {
+        assert_eq!(
+            w[1].outcome_seq,
+            w[0].outcome_seq + 1,
+            "outcome numbers not consecutive: {} then {}",
+            w[0].outcome_seq,
+            w[1].outcome_seq
+        );
+    }
+    for t in &outcomes {
+        assert!(
+            accepted.contains(&t.outcome_request_id),
+            "outcome for request {} that was never accepted: {}",
+            t.outcome_request_id,
+            t.outcome_text()
+        );
+    }
+    accepted
+        .iter()
+        .map(|id| {
+            let mine: Vec<&&Telemetry> = outcomes
+                .iter()
+                .filter(|t| t.outcome_request_id == *id)
+                .collect();
+            assert_eq!(
+                mine.len(),
+                1,
+                "goal {id}: {} outcome reports ({:?})",
+                mine.len(),
+                mine.iter()
+                    .map(|t| (t.tick, t.outcome, t.outcome_text()))
+                    .collect::<Vec<_>>()
+            );
+            *mine[0]
+        })
+        .collect()
+}
+
+/// A ring of 8 overlapping circles of radius `r` on a circle of radius `ring` around
+/// (x, y): a goal at the centre is enclosed.
+pub fn ring(x: f64, y: f64, ring: f64, r: f64) -> Vec<Obstacle> {
+    (0..8)
+        .map(|k| {
+            let a = k as f64 * std::f64::consts::FRAC_PI_4;
+            Obstacle::new(x + ring * a.cos(), y + ring * a.sin(), r)
+        })
+        .collect()
 }

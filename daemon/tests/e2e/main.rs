@@ -3,6 +3,7 @@
 //! them. Each test has its own service prefix.
 
 mod common;
+mod outcomes;
 mod process;
 
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -328,7 +329,7 @@ fn invalid_goal_keeps_previous_and_newest_wins() {
             timeout,
         )
         .unwrap();
-    assert_eq!(r.reject_code(), Ok(RejectCode::GoalInsideObstacle));
+    assert_eq!(r.reject_code(), Ok(RejectCode::GoalInCollision));
     let seen = d.wait_for(Duration::from_secs(5), "3 more ticks", |t| t.tick > 0);
     let tick = seen.last().unwrap().tick;
     let later = d.wait_for(Duration::from_secs(5), "3 more ticks", |t| {

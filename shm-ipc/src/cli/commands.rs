@@ -1,5 +1,5 @@
-//! `goal`, `cancel`, `stop` and `watch`, plus the telemetry-following loop that `goal --wait`
-//! and `demo` share.
+//! `goal`, `cancel`, `stop`, `resume` and `watch`, plus the telemetry-following loop that
+//! `goal --wait` and `demo` share.
 
 use std::io::Write;
 use std::time::{Duration, Instant};
@@ -12,7 +12,7 @@ use crate::msg::{GoalReply, GoalRequest, Pose2, RejectCode, Telemetry};
 
 use super::follow::{GoalStatus, GoalTracker};
 use super::view::{self, mode_name};
-use super::{exit, signal, Cli, GoalArgs, RequestArgs, WatchArgs};
+use super::{exit, signal, Cli, GoalArgs, RequestArgs, SimpleRequest, WatchArgs};
 
 /// Writes one line to stdout; false if stdout is gone (`wlnav watch | head`), so callers
 /// stop quietly instead of panicking on a broken pipe.
@@ -40,10 +40,11 @@ pub fn reject_code_name(code: u32) -> String {
         Ok(RejectCode::OutOfWorkspace) => "out-of-workspace".into(),
         Ok(RejectCode::TooManyObstacles) => "too-many-obstacles".into(),
         Ok(RejectCode::BadObstacle) => "bad-obstacle".into(),
-        Ok(RejectCode::GoalInsideObstacle) => "goal-inside-obstacle".into(),
+        Ok(RejectCode::GoalInCollision) => "goal-in-collision".into(),
         Ok(RejectCode::UnknownKind) => "unknown-kind".into(),
         Ok(RejectCode::NotReady) => "not-ready".into(),
         Ok(RejectCode::Other) => "other".into(),
+        Ok(RejectCode::MachineInCollision) => "machine-in-collision".into(),
         Err(c) => format!("code-{c}"),
     }
 }
@@ -137,10 +138,7 @@ pub fn goal(cli: &Cli, a: &GoalArgs) -> anyhow::Result<u8> {
         return Ok(exit::INTERRUPTED);
     }
     emit(&outcome_line(&tracker, cli.tick_s()));
-    Ok(match tracker.status() {
-        GoalStatus::Reached => exit::OK,
-        _ => exit::FAILED,
-    })
+    Ok(exit::for_status(tracker.status()))
 }
 
 /// Ticks in one second (at least 1).
@@ -148,28 +146,31 @@ pub fn ticks_per_second(tick_s: f64) -> u64 {
     ((1.0 / tick_s).round() as u64).max(1)
 }
 
-/// `reached: converged after 9.8 s, reported reached after 10.2 s (51 ticks)` or
-/// `failed: …`.
+/// `succeeded: converged after 9.8 s, reported after 10.2 s (51 ticks)`,
+/// `aborted (no-progress): no approach to the goal for 10.0 s`, …
 pub fn outcome_line(tracker: &GoalTracker, tick_s: f64) -> String {
     let secs = |tick: Option<u64>| {
         tick.and_then(|t| tracker.ticks_since_start(t))
             .map(|n| n as f64 * tick_s)
     };
+    let fmt_s = |s: Option<f64>| {
+        s.map(|s| format!("{s:.1} s"))
+            .unwrap_or_else(|| "? s".into())
+    };
     match tracker.status() {
-        GoalStatus::Reached => format!(
-            "reached: converged (DESIGN §7, < 0.1) after {}, reported reached after {} ({} ticks)",
-            secs(tracker.converged_tick)
-                .map(|s| format!("{s:.1} s"))
-                .unwrap_or_else(|| "? s".into()),
-            secs(tracker.reached_tick)
-                .map(|s| format!("{s:.1} s"))
-                .unwrap_or_else(|| "? s".into()),
+        GoalStatus::Ended(o) if tracker.status().is_succeeded() => format!(
+            "succeeded: converged (DESIGN §7, < 0.1) after {}, reported after {} ({} ticks): {}",
+            fmt_s(secs(tracker.converged_tick)),
+            fmt_s(secs(tracker.reached_tick)),
             tracker
                 .reached_tick
                 .and_then(|t| tracker.ticks_since_start(t))
-                .unwrap_or(0)
+                .unwrap_or(0),
+            o.text
         ),
-        GoalStatus::Failed(why) => format!("failed: {why}"),
+        GoalStatus::Ended(o) => format!("{}: {}", o.name(), o.text),
+        GoalStatus::NoTelemetry(why) => format!("no outcome: {why}"),
+        GoalStatus::TimedOut(why) => format!("no outcome yet: {why}"),
         GoalStatus::Pending => "no telemetry for this goal".into(),
         GoalStatus::Active => "still driving".into(),
     }
@@ -253,14 +254,14 @@ impl Default for FollowOptions {
 /// How [`follow`] ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum FollowEnd {
-    /// The tracker reached a final status (reached or failed).
+    /// The tracker reached a final status (an outcome, or a time limit).
     Final,
     /// Ctrl-C / SIGTERM.
     Interrupted,
 }
 
-/// Feeds telemetry to `tracker` until its status is final (reached, failed, timed out),
-/// calling `on_sample` after each sample.
+/// Feeds telemetry to `tracker` until its status is final (the goal's outcome, silence, a
+/// time limit), calling `on_sample` after each sample.
 pub fn follow(
     sub: &TelemetrySubscriber,
     tracker: &mut GoalTracker,
@@ -280,7 +281,7 @@ pub fn follow(
             if *tracker.status() == GoalStatus::Pending {
                 pending_samples += 1;
                 if pending_samples > opts.max_pending_samples {
-                    tracker.fail(format!(
+                    tracker.time_out(format!(
                         "the daemon did not take the goal up within {} ticks",
                         opts.max_pending_samples
                     ));
@@ -288,18 +289,18 @@ pub fn follow(
             }
             if let (Some(max), Some(n)) = (opts.max_ticks, tracker.ticks_since_start(t.tick)) {
                 if n >= max && !tracker.status().is_final() {
-                    tracker.fail(format!("not reached within {max} ticks"));
+                    tracker.time_out(format!("not reached within {max} ticks"));
                 }
             }
             on_sample(&t, tracker);
         } else if last_sample.elapsed() >= opts.silence {
-            tracker.fail(format!(
+            tracker.lose_telemetry(format!(
                 "no telemetry for {:.1} s: is the daemon still running?",
                 opts.silence.as_secs_f64()
             ));
         }
         if !tracker.status().is_final() && start.elapsed() >= opts.timeout {
-            tracker.fail(format!(
+            tracker.time_out(format!(
                 "no result within {:.0} s",
                 opts.timeout.as_secs_f64()
             ));
@@ -310,24 +311,20 @@ pub fn follow(
     }
 }
 
-/// `wlnav cancel` / `wlnav stop`.
-pub fn cancel_or_stop(cli: &Cli, a: &RequestArgs, stop: bool) -> anyhow::Result<u8> {
+/// `wlnav cancel`, `wlnav stop`, `wlnav resume`.
+pub fn simple_request(cli: &Cli, a: &RequestArgs, what: SimpleRequest) -> anyhow::Result<u8> {
     let client = connect(cli)?;
     let timeout = Duration::from_secs_f64(a.reply_timeout);
-    let result = if stop {
-        client.stop(timeout)
-    } else {
-        client.cancel(timeout)
+    let result = match what {
+        SimpleRequest::Cancel => client.cancel(timeout),
+        SimpleRequest::Stop => client.stop(timeout),
+        SimpleRequest::Resume => client.resume(timeout),
     };
     let reply = match result {
         Ok(r) => r,
         Err(e) => return Ok(request_error(cli, e)),
     };
-    emit(&format!(
-        "{}: {}",
-        if stop { "stop" } else { "cancel" },
-        describe_reply(&reply)
-    ));
+    emit(&format!("{}: {}", what.name(), describe_reply(&reply)));
     Ok(if reply.is_accepted() {
         exit::OK
     } else {

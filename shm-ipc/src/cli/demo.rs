@@ -244,7 +244,7 @@ pub fn run(cli: &Cli, a: &DemoArgs) -> anyhow::Result<u8> {
             goal: g,
             ..LegTrace::default()
         };
-        if i > 0 && !matches!(results.last().map(|r| &r.status), Some(GoalStatus::Reached)) {
+        if i > 0 && !results.last().is_some_and(|r| r.status.is_succeeded()) {
             // After a failed leg the daemon may still be stopping or faulted: give it time to
             // come back (a fault clears once the machine stands still) before the next goal.
             if let Err(e) = daemon.wait_ready(&sub, Duration::from_secs(10)) {
@@ -258,7 +258,7 @@ pub fn run(cli: &Cli, a: &DemoArgs) -> anyhow::Result<u8> {
                 results.push(LegResult {
                     leg: *leg,
                     reply: None,
-                    status: GoalStatus::Failed(e.to_string()),
+                    status: GoalStatus::NoTelemetry(format!("request failed: {e}")),
                     converged_s: None,
                     reached_s: None,
                     path_length: 0.0,
@@ -272,7 +272,7 @@ pub fn run(cli: &Cli, a: &DemoArgs) -> anyhow::Result<u8> {
         emit(&format!("{head}: {}", describe_reply(&reply)));
         let mut tracker = GoalTracker::new(id, g);
         if !reply.is_accepted() {
-            tracker.fail(format!("rejected: {}", reply.reason_text()));
+            tracker.time_out(format!("rejected: {}", reply.reason_text()));
         } else {
             let mut printer = ProgressPrinter::default();
             let end = follow(&sub, &mut tracker, &opts, |t, tr| {
@@ -291,7 +291,7 @@ pub fn run(cli: &Cli, a: &DemoArgs) -> anyhow::Result<u8> {
                 }
             })?;
             if end == FollowEnd::Interrupted {
-                tracker.fail("interrupted");
+                tracker.time_out("interrupted");
                 interrupted = true;
             }
         }
@@ -300,7 +300,7 @@ pub fn run(cli: &Cli, a: &DemoArgs) -> anyhow::Result<u8> {
             tick.and_then(|t| tracker.ticks_since_start(t))
                 .map(|n| n as f64 * tick_s)
         };
-        trace.reached = *tracker.status() == GoalStatus::Reached;
+        trace.reached = tracker.status().is_succeeded();
         results.push(LegResult {
             leg: *leg,
             reply: Some(reply),
@@ -341,10 +341,10 @@ pub fn run(cli: &Cli, a: &DemoArgs) -> anyhow::Result<u8> {
             i + 1,
             r.leg.name,
             format!("({:.2}, {:.2}, {:.0}°)", g.x, g.y, g.heading.to_degrees()),
-            match &r.status {
-                GoalStatus::Reached => "reached",
-                GoalStatus::Failed(_) => "NOT reached",
-                _ => "?",
+            if r.status.is_succeeded() {
+                "reached"
+            } else {
+                "NOT reached"
             },
             fmt_s(r.converged_s),
             fmt_s(r.reached_s),
@@ -353,10 +353,7 @@ pub fn run(cli: &Cli, a: &DemoArgs) -> anyhow::Result<u8> {
             r.overruns
         ));
     }
-    let reached = results
-        .iter()
-        .filter(|r| r.status == GoalStatus::Reached)
-        .count();
+    let reached = results.iter().filter(|r| r.status.is_succeeded()).count();
     let total: f64 = results.iter().filter_map(|r| r.reached_s).sum();
     emit(&format!(
         "  {reached}/{} legs reached{}",
@@ -418,7 +415,7 @@ pub fn run(cli: &Cli, a: &DemoArgs) -> anyhow::Result<u8> {
             } else if reached == LOADING_CYCLE.len() {
                 exit::OK
             } else {
-                exit::FAILED
+                exit::ABORTED
             }
         }
         Err(e) => {

@@ -1,17 +1,37 @@
-//! Following one goal through telemetry: when the daemon took it up, when it converged
-//! (DESIGN §7 test), when the daemon declared it reached, or why it failed. Used by
-//! `wlnav goal --wait`, `wlnav demo` and the end-to-end tests.
+//! Following one goal through telemetry until the daemon reports its outcome (DESIGN §10:
+//! every accepted goal ends in exactly one outcome, reported once with its request id).
+//! Along the way: when the daemon took the goal up and when it converged (DESIGN §7 test).
+//! Used by `wlnav goal --wait`, `wlnav demo` and the end-to-end tests.
 
-use crate::msg::{fault_flags, Mode, Pose2, Telemetry};
+use crate::msg::{fault_flags, AbortReason, GoalOutcome, Pose2, Telemetry};
 
-use super::view::{fault_text, goal_distance, mode_name};
+use super::view::goal_distance;
 
 /// DESIGN §7 success tolerance on ‖(x_f − x_g, y_f − y_g, e_θ)‖.
 pub const CONVERGED_TOLERANCE: f64 = 0.1;
 
-/// Fault bits that end a goal when the daemon is stopping or faulted (an overrun alone is
-/// reported but does not end a goal).
-const ENDING_FAULTS: u32 = !fault_flags::OVERRUN;
+/// The outcome the daemon reported for a goal.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ReportedOutcome {
+    /// How the goal ended (never [`GoalOutcome::None`]).
+    pub outcome: GoalOutcome,
+    /// Why, when aborted ([`AbortReason::None`] otherwise).
+    pub abort_reason: AbortReason,
+    /// The daemon's reason text.
+    pub text: String,
+    /// The tick that reported it.
+    pub tick: u64,
+}
+
+impl ReportedOutcome {
+    /// `succeeded`, `cancelled`, `preempted`, or `aborted (no-progress)`.
+    pub fn name(&self) -> String {
+        match self.outcome {
+            GoalOutcome::Aborted => format!("aborted ({})", self.abort_reason.name()),
+            other => other.name().to_owned(),
+        }
+    }
+}
 
 /// Where a followed goal stands after a telemetry sample.
 #[derive(Debug, Clone, PartialEq)]
@@ -20,16 +40,32 @@ pub enum GoalStatus {
     Pending,
     /// The daemon drives towards this goal.
     Active,
-    /// The daemon reports the goal reached.
-    Reached,
-    /// The goal ended without being reached; the text says why.
-    Failed(String),
+    /// The daemon reported the goal's outcome.
+    Ended(ReportedOutcome),
+    /// Following stopped without an outcome because telemetry stopped: the daemon is gone.
+    NoTelemetry(String),
+    /// Following stopped without an outcome because a time limit passed; the goal may
+    /// still be active.
+    TimedOut(String),
 }
 
 impl GoalStatus {
-    /// True for [`GoalStatus::Reached`] and [`GoalStatus::Failed`].
+    /// True once the status can no longer change (an outcome, or following gave up).
     pub fn is_final(&self) -> bool {
-        matches!(self, Self::Reached | Self::Failed(_))
+        !matches!(self, Self::Pending | Self::Active)
+    }
+
+    /// True if the daemon reported the goal `succeeded`.
+    pub fn is_succeeded(&self) -> bool {
+        matches!(self, Self::Ended(o) if o.outcome == GoalOutcome::Succeeded)
+    }
+
+    /// The reported outcome, if any.
+    pub fn outcome(&self) -> Option<&ReportedOutcome> {
+        match self {
+            Self::Ended(o) => Some(o),
+            _ => None,
+        }
     }
 }
 
@@ -43,7 +79,7 @@ pub struct GoalTracker {
     pub first_tick: Option<u64>,
     /// First tick at which the DESIGN §7 test held.
     pub converged_tick: Option<u64>,
-    /// Tick at which the daemon reported the goal reached.
+    /// Tick at which the daemon reported the goal succeeded.
     pub reached_tick: Option<u64>,
     /// Most recent tick seen.
     pub last_tick: Option<u64>,
@@ -89,85 +125,66 @@ impl GoalTracker {
         self.first_tick.map(|f| tick.saturating_sub(f))
     }
 
-    /// Feeds one telemetry sample (samples before the goal appeared are ignored) and
-    /// returns the new status. Once final, the status does not change.
+    /// Feeds one telemetry sample and returns the new status. The goal ends only with the
+    /// outcome the daemon reports for its request id. Once final, the status does not
+    /// change.
     pub fn update(&mut self, t: &Telemetry) -> &GoalStatus {
         if self.status.is_final() {
             return &self.status;
         }
         self.last_tick = Some(t.tick);
-        let ours = t.goal_request_id == self.request_id;
-        if !ours {
-            if self.first_tick.is_some() {
-                let why = if t.goal_request_id == 0 || t.goal_active == 0 {
-                    format!(
-                        "the daemon dropped the goal at tick {} (mode {}, faults {})",
-                        t.tick,
-                        mode_name(t.mode),
-                        fault_text(t.fault_flags)
-                    )
-                } else {
-                    format!(
-                        "superseded at tick {} by request {}",
-                        t.tick, t.goal_request_id
-                    )
-                };
-                self.status = GoalStatus::Failed(why);
+        if t.goal_request_id == self.request_id && t.goal_active != 0 {
+            if self.first_tick.is_none() {
+                self.first_tick = Some(t.tick);
+                self.status = GoalStatus::Active;
             }
-            return &self.status;
+            if t.fault_flags & fault_flags::OVERRUN != 0 {
+                self.overruns += 1;
+            }
+            if t.solve_time_us.is_finite() {
+                self.max_solve_us = self.max_solve_us.max(t.solve_time_us);
+            }
+            if self.converged_tick.is_none() && goal_distance(t) < CONVERGED_TOLERANCE {
+                self.converged_tick = Some(t.tick);
+            }
         }
-        if self.first_tick.is_none() {
-            self.first_tick = Some(t.tick);
-            self.status = GoalStatus::Active;
-        }
-        if t.fault_flags & fault_flags::OVERRUN != 0 {
-            self.overruns += 1;
-        }
-        if t.solve_time_us.is_finite() {
-            self.max_solve_us = self.max_solve_us.max(t.solve_time_us);
-        }
-        if self.converged_tick.is_none() && goal_distance(t) < CONVERGED_TOLERANCE {
-            self.converged_tick = Some(t.tick);
-        }
-        match t.mode() {
-            Ok(Mode::Reached) => {
+        if t.outcome != GoalOutcome::None.code() && t.outcome_request_id == self.request_id {
+            let reported = match t.outcome() {
+                Ok(outcome) => ReportedOutcome {
+                    outcome,
+                    abort_reason: t.abort_reason().unwrap_or(AbortReason::None),
+                    text: t.outcome_text().to_owned(),
+                    tick: t.tick,
+                },
+                // A newer daemon's outcome this client does not know: the goal ended, but
+                // not as asked for.
+                Err(code) => ReportedOutcome {
+                    outcome: GoalOutcome::Aborted,
+                    abort_reason: AbortReason::None,
+                    text: format!("unknown outcome code {code}: {}", t.outcome_text()),
+                    tick: t.tick,
+                },
+            };
+            if reported.outcome == GoalOutcome::Succeeded {
                 self.reached_tick = Some(t.tick);
-                self.status = GoalStatus::Reached;
             }
-            Ok(Mode::Fault) => {
-                self.status = GoalStatus::Failed(format!(
-                    "daemon fault at tick {}: {}",
-                    t.tick,
-                    fault_text(t.fault_flags)
-                ));
-            }
-            Ok(Mode::Stopping) if t.fault_flags & ENDING_FAULTS != 0 => {
-                self.status = GoalStatus::Failed(format!(
-                    "controlled stop at tick {}: {}",
-                    t.tick,
-                    fault_text(t.fault_flags)
-                ));
-            }
-            Ok(Mode::Idle) => {
-                self.status = GoalStatus::Failed(format!(
-                    "the daemon went idle at tick {} (faults {})",
-                    t.tick,
-                    fault_text(t.fault_flags)
-                ));
-            }
-            Ok(_) => {}
-            Err(code) => {
-                self.status =
-                    GoalStatus::Failed(format!("unknown mode code {code} at tick {}", t.tick));
-            }
+            self.status = GoalStatus::Ended(reported);
         }
         &self.status
     }
 
-    /// Marks the goal failed (timeout, daemon gone) unless it already ended.
-    pub fn fail(&mut self, why: impl Into<String>) {
+    /// Marks following as given up by a time limit (unless the goal already ended).
+    pub fn time_out(&mut self, why: impl Into<String>) {
         if !self.status.is_final() {
-            self.status = GoalStatus::Failed(why.into());
+            self.status = GoalStatus::TimedOut(why.into());
+        }
+    }
+
+    /// Marks following as given up because telemetry stopped (unless the goal already
+    /// ended).
+    pub fn lose_telemetry(&mut self, why: impl Into<String>) {
+        if !self.status.is_final() {
+            self.status = GoalStatus::NoTelemetry(why.into());
         }
     }
 }

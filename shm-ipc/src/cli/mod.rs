@@ -5,8 +5,8 @@
 //!
 //! | command | what it does | exit code |
 //! |---|---|---|
-//! | `goal X Y HEADING [--obstacle x,y,r]... [--wait]` | send a goal, print the daemon's accept/reject and reason; with `--wait` follow telemetry until reached or failed | 0 accepted (reached with `--wait`), 1 rejected, 3 failed, 4 no daemon |
-//! | `cancel`, `stop` | drop the goal / controlled stop | 0, 1 rejected, 4 no daemon |
+//! | `goal X Y HEADING [--obstacle x,y,r]... [--wait]` | send a goal, print the daemon's accept/reject and reason; with `--wait` follow telemetry until the goal's outcome | 0 accepted (succeeded with `--wait`), 1 rejected; with `--wait`: 3 aborted, 5 cancelled, 6 preempted, 7 no outcome within `--timeout`; 4 no daemon |
+//! | `cancel`, `stop`, `resume` | drop the goal / controlled stop that latches / release the stop | 0, 1 rejected, 4 no daemon |
 //! | `watch [--table] [--count N]` | one line per tick, or a table | 0, 4 no telemetry |
 //! | `record FILE.mcap [--duration S] [--ticks N]` | telemetry to MCAP (JSON schema, `json` messages: opens in Foxglove) | 0 |
 //! | `demo` | start `wlnavd --sim`, drive a loading cycle, print times, write an SVG | 0 all legs reached, 3 a leg failed, 4 daemon trouble |
@@ -31,26 +31,51 @@ use clap::{Args, Parser, Subcommand};
 use crate::config::{IpcConfig, DEFAULT_PREFIX};
 use crate::msg::Obstacle;
 
-/// Process exit codes of `wlnav` (documented in `--help`).
+/// Process exit codes of `wlnav` (documented in `--help` and the README).
 pub mod exit {
-    /// Success: accepted, reached, finished.
+    use super::follow::GoalStatus;
+    use crate::msg::GoalOutcome;
+
+    /// Success: accepted, succeeded, finished.
     pub const OK: u8 = 0;
     /// The daemon rejected the request.
     pub const REJECTED: u8 = 1;
     /// Bad command line (clap's code).
     pub const USAGE: u8 = 2;
-    /// The goal (or a demo leg) was accepted but not reached.
-    pub const FAILED: u8 = 3;
-    /// No daemon, no telemetry, a transport or file error.
+    /// The goal was aborted (no-progress, no-route, goal-in-collision, fault, shutdown), or
+    /// a demo leg was not reached.
+    pub const ABORTED: u8 = 3;
+    /// No daemon, no telemetry (the daemon went away), a transport or file error.
     pub const ERROR: u8 = 4;
+    /// The goal was cancelled (cancel or stop request).
+    pub const CANCELLED: u8 = 5;
+    /// A newer goal preempted the goal.
+    pub const PREEMPTED: u8 = 6;
+    /// No outcome within the time limit (`--timeout`); the goal may still be active.
+    pub const TIMED_OUT: u8 = 7;
     /// Interrupted by Ctrl-C / SIGTERM while waiting.
     pub const INTERRUPTED: u8 = 130;
+
+    /// The exit code of `goal --wait` for a final status.
+    pub fn for_status(status: &GoalStatus) -> u8 {
+        match status {
+            GoalStatus::Ended(o) => match o.outcome {
+                GoalOutcome::Succeeded => OK,
+                GoalOutcome::Cancelled => CANCELLED,
+                GoalOutcome::Preempted => PREEMPTED,
+                GoalOutcome::Aborted | GoalOutcome::None => ABORTED,
+            },
+            GoalStatus::NoTelemetry(_) => ERROR,
+            GoalStatus::TimedOut(_) | GoalStatus::Pending | GoalStatus::Active => TIMED_OUT,
+        }
+    }
 }
 
 const AFTER_HELP: &str = "\
-Exit codes: 0 ok (goal accepted, or reached with --wait), 1 rejected by the daemon,
-2 bad command line, 3 goal failed / demo leg not reached, 4 no daemon, no telemetry or another error,
-130 interrupted.
+Exit codes: 0 ok (goal accepted, or succeeded with --wait), 1 rejected by the daemon,
+2 bad command line, 3 goal aborted (with --wait; demo: a leg not reached), 4 no daemon,
+no telemetry or another error, 5 goal cancelled, 6 goal preempted by a newer one,
+7 no outcome within --timeout, 130 interrupted.
 
 Angles are radians unless --deg is given; lengths metres; the pose is the front axle's.";
 
@@ -104,8 +129,10 @@ pub enum Command {
     Goal(GoalArgs),
     /// Drop the current goal and come to a controlled stop
     Cancel(RequestArgs),
-    /// Controlled stop now
+    /// Controlled stop now; latches (goals are rejected) until `resume`
     Stop(RequestArgs),
+    /// Release an operator stop: goals are accepted again
+    Resume(RequestArgs),
     /// Show telemetry live, one line per tick (or a table with --table)
     Watch(WatchArgs),
     /// Record telemetry to an MCAP file (JSON schema; opens in Foxglove)
@@ -133,10 +160,11 @@ pub struct GoalArgs {
     #[arg(long = "obstacle", value_name = "x,y,r", value_parser = args::parse_obstacle,
           allow_hyphen_values = true)]
     pub obstacles: Vec<Obstacle>,
-    /// Follow telemetry until the goal is reached or fails; the exit code says which
+    /// Follow telemetry until the daemon reports the goal's outcome; the exit code says
+    /// which (0 succeeded, 3 aborted, 5 cancelled, 6 preempted)
     #[arg(long)]
     pub wait: bool,
-    /// With --wait: give up after this many seconds (wall clock)
+    /// With --wait: give up after this many seconds (wall clock; exit code 7)
     #[arg(long, default_value_t = 120.0, value_parser = args::parse_seconds)]
     pub timeout: f64,
     /// How long to wait for the daemon's reply [s]
@@ -144,7 +172,29 @@ pub struct GoalArgs {
     pub reply_timeout: f64,
 }
 
-/// `wlnav cancel` / `wlnav stop`.
+/// The requests without arguments.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SimpleRequest {
+    /// `wlnav cancel`
+    Cancel,
+    /// `wlnav stop`
+    Stop,
+    /// `wlnav resume`
+    Resume,
+}
+
+impl SimpleRequest {
+    /// The subcommand's name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Cancel => "cancel",
+            Self::Stop => "stop",
+            Self::Resume => "resume",
+        }
+    }
+}
+
+/// `wlnav cancel` / `wlnav stop` / `wlnav resume`.
 #[derive(Debug, Clone, Args)]
 pub struct RequestArgs {
     /// How long to wait for the daemon's reply [s]
@@ -186,8 +236,9 @@ pub fn run(cli: Cli) -> u8 {
     signal::install();
     let result = match &cli.command {
         Command::Goal(a) => commands::goal(&cli, a),
-        Command::Cancel(a) => commands::cancel_or_stop(&cli, a, false),
-        Command::Stop(a) => commands::cancel_or_stop(&cli, a, true),
+        Command::Cancel(a) => commands::simple_request(&cli, a, SimpleRequest::Cancel),
+        Command::Stop(a) => commands::simple_request(&cli, a, SimpleRequest::Stop),
+        Command::Resume(a) => commands::simple_request(&cli, a, SimpleRequest::Resume),
         Command::Watch(a) => commands::watch(&cli, a),
         Command::Record(a) => record::run(&cli, a),
         Command::Demo(a) => demo::run(&cli, a),

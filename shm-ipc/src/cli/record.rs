@@ -18,7 +18,7 @@ use serde_json::{json, Value};
 
 use crate::config::IpcConfig;
 use crate::endpoint::Client;
-use crate::msg::{MachineState, Telemetry};
+use crate::msg::{MachineState, Pose2, Telemetry};
 
 use super::view::{fault_names, mode_name};
 use super::{exit, signal, Cli, RecordArgs};
@@ -32,7 +32,7 @@ pub const SCHEMA_NAME: &str = "wlnav.Telemetry";
 pub const TELEMETRY_JSON_SCHEMA: &str = r##"{
   "$schema": "https://json-schema.org/draft/2020-12/schema",
   "title": "wlnav.Telemetry",
-  "description": "One wlnavd control tick (shm-ipc Telemetry, wire format v1). Lengths m, angles rad, speeds m/s.",
+  "description": "One wlnavd control tick (shm-ipc Telemetry, wire format v2). Lengths m, angles rad, speeds m/s.",
   "type": "object",
   "$defs": {
     "num": {"type": ["number", "null"]},
@@ -62,7 +62,15 @@ pub const TELEMETRY_JSON_SCHEMA: &str = r##"{
     "state": {"$ref": "#/$defs/state"},
     "goal": {"$ref": "#/$defs/pose"},
     "command": {"type": "object", "properties": {"beta_dot": {"$ref": "#/$defs/num"}, "v": {"$ref": "#/$defs/num"}}},
-    "trajectory": {"type": "array", "items": {"$ref": "#/$defs/state"}, "description": "planned x_0..x_N"}
+    "trajectory": {"type": "array", "items": {"$ref": "#/$defs/state"}, "description": "planned x_0..x_N"},
+    "outcome": {"type": "string", "enum": ["none", "succeeded", "cancelled", "preempted", "aborted"], "description": "how a goal ended this tick"},
+    "outcome_code": {"type": "integer"},
+    "abort_reason": {"type": "string", "description": "no-progress, no-route, goal-in-collision, fault, shutdown; none unless aborted"},
+    "outcome_request_id": {"type": "integer", "description": "request id of the goal that ended, 0 if none"},
+    "outcome_seq": {"type": "integer"},
+    "outcome_text": {"type": "string"},
+    "subgoal": {"oneOf": [{"$ref": "#/$defs/pose"}, {"type": "null"}], "description": "current subgoal of the global route"},
+    "route": {"type": "array", "items": {"$ref": "#/$defs/pose"}, "description": "global route"}
   },
   "required": ["tick", "timestamp_ns", "mode", "state", "trajectory"]
 }"##;
@@ -77,6 +85,10 @@ fn state_json(s: &MachineState) -> Value {
         "x_f": num(s.x_f), "y_f": num(s.y_f), "theta_f": num(s.theta_f),
         "beta": num(s.beta), "beta_dot": num(s.beta_dot), "v_f": num(s.v_f),
     })
+}
+
+fn pose_json(p: &Pose2) -> Value {
+    json!({"x": num(p.x), "y": num(p.y), "heading": num(p.heading)})
 }
 
 fn time_json(ns: u64) -> Value {
@@ -102,9 +114,17 @@ pub fn telemetry_json(t: &Telemetry, wall_ns: u64) -> Value {
         "pose_error_xy": num(t.pose_error_xy),
         "pose_error_heading": num(t.pose_error_heading),
         "state": state_json(&t.state),
-        "goal": {"x": num(t.goal.x), "y": num(t.goal.y), "heading": num(t.goal.heading)},
+        "goal": pose_json(&t.goal),
         "command": {"beta_dot": num(t.command.beta_dot), "v": num(t.command.v)},
         "trajectory": t.trajectory().iter().map(state_json).collect::<Vec<_>>(),
+        "outcome": t.outcome().map_or_else(|c| format!("outcome-{c}"), |o| o.name().to_owned()),
+        "outcome_code": t.outcome,
+        "abort_reason": t.abort_reason().map_or_else(|c| format!("reason-{c}"), |r| r.name().to_owned()),
+        "outcome_request_id": t.outcome_request_id,
+        "outcome_seq": t.outcome_seq,
+        "outcome_text": t.outcome_text(),
+        "subgoal": t.active_subgoal().map(|p| pose_json(&p)),
+        "route": t.route().iter().map(pose_json).collect::<Vec<_>>(),
     })
 }
 

@@ -1,7 +1,7 @@
 //! Human-readable renderings of [`Telemetry`]: the one-line-per-tick view and the table view
 //! of `wlnav watch`, mode and fault names (shared with `record` and `demo`).
 
-use crate::msg::{fault_flags, Mode, Telemetry};
+use crate::msg::{fault_flags, AbortReason, GoalOutcome, Mode, Telemetry};
 
 /// Fault bits and their names, in bit order.
 pub const FAULT_NAMES: [(u32, &str); 9] = [
@@ -54,6 +54,27 @@ pub fn mode_name(code: u32) -> String {
     }
 }
 
+/// The outcome reported on this sample, as `aborted (no-progress) of request 42: text`, or
+/// `None` when no goal ended this tick.
+pub fn outcome_text(t: &Telemetry) -> Option<String> {
+    if t.outcome == GoalOutcome::None.code() {
+        return None;
+    }
+    let name = match (t.outcome(), t.abort_reason()) {
+        (Ok(GoalOutcome::Aborted), Ok(reason)) if reason != AbortReason::None => {
+            format!("aborted ({})", reason.name())
+        }
+        (Ok(GoalOutcome::Aborted), Err(code)) => format!("aborted (reason-{code})"),
+        (Ok(outcome), _) => outcome.name().to_owned(),
+        (Err(code), _) => format!("outcome-{code}"),
+    };
+    Some(format!(
+        "{name} of request {}: {}",
+        t.outcome_request_id,
+        t.outcome_text()
+    ))
+}
+
 /// The distance of DESIGN §7's success test, ‖(x_f − x_g, y_f − y_g, e_θ)‖ (metres and
 /// radians mixed, as in the paper).
 pub fn goal_distance(t: &Telemetry) -> f64 {
@@ -64,10 +85,18 @@ fn deg(rad: f64) -> f64 {
     rad.to_degrees()
 }
 
-/// One line per tick: everything an operator looks at, in a fixed order.
+/// One line per tick: everything an operator looks at, in a fixed order, and the goal
+/// outcome on the tick that reports one.
 ///
 /// `tick 412 tracking  x  3.21 y -0.40 θ  12.5° β   4.1° v  0.82 | goal  6.00  0.00    0.0° err 2.81 m  -12.5° | cmd β̇ -3.0°/s v 0.85 | solve 3.9 ms qp 11 cost 2.35 | faults -`
 pub fn line(t: &Telemetry) -> String {
+    match outcome_text(t) {
+        Some(outcome) => format!("{} | outcome {outcome}", state_line(t)),
+        None => state_line(t),
+    }
+}
+
+fn state_line(t: &Telemetry) -> String {
     let s = &t.state;
     let goal = match t.active_goal() {
         Some(g) => format!(
