@@ -330,10 +330,10 @@ impl AbortReason {
 
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum NavError {
-    #[error("goal in collision: its footprint (β = 0) is {depth:.3} m inside obstacle circle {obstacle}")]
-    GoalInCollision { obstacle: usize, depth: f64 },
-    #[error("start in collision: the machine's footprint is {depth:.3} m inside obstacle circle {obstacle}")]
-    StartInCollision { obstacle: usize, depth: f64 },
+    /// The goal's footprint or the machine's current one is inside a circle
+    /// (the one check of [`crate::goal_check`]).
+    #[error(transparent)]
+    Collision(#[from] crate::goal_check::GoalConflict),
     #[error("navigator setting `{name}` {requirement} (got {value})")]
     BadSettings {
         name: &'static str,
@@ -486,9 +486,9 @@ impl Navigator {
         &self.settings
     }
 
-    /// New goal. Errors: `GoalInCollision` (the goal pose's footprint, β = 0,
-    /// inside a circle), `StartInCollision` (a circle contains the machine's
-    /// current footprint), and malformed input (`BadGoal`, `TooManyObstacles`,
+    /// New goal. Errors: `Collision` (the goal pose's footprint, β = 0,
+    /// inside a circle, or a circle containing the machine's current
+    /// footprint: [`crate::goal_check::check_goal`]), and malformed input (`BadGoal`, `TooManyObstacles`,
     /// `BadObstacle`). Decides whether the way is blocked; if so plans a
     /// route. A failed plan is not an error here: the goal is accepted and
     /// the first `update` reports `Abort(NoRoute)`.
@@ -507,14 +507,11 @@ impl Navigator {
         }
         self.clear();
         self.world.set(obstacles)?;
-        let goal_pose = State::new(goal.x, goal.y, goal.theta, 0.0, 0.0, 0.0);
-        if let Some((obstacle, depth)) = deepest(&self.params, &goal_pose, obstacles) {
+        if let Err(conflict) =
+            crate::goal_check::check_goal(&self.params, Some(start), &goal, obstacles)
+        {
             self.world.clear();
-            return Err(NavError::GoalInCollision { obstacle, depth });
-        }
-        if let Some((obstacle, depth)) = deepest(&self.params, start, obstacles) {
-            self.world.clear();
-            return Err(NavError::StartInCollision { obstacle, depth });
+            return Err(conflict.into());
         }
         self.goal = Some(goal);
         self.clocks_pending = true;
@@ -747,17 +744,6 @@ impl Navigator {
 }
 
 /// The circle a footprint is deepest inside, and how deep, if any.
-fn deepest(p: &MachineParams, x: &State, obstacles: &[Obstacle]) -> Option<(usize, f64)> {
-    let mut worst: Option<(usize, f64)> = None;
-    for (i, o) in obstacles.iter().enumerate() {
-        let c = crate::obstacle::footprint_clearance(p, x, std::slice::from_ref(o));
-        if c < 0.0 && worst.is_none_or(|(_, d)| -c > d) {
-            worst = Some((i, -c));
-        }
-    }
-    worst
-}
-
 /// Both axle points free along the straight line from the start's front axle
 /// to the goal's, heading along the line and unarticulated, plus both end poses.
 fn straight_corridor_free(world: &World, start: &State, goal: &Goal, spacing: f64) -> bool {

@@ -5,6 +5,7 @@
 use super::hybrid_astar::primitive_free;
 use super::primitives::{build, compose};
 use super::*;
+use crate::goal_check::GoalConflict;
 use crate::obstacle::{footprint_clearance, AxlePoint};
 use crate::weights::decode;
 
@@ -267,10 +268,13 @@ fn goals_and_starts_in_collision_are_rejected() {
         )
         .unwrap_err();
     assert!(
-        matches!(e, NavError::GoalInCollision { obstacle: 0, .. }),
+        matches!(
+            e,
+            NavError::Collision(GoalConflict::GoalInCollision { index: 0, .. })
+        ),
         "{e}"
     );
-    assert!(e.to_string().contains("goal in collision"));
+    assert!(e.to_string().contains("goal-in-collision"));
     let e = nav
         .set_goal(
             &at_rest(4.5, 0.0, 0.0),
@@ -279,7 +283,10 @@ fn goals_and_starts_in_collision_are_rejected() {
         )
         .unwrap_err();
     assert!(
-        matches!(e, NavError::StartInCollision { obstacle: 0, .. }),
+        matches!(
+            e,
+            NavError::Collision(GoalConflict::MachineInCollision { index: 0, .. })
+        ),
         "{e}"
     );
     assert!(nav.route().is_empty());
