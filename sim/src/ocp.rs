@@ -874,7 +874,8 @@ pub fn solve_min_time(
 
 /// One min-time solve from guess `g` (goal heading on the branch nearest the
 /// guess's final heading): the plan when it is feasible (bound and constraint
-/// violation < 1e-5; `objective` is T), and the time spent.
+/// violation < 1e-5; `objective` is T), and the time spent. With the
+/// environment variable `WLNAV_MT_DEBUG` set, each solve is logged to stderr.
 pub fn min_time_attempt(
     p: &MachineParams,
     sc: &Scenario,
