@@ -618,20 +618,21 @@ impl Drop for IncomingGoal<'_> {
     }
 }
 
-/// The client's side: sends goals, cancels, stops; publishes poses; subscribes to
-/// telemetry.
+/// A pose publisher with the notifier that wakes the daemon after each sample.
+type PosePublisher = (
+    Publisher<IpcService, PoseEstimate, ()>,
+    Notifier<IpcService>,
+);
+
+/// The client's side: sends goals, cancels, stops, resumes; publishes poses; subscribes
+/// to telemetry.
 pub struct Client {
     conn: Connection,
     client: GoalClient,
     goal_notifier: Notifier<IpcService>,
     goal_listener: Listener<IpcService>,
     /// Created on first [`Client::publish_pose`], so read-only clients take no publisher slot.
-    pose_pub: std::sync::Mutex<
-        Option<(
-            Publisher<IpcService, PoseEstimate, ()>,
-            Notifier<IpcService>,
-        )>,
-    >,
+    pose_pub: std::sync::Mutex<Option<PosePublisher>>,
     next_id: AtomicU64,
 }
 

@@ -129,6 +129,9 @@ impl RejectReason {
 }
 
 /// A request that passed validation, decoded into Rust types.
+// SetGoal carries its obstacles inline (≈ 230 bytes): validation runs on the daemon's I/O
+// path, a flood of requests included, and must not allocate.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, PartialEq)]
 pub enum ValidRequest {
     /// Drive to `goal` avoiding `obstacles` (at most [`MAX_OBSTACLES`], all finite, radii > 0).
