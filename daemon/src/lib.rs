@@ -16,8 +16,10 @@ pub mod control_loop;
 pub mod controller;
 pub mod daemon;
 pub mod ipc;
+pub mod log_limit;
 pub mod logging;
 pub mod notify;
+pub mod pose_gate;
 pub mod sim;
 pub mod stats;
 

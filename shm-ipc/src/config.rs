@@ -8,7 +8,7 @@ pub const DEFAULT_PREFIX: &str = "wlnav";
 /// layout changes, so an old peer fails to find the service instead of misreading bytes.
 pub const API_VERSION: &str = "v1";
 
-/// The three service names for one prefix. Each name is used twice: once for the data
+/// The service names for one prefix. Each name is used twice: once for the data
 /// service (request-response or publish-subscribe) and once for its paired event service;
 /// iceoryx2 tells services apart by name *and* messaging pattern.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -20,6 +20,10 @@ pub struct ServiceNames {
     pub pose: String,
     /// `{prefix}/v1/telemetry`: publish-subscribe [`crate::Telemetry`], plus event.
     pub telemetry: String,
+    /// `{prefix}/v1/stop`: request-response [`crate::GoalRequest`] (kind stop only) →
+    /// [`crate::GoalReply`], plus event: the reserved stop path (see
+    /// [`crate::StopClient`]).
+    pub stop: String,
 }
 
 impl ServiceNames {
@@ -30,6 +34,7 @@ impl ServiceNames {
             goal: format!("{prefix}/{API_VERSION}/goal"),
             pose: format!("{prefix}/{API_VERSION}/pose"),
             telemetry: format!("{prefix}/{API_VERSION}/telemetry"),
+            stop: format!("{prefix}/{API_VERSION}/stop"),
         })
     }
 }

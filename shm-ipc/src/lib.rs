@@ -172,7 +172,7 @@ pub use config::{
 };
 pub use endpoint::{
     cleanup_stale_nodes, event_ids, qos, CleanupReport, Client, DaemonEndpoint, IncomingGoal,
-    IpcService, PendingGoal, TelemetrySubscriber, Wakeup,
+    IpcService, PendingGoal, StopClient, TelemetrySubscriber, Wakeup,
 };
 pub use error::{BoxedSource, ClientError, IpcError};
 pub use msg::{
@@ -180,7 +180,10 @@ pub use msg::{
     Obstacle, Pose2, PoseEstimate, RejectCode, Telemetry, MAX_OBSTACLES, MAX_TRAJECTORY,
     REASON_TEXT_CAPACITY,
 };
-pub use validate::{heapless_obstacles, GoalValidator, RejectReason, ValidRequest, Workspace};
+pub use validate::{
+    heapless_obstacles, normalize_angle, GoalValidator, Num, RejectReason, ValidRequest,
+    Workspace, MAX_HEADING_ABS, MAX_OBSTACLE_ABS,
+};
 
 /// Now, in nanoseconds of `CLOCK_MONOTONIC`: the clock of [`PoseEstimate::timestamp_ns`] and
 /// [`Telemetry::timestamp_ns`]. Monotonic because poses are judged stale by age, which must

@@ -11,7 +11,7 @@ use e2e::{binaries, SimDaemon};
 use shm_ipc::cli::commands::{follow, FollowEnd, FollowOptions};
 use shm_ipc::cli::follow::{GoalStatus, GoalTracker};
 use shm_ipc::{
-    fault_flags, Client, ClientError, GoalRequest, Mode, Obstacle, Pose2, RejectCode, Telemetry,
+    fault_flags, Client, GoalRequest, Mode, Obstacle, Pose2, RejectCode, Telemetry,
     MAX_OBSTACLES,
 };
 
@@ -369,10 +369,10 @@ fn two_daemons_with_different_prefixes_do_not_interfere() {
     let t1 = b.next(Duration::from_secs(2)).tick;
     assert!(t1 > t0);
     // A prefix nobody serves has no daemon.
-    let nobody = Client::new(&shm_ipc::IpcConfig::new(e2e::unique_prefix("nobody"))).unwrap();
+    // A prefix nobody serves has no services (clients never create them).
     assert!(matches!(
-        nobody.set_goal(ga, &[], REPLY),
-        Err(ClientError::NoDaemon { .. })
+        Client::new(&shm_ipc::IpcConfig::new(e2e::unique_prefix("nobody"))),
+        Err(shm_ipc::IpcError::NotServed { .. })
     ));
     b.stop();
 }

@@ -55,7 +55,7 @@ fn sigterm_stops_the_machine_and_the_stop_is_the_last_frame() {
         .stderr(Stdio::null())
         .spawn()
         .unwrap();
-    let client = Client::new(&IpcConfig::new(prefix)).unwrap();
+    let client = Client::connect(&IpcConfig::new(prefix), Duration::from_secs(30)).unwrap();
     let telemetry = client.subscribe_telemetry().unwrap();
     let deadline = Instant::now() + Duration::from_secs(30);
     loop {

@@ -6,7 +6,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context;
 
-use crate::endpoint::{Client, TelemetrySubscriber};
+use crate::endpoint::{Client, StopClient, TelemetrySubscriber};
 use crate::error::{ClientError, IpcError};
 use crate::msg::{GoalReply, GoalRequest, Pose2, RejectCode, Telemetry};
 
@@ -30,6 +30,37 @@ pub fn connect(cli: &Cli) -> anyhow::Result<Client> {
             config.prefix
         )
     })
+}
+
+/// Connects a client, waiting up to `timeout` for a daemon to create the services (the
+/// client never creates them) unless Ctrl-C comes first. `Ok(None)` when interrupted.
+pub fn connect_waiting(cli: &Cli, timeout: Duration) -> anyhow::Result<Option<Client>> {
+    let mut config = cli.ipc_config();
+    let deadline = Instant::now() + timeout;
+    let mut hinted = false;
+    loop {
+        if signal::requested() {
+            return Ok(None);
+        }
+        match Client::new(&config) {
+            Err(IpcError::NotServed { .. }) if Instant::now() < deadline => {
+                if !hinted {
+                    eprintln!("wlnav: waiting for wlnavd on prefix {:?} …", config.prefix);
+                    hinted = true;
+                }
+                config.cleanup_stale_nodes = false;
+                std::thread::sleep(Duration::from_millis(100));
+            }
+            other => {
+                return other.map(Some).with_context(|| {
+                    format!(
+                        "cannot open the shared-memory services of prefix {:?}",
+                        config.prefix
+                    )
+                })
+            }
+        }
+    }
 }
 
 /// A reject code's short name.
@@ -132,9 +163,16 @@ pub fn goal(cli: &Cli, a: &GoalArgs) -> anyhow::Result<u8> {
             emit(&line);
         }
     })?;
-    if end == FollowEnd::Interrupted {
-        emit("interrupted: the goal stays active (`wlnav cancel` drops it)");
-        return Ok(exit::INTERRUPTED);
+    match end {
+        FollowEnd::Interrupted => {
+            emit("interrupted: the goal stays active (`wlnav cancel` drops it)");
+            return Ok(exit::INTERRUPTED);
+        }
+        FollowEnd::DaemonLost => {
+            emit(&outcome_line(&tracker, cli.tick_s()));
+            return Ok(exit::ERROR);
+        }
+        FollowEnd::Final => {}
     }
     emit(&outcome_line(&tracker, cli.tick_s()));
     Ok(match tracker.status() {
@@ -257,6 +295,9 @@ pub enum FollowEnd {
     Final,
     /// Ctrl-C / SIGTERM.
     Interrupted,
+    /// No telemetry for [`FollowOptions::silence`]: the daemon is gone (the tracker is
+    /// marked failed with the reason too).
+    DaemonLost,
 }
 
 /// Feeds telemetry to `tracker` until its status is final (reached, failed, timed out),
@@ -274,7 +315,12 @@ pub fn follow(
         if signal::requested() {
             return Ok(FollowEnd::Interrupted);
         }
-        if let Some(t) = sub.recv_timeout(Duration::from_millis(100))? {
+        let sample = match sub.recv_timeout(Duration::from_millis(100)) {
+            // A signal woke the wait: the check at the top of the loop decides.
+            Err(IpcError::Interrupted) => continue,
+            other => other?,
+        };
+        if let Some(t) = sample {
             last_sample = Instant::now();
             tracker.update(&t);
             if *tracker.status() == GoalStatus::Pending {
@@ -297,6 +343,7 @@ pub fn follow(
                 "no telemetry for {:.1} s: is the daemon still running?",
                 opts.silence.as_secs_f64()
             ));
+            return Ok(FollowEnd::DaemonLost);
         }
         if !tracker.status().is_final() && start.elapsed() >= opts.timeout {
             tracker.fail(format!(
@@ -310,14 +357,21 @@ pub fn follow(
     }
 }
 
-/// `wlnav cancel` / `wlnav stop`.
+/// `wlnav cancel` / `wlnav stop`. A stop goes through the reserved stop service
+/// ([`StopClient`]): it needs none of the goal service's client slots.
 pub fn cancel_or_stop(cli: &Cli, a: &RequestArgs, stop: bool) -> anyhow::Result<u8> {
-    let client = connect(cli)?;
     let timeout = Duration::from_secs_f64(a.reply_timeout);
     let result = if stop {
+        let config = cli.ipc_config();
+        let client = StopClient::new(&config).with_context(|| {
+            format!(
+                "cannot open the stop service of prefix {:?}",
+                config.prefix
+            )
+        })?;
         client.stop(timeout)
     } else {
-        client.cancel(timeout)
+        connect(cli)?.cancel(timeout)
     };
     let reply = match result {
         Ok(r) => r,
@@ -337,9 +391,11 @@ pub fn cancel_or_stop(cli: &Cli, a: &RequestArgs, stop: bool) -> anyhow::Result<
 
 /// `wlnav watch [--table] [--count N]`.
 pub fn watch(cli: &Cli, a: &WatchArgs) -> anyhow::Result<u8> {
-    let client = connect(cli)?;
-    let sub = client.subscribe_telemetry()?;
     let silence = Duration::from_secs_f64(a.silence_timeout);
+    let Some(client) = connect_waiting(cli, silence)? else {
+        return Ok(exit::INTERRUPTED);
+    };
+    let sub = client.subscribe_telemetry()?;
     let mut last_sample = Instant::now();
     let mut last_tick: Option<u64> = None;
     let mut shown = 0u64;
@@ -348,7 +404,11 @@ pub fn watch(cli: &Cli, a: &WatchArgs) -> anyhow::Result<u8> {
         if a.count.is_some_and(|c| shown >= c) {
             break;
         }
-        let Some(t) = sub.recv_timeout(Duration::from_millis(200))? else {
+        let sample = match sub.recv_timeout(Duration::from_millis(200)) {
+            Err(IpcError::Interrupted) => continue,
+            other => other?,
+        };
+        let Some(t) = sample else {
             if !hinted && last_sample.elapsed() > Duration::from_secs(1) {
                 eprintln!(
                     "wlnav: waiting for telemetry on {:?} …",
@@ -386,5 +446,9 @@ pub fn watch(cli: &Cli, a: &WatchArgs) -> anyhow::Result<u8> {
         }
         shown += 1;
     }
-    Ok(exit::OK)
+    Ok(if signal::requested() {
+        exit::INTERRUPTED
+    } else {
+        exit::OK
+    })
 }

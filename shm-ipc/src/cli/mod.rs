@@ -5,10 +5,10 @@
 //!
 //! | command | what it does | exit code |
 //! |---|---|---|
-//! | `goal X Y HEADING [--obstacle x,y,r]... [--wait]` | send a goal, print the daemon's accept/reject and reason; with `--wait` follow telemetry until reached or failed | 0 accepted (reached with `--wait`), 1 rejected, 3 failed, 4 no daemon |
-//! | `cancel`, `stop` | drop the goal / controlled stop | 0, 1 rejected, 4 no daemon |
-//! | `watch [--table] [--count N]` | one line per tick, or a table | 0, 4 no telemetry |
-//! | `record FILE.mcap [--duration S] [--ticks N]` | telemetry to MCAP (JSON schema, `json` messages: opens in Foxglove) | 0 |
+//! | `goal X Y HEADING [--obstacle x,y,r]... [--wait]` | send a goal, print the daemon's accept/reject and reason; with `--wait` follow telemetry until reached or failed | 0 accepted (reached with `--wait`), 1 rejected, 3 failed, 4 no daemon (also: the daemon's telemetry stopped during `--wait`), 130 Ctrl-C during `--wait` |
+//! | `cancel`, `stop` | drop the goal / controlled stop (`stop` uses the reserved stop service: it gets through when every goal client slot is taken) | 0, 1 rejected, 4 no daemon |
+//! | `watch [--table] [--count N]` | one line per tick, or a table | 0, 4 no telemetry, 130 Ctrl-C |
+//! | `record FILE.mcap [--duration S] [--ticks N]` | telemetry to MCAP (JSON schema, `json` messages: opens in Foxglove) | 0, 130 Ctrl-C (the file is finished either way) |
 //! | `demo` | start `wlnavd --sim`, drive a loading cycle, print times, write an SVG | 0 all legs reached, 3 a leg failed, 4 daemon trouble |
 //!
 //! Usage errors (bad numbers, NaN, malformed `--obstacle`) exit with 2 and name the
@@ -194,6 +194,9 @@ pub fn run(cli: Cli) -> u8 {
     };
     match result {
         Ok(code) => code,
+        // Ctrl-C during a wait is an interruption, not an error (whatever the wait
+        // reported).
+        Err(_) if signal::requested() => exit::INTERRUPTED,
         Err(e) => {
             eprintln!("wlnav: error: {e:#}");
             exit::ERROR
