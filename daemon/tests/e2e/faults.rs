@@ -236,6 +236,7 @@ fn a_peer_that_created_a_service_first_is_named_in_the_refusal() {
     let err = wlnavd::run(config, wlnavd::RunOptions::default())
         .expect_err("the daemon cannot use that service");
     let text = err.to_string();
+    eprintln!("wlnavd refused: {text}");
     assert!(
         matches!(err, wlnavd::DaemonError::Ipc(IpcError::ServiceHeld { .. })),
         "{text}"
