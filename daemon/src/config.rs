@@ -687,7 +687,11 @@ mod tests {
         let file = dir.path().join("wlnavd.toml");
         std::fs::write(&file, "[loop]\nrate_hz = 5.0\n").unwrap();
         let c = Config::load(&file).unwrap();
-        assert_eq!(c.weights, WeightsConfig::default(), "defaults stay relative");
+        assert_eq!(
+            c.weights,
+            WeightsConfig::default(),
+            "defaults stay relative"
+        );
         // Paths the file gives are relative to the file.
         std::fs::write(&file, "[weights]\ncritic = \"w/c.safetensors\"\n").unwrap();
         let c = Config::load(&file).unwrap();

@@ -290,8 +290,7 @@ impl ControlLoop {
             let t = self.ctx.clock.from_monotonic_ns(sample.timestamp_ns);
             let now = self.ctx.clock.now();
             let valid = sample.flags & shm_ipc::pose_flags::VALID != 0;
-            if let PoseVerdict::Rejected(why) = self.pose_gate.offer(sample.pose(), valid, t, now)
-            {
+            if let PoseVerdict::Rejected(why) = self.pose_gate.offer(sample.pose(), valid, t, now) {
                 rejected = true;
                 if let LogDecision::Log { suppressed } = self.pose_log.check(now) {
                     tracing::warn!(

@@ -232,7 +232,9 @@ pub async fn serve_goals(
     } else {
         Duration::from_millis(20)
     };
-    async fn readable(fd: &Option<AsyncFd<Fd>>) -> std::io::Result<Option<AsyncFdReadyGuard<'_, Fd>>> {
+    async fn readable(
+        fd: &Option<AsyncFd<Fd>>,
+    ) -> std::io::Result<Option<AsyncFdReadyGuard<'_, Fd>>> {
         match fd {
             Some(fd) => fd.readable().await.map(Some),
             None => std::future::pending().await,

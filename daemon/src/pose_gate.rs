@@ -189,7 +189,11 @@ impl PoseGate {
         let dt = t - prev.1;
         let distance = (pose.x - prev.0.x).hypot(pose.y - prev.0.y);
         let allowed = self.cfg.max_speed * dt + self.cfg.position_tolerance;
-        if !(distance <= allowed) {
+        // NaN-safe: anything not provably within the bound is a jump.
+        if distance
+            .partial_cmp(&allowed)
+            .is_none_or(|o| o == core::cmp::Ordering::Greater)
+        {
             return Some(PoseReject::Jump {
                 distance,
                 allowed,
@@ -198,7 +202,10 @@ impl PoseGate {
         }
         let change = heading_change(pose.heading, prev.0.heading).abs();
         let allowed = self.cfg.max_yaw_rate * dt + self.cfg.heading_tolerance;
-        if !(change <= allowed) {
+        if change
+            .partial_cmp(&allowed)
+            .is_none_or(|o| o == core::cmp::Ordering::Greater)
+        {
             return Some(PoseReject::HeadingJump {
                 change,
                 allowed,
@@ -259,9 +266,7 @@ impl PoseGate {
         if self.faulted() {
             // Re-anchoring: count successive samples consistent with each other.
             let len = match self.chain {
-                Some((p, tp, n)) if t > tp && self.implausible((p, tp), pose, t).is_none() => {
-                    n + 1
-                }
+                Some((p, tp, n)) if t > tp && self.implausible((p, tp), pose, t).is_none() => n + 1,
                 _ => 1,
             };
             self.chain = Some((pose, t, len));
@@ -338,13 +343,22 @@ mod tests {
         drive(&mut g, 2.0);
         // 8 s ahead, then silence.
         let v = g.offer(p(2.05, 0.0, 0.0), true, 10.0, 2.02);
-        assert!(matches!(v, PoseVerdict::Rejected(PoseReject::Future { .. })), "{v:?}");
+        assert!(
+            matches!(v, PoseVerdict::Rejected(PoseReject::Future { .. })),
+            "{v:?}"
+        );
         assert!(g.fresh(2.4).is_some());
-        assert!(g.fresh(2.51).is_none(), "stale 0.5 s after the last good pose");
+        assert!(
+            g.fresh(2.51).is_none(),
+            "stale 0.5 s after the last good pose"
+        );
         assert!(g.fresh(9.0).is_none());
         // Within the 50 ms tolerance a stamp is fine.
         let mut g = PoseGate::new(cfg());
-        assert_eq!(g.offer(p(0.0, 0.0, 0.0), true, 1.04, 1.0), PoseVerdict::Accepted);
+        assert_eq!(
+            g.offer(p(0.0, 0.0, 0.0), true, 1.04, 1.0),
+            PoseVerdict::Accepted
+        );
     }
 
     #[test]
@@ -352,13 +366,22 @@ mod tests {
         let mut g = PoseGate::new(cfg());
         drive(&mut g, 1.0);
         let v = g.offer(p(1e6, -1e6, 0.0), true, 1.1, 1.1);
-        assert!(matches!(v, PoseVerdict::Rejected(PoseReject::OutsideRegion { .. })));
+        assert!(matches!(
+            v,
+            PoseVerdict::Rejected(PoseReject::OutsideRegion { .. })
+        ));
         // 10 m in 0.5 s: far more than 1.2 m/s allows.
         let v = g.offer(p(11.0, 0.0, 0.0), true, 1.5, 1.5);
-        assert!(matches!(v, PoseVerdict::Rejected(PoseReject::Jump { .. })), "{v:?}");
+        assert!(
+            matches!(v, PoseVerdict::Rejected(PoseReject::Jump { .. })),
+            "{v:?}"
+        );
         assert!(!g.faulted());
         let v = g.offer(p(1.0, 0.0, 2.5), true, 1.55, 1.55);
-        assert!(matches!(v, PoseVerdict::Rejected(PoseReject::HeadingJump { .. })), "{v:?}");
+        assert!(
+            matches!(v, PoseVerdict::Rejected(PoseReject::HeadingJump { .. })),
+            "{v:?}"
+        );
         assert!(g.faulted(), "three in a row");
         assert_eq!(g.rejected_total(), 3);
         // The last good pose is kept as the reference, and goes stale.
@@ -396,8 +419,14 @@ mod tests {
         assert_eq!(g.reject_run(), 1, "only the NaN counts");
         // A heading just across ±π is a small change, not a jump.
         let mut g = PoseGate::new(cfg());
-        assert_eq!(g.offer(p(0.0, 0.0, 3.1), true, 0.0, 0.0), PoseVerdict::Accepted);
-        assert_eq!(g.offer(p(0.0, 0.0, -3.1), true, 0.05, 0.05), PoseVerdict::Accepted);
+        assert_eq!(
+            g.offer(p(0.0, 0.0, 3.1), true, 0.0, 0.0),
+            PoseVerdict::Accepted
+        );
+        assert_eq!(
+            g.offer(p(0.0, 0.0, -3.1), true, 0.05, 0.05),
+            PoseVerdict::Accepted
+        );
     }
 
     #[test]

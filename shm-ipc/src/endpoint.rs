@@ -86,6 +86,11 @@ pub mod qos {
     pub const STOP_MAX_ACTIVE_REQUESTS_PER_CLIENT: usize = 2;
 }
 
+/// A pose publisher and the notifier that wakes its subscribers.
+type PosePublisher = (
+    Publisher<IpcService, PoseEstimate, ()>,
+    Notifier<IpcService>,
+);
 type GoalFactory = request_response::PortFactory<IpcService, GoalRequest, (), GoalReply, ()>;
 type GoalServer = Server<IpcService, GoalRequest, (), GoalReply, ()>;
 type GoalClient = IoxClient<IpcService, GoalRequest, (), GoalReply, ()>;
@@ -158,15 +163,12 @@ fn service_name(name: &str) -> Result<ServiceName, IpcError> {
 fn service_holders(name: &ServiceName, pattern: MessagingPattern) -> String {
     use iceoryx2::node::{NodeState, NodeView};
     use iceoryx2::service::Service as _;
-    let details = match IpcService::details(
-        name,
-        iceoryx2::config::Config::global_config(),
-        pattern,
-    ) {
-        Ok(Some(d)) => d,
-        Ok(None) => return "nobody (the service vanished meanwhile)".into(),
-        Err(e) => return format!("unknown ({e:?})"),
-    };
+    let details =
+        match IpcService::details(name, iceoryx2::config::Config::global_config(), pattern) {
+            Ok(Some(d)) => d,
+            Ok(None) => return "nobody (the service vanished meanwhile)".into(),
+            Err(e) => return format!("unknown ({e:?})"),
+        };
     let Some(dynamic) = details.dynamic_details else {
         return "unknown".into();
     };
@@ -221,15 +223,13 @@ fn create_error<E: std::error::Error + Send + Sync + 'static>(
     messaging: MessagingPattern,
     e: E,
 ) -> IpcError {
-    let exists = ServiceName::new(name)
-        .ok()
-        .and_then(|n| {
-            use iceoryx2::service::Service as _;
-            IpcService::details(&n, iceoryx2::config::Config::global_config(), messaging)
-                .ok()
-                .flatten()
-                .map(|_| n)
-        });
+    let exists = ServiceName::new(name).ok().and_then(|n| {
+        use iceoryx2::service::Service as _;
+        IpcService::details(&n, iceoryx2::config::Config::global_config(), messaging)
+            .ok()
+            .flatten()
+            .map(|_| n)
+    });
     match exists {
         Some(n) => IpcError::ServiceHeld {
             service: name.to_owned(),
@@ -908,9 +908,17 @@ impl IncomingGoal<'_> {
     fn reply_path(&self) -> (&String, &Notifier<IpcService>, usize) {
         let ep = self.endpoint;
         if self.via_stop_service {
-            (&ep.conn.names.stop, &ep.stop_notifier, event_ids::STOP_REPLY)
+            (
+                &ep.conn.names.stop,
+                &ep.stop_notifier,
+                event_ids::STOP_REPLY,
+            )
         } else {
-            (&ep.conn.names.goal, &ep.goal_notifier, event_ids::GOAL_REPLY)
+            (
+                &ep.conn.names.goal,
+                &ep.goal_notifier,
+                event_ids::GOAL_REPLY,
+            )
         }
     }
 
@@ -952,12 +960,7 @@ pub struct Client {
     goal_notifier: Notifier<IpcService>,
     goal_listener: Listener<IpcService>,
     /// Created on first [`Client::publish_pose`], so read-only clients take no publisher slot.
-    pose_pub: std::sync::Mutex<
-        Option<(
-            Publisher<IpcService, PoseEstimate, ()>,
-            Notifier<IpcService>,
-        )>,
-    >,
+    pose_pub: std::sync::Mutex<Option<PosePublisher>>,
     next_id: AtomicU64,
     /// For the stop path ([`Client::stop`] opens a [`StopClient`] per stop).
     config: IpcConfig,
@@ -1319,7 +1322,11 @@ impl StopClient {
     }
 
     /// [`StopClient::stop`] with a chosen request id.
-    pub fn stop_with_id(&self, request_id: u64, timeout: Duration) -> Result<GoalReply, ClientError> {
+    pub fn stop_with_id(
+        &self,
+        request_id: u64,
+        timeout: Duration,
+    ) -> Result<GoalReply, ClientError> {
         let service = &self.service;
         // Ports for this request only: nothing stays attached after the reply.
         let client = self

@@ -230,8 +230,8 @@ pub use msg::{
     REASON_TEXT_CAPACITY,
 };
 pub use validate::{
-    heapless_obstacles, normalize_angle, GoalValidator, Num, RejectReason, ValidRequest,
-    Workspace, MAX_HEADING_ABS, MAX_OBSTACLE_ABS,
+    heapless_obstacles, normalize_angle, GoalValidator, Num, RejectReason, ValidRequest, Workspace,
+    MAX_HEADING_ABS, MAX_OBSTACLE_ABS,
 };
 
 /// Now, in nanoseconds of `CLOCK_MONOTONIC`: the clock of [`PoseEstimate::timestamp_ns`] and

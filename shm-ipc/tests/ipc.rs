@@ -188,7 +188,11 @@ fn a_stop_gets_through_when_every_goal_client_slot_is_taken() {
             Err(e) => panic!("unexpected {e}"),
         }
     }
-    assert_eq!(held.len(), shm_ipc::qos::GOAL_MAX_CLIENTS, "every goal slot taken");
+    assert_eq!(
+        held.len(),
+        shm_ipc::qos::GOAL_MAX_CLIENTS,
+        "every goal slot taken"
+    );
     assert!(Client::new(&config).is_err(), "no goal slot left");
     let stop = shm_ipc::StopClient::new(&config).expect("stop client");
     for _ in 0..3 {

@@ -96,10 +96,7 @@ fn absurd_finite_values_are_rejected_with_readable_numbers() {
     assert!(text.contains("1.000e300"), "{text}");
     assert!(text.len() < 100, "{text}");
     let reason = reject(&goal(-1e300, 1.0, 0.0, &[]));
-    assert!(
-        reason.to_string().contains("-1.000e300"),
-        "{reason}"
-    );
+    assert!(reason.to_string().contains("-1.000e300"), "{reason}");
     // Obstacles far beyond any site.
     let reason = reject(&goal(1.0, 1.0, 0.0, &[Obstacle::new(1e300, 0.0, 1.0)]));
     assert_eq!(reason.code(), RejectCode::BadObstacle);
@@ -116,18 +113,27 @@ fn huge_numbers_print_short_and_reasons_are_never_cut_inside_a_number() {
     let reason = reject(&goal(1e308, 1e308, 0.0, &[]));
     let text = reason.to_string();
     assert!(text.contains("(1.000e308, 1.000e308)"), "{text}");
-    assert!(text.len() <= REASON_TEXT_CAPACITY, "{} bytes: {text}", text.len());
+    assert!(
+        text.len() <= REASON_TEXT_CAPACITY,
+        "{} bytes: {text}",
+        text.len()
+    );
     let reply = reason.to_reply(1);
     assert_eq!(reply.reason_text(), text, "fits whole");
     // A message that does not fit is cut between words: every number kept is whole.
-    let numbers: Vec<String> = (0..40).map(|i| format!("{}", 1234.5678 + i as f64)).collect();
+    let numbers: Vec<String> = (0..40)
+        .map(|i| format!("{}", 1234.5678 + i as f64))
+        .collect();
     let message = numbers.join(" ");
     let reply = GoalReply::reject(1, RejectCode::Other, &message);
     let kept = reply.reason_text();
     assert!(kept.len() <= REASON_TEXT_CAPACITY);
     assert!(kept.ends_with('…'), "{kept}");
     for word in kept.trim_end_matches('…').split_whitespace() {
-        assert!(numbers.iter().any(|n| n == word), "cut number {word:?} in {kept:?}");
+        assert!(
+            numbers.iter().any(|n| n == word),
+            "cut number {word:?} in {kept:?}"
+        );
     }
     for n in [0.0, 1.5, -2.25, 999_999.0, 1e6, 1e-4, f64::NAN] {
         let s = shm_ipc::Num::new(n).to_string();
@@ -293,7 +299,11 @@ fn reason_text_is_truncated_at_char_boundary_and_never_panics() {
     let reply = GoalReply::reject(1, RejectCode::Other, &three);
     assert!(reply.reason_len as usize <= REASON_TEXT_CAPACITY);
     assert!(reply.reason_text().ends_with('…'));
-    assert!(reply.reason_text().trim_end_matches('…').chars().all(|c| c == '€'));
+    assert!(reply
+        .reason_text()
+        .trim_end_matches('…')
+        .chars()
+        .all(|c| c == '€'));
 
     // A short message is kept whole.
     let reply = GoalReply::reject(1, RejectCode::Other, "fits");

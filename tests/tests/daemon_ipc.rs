@@ -11,8 +11,7 @@ use e2e::{binaries, SimDaemon};
 use shm_ipc::cli::commands::{follow, FollowEnd, FollowOptions};
 use shm_ipc::cli::follow::{GoalStatus, GoalTracker};
 use shm_ipc::{
-    fault_flags, Client, GoalRequest, Mode, Obstacle, Pose2, RejectCode, Telemetry,
-    MAX_OBSTACLES,
+    fault_flags, Client, GoalRequest, Mode, Obstacle, Pose2, RejectCode, Telemetry, MAX_OBSTACLES,
 };
 
 const REPLY: Duration = Duration::from_secs(2);

@@ -42,7 +42,8 @@ fn pose_fault_stops_the_machine(name: &str, inject: Inject, expect_flag: u32) {
     let last_good = Arc::new(AtomicU64::new(0));
     let injected_at = Arc::new(Mutex::new(None::<f64>));
     let loc = {
-        let (phase, last_good, injected_at) = (phase.clone(), last_good.clone(), injected_at.clone());
+        let (phase, last_good, injected_at) =
+            (phase.clone(), last_good.clone(), injected_at.clone());
         Localization::start(&prefix, d.sim.clone(), move |log, now| {
             let p = *phase.lock().unwrap();
             match p {
@@ -80,8 +81,17 @@ fn pose_fault_stops_the_machine(name: &str, inject: Inject, expect_flag: u32) {
         mode(t) == Mode::Fault
     });
     let fault = seen.last().unwrap();
-    assert_ne!(fault.fault_flags & expect_flag, 0, "flags {:#x}", fault.fault_flags);
-    assert_eq!(fault.fault_flags & fault_flags::SOLVE_FAILED, 0, "not a solver fault");
+    assert_ne!(
+        fault.fault_flags & expect_flag,
+        0,
+        "flags {:#x}",
+        fault.fault_flags
+    );
+    assert_eq!(
+        fault.fault_flags & fault_flags::SOLVE_FAILED,
+        0,
+        "not a solver fault"
+    );
     assert_eq!(fault.goal_active, 0, "the goal is dropped on a fault");
     d.wait_for(Duration::from_secs(20), "stopped", |t| {
         t.command.v.abs() < 1e-9 && t.command.beta_dot.abs() < 1e-9
@@ -140,7 +150,11 @@ fn a_second_pose_publisher_is_refused_and_the_good_poses_keep_coming() {
     invalid.flags = 0;
     for sample in [
         PoseEstimate::new(now, 1, Pose2::new(f64::NAN, 0.0, 0.0)),
-        PoseEstimate::new(now.saturating_sub(5_000_000_000), 2, Pose2::new(0.0, 0.0, 0.0)),
+        PoseEstimate::new(
+            now.saturating_sub(5_000_000_000),
+            2,
+            Pose2::new(0.0, 0.0, 0.0),
+        ),
         invalid,
     ] {
         match rogue.publish_pose(&sample) {
@@ -158,7 +172,10 @@ fn a_second_pose_publisher_is_refused_and_the_good_poses_keep_coming() {
     });
     for t in &seen {
         assert_eq!(mode(t), Mode::Tracking, "flags {:#x}", t.fault_flags);
-        assert_eq!(t.fault_flags & (fault_flags::POSE_STALE | fault_flags::POSE_REJECTED), 0);
+        assert_eq!(
+            t.fault_flags & (fault_flags::POSE_STALE | fault_flags::POSE_REJECTED),
+            0
+        );
     }
     d.stop();
 }

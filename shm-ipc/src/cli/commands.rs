@@ -364,10 +364,7 @@ pub fn cancel_or_stop(cli: &Cli, a: &RequestArgs, stop: bool) -> anyhow::Result<
     let result = if stop {
         let config = cli.ipc_config();
         let client = StopClient::new(&config).with_context(|| {
-            format!(
-                "cannot open the stop service of prefix {:?}",
-                config.prefix
-            )
+            format!("cannot open the stop service of prefix {:?}", config.prefix)
         })?;
         client.stop(timeout)
     } else {
@@ -437,7 +434,7 @@ pub fn watch(cli: &Cli, a: &WatchArgs) -> anyhow::Result<u8> {
         }
         last_tick = Some(t.tick);
         let ok = if a.table {
-            (shown % 20 != 0 || emit(&view::table_header())) && emit(&view::table_row(&t))
+            (!shown.is_multiple_of(20) || emit(&view::table_header())) && emit(&view::table_row(&t))
         } else {
             emit(&view::line(&t))
         };

@@ -171,14 +171,12 @@ pub fn run(cli: &Cli, a: &DemoArgs) -> anyhow::Result<u8> {
             log.display()
         ));
         let ready_timeout = Duration::from_secs_f64(a.ready_timeout);
-        let connected = daemon
-            .connect(&config, ready_timeout)
-            .and_then(|client| {
-                let sub = client
-                    .subscribe_telemetry()
-                    .context("cannot subscribe to telemetry")?;
-                Ok((client, sub))
-            });
+        let connected = daemon.connect(&config, ready_timeout).and_then(|client| {
+            let sub = client
+                .subscribe_telemetry()
+                .context("cannot subscribe to telemetry")?;
+            Ok((client, sub))
+        });
         let ready = connected.and_then(|(client, sub)| {
             let t = daemon.wait_ready(&sub, ready_timeout)?;
             Ok((client, sub, t))

@@ -210,7 +210,9 @@ pub fn record(
         match Client::new(config) {
             Err(crate::error::IpcError::NotServed { .. })
                 if !(stop.load(Ordering::SeqCst) || signal::requested())
-                    && limits.duration.is_none_or(|d| Instant::now() < start_wait + d) =>
+                    && limits
+                        .duration
+                        .is_none_or(|d| Instant::now() < start_wait + d) =>
             {
                 std::thread::sleep(Duration::from_millis(100));
             }
