@@ -40,7 +40,10 @@ impl LogLimiter {
     fn roll(&mut self, now: f64) {
         let expired = match self.window_start {
             None => true,
-            Some(start) => !(now - start < self.window),
+            // NaN-safe: a window counts as over unless it is provably still open.
+            Some(start) => {
+                (now - start).partial_cmp(&self.window) != Some(core::cmp::Ordering::Less)
+            }
         };
         if expired {
             self.window_start = Some(now);
@@ -65,7 +68,9 @@ impl LogLimiter {
     /// Called periodically: once the window in which events were suppressed has passed,
     /// returns their number (to log one summary line) and resets it.
     pub fn summary(&mut self, now: f64) -> Option<u64> {
-        let window_over = self.window_start.is_none_or(|s| !(now - s < self.window));
+        let window_over = self
+            .window_start
+            .is_none_or(|s| (now - s).partial_cmp(&self.window) != Some(core::cmp::Ordering::Less));
         if self.suppressed > 0 && window_over {
             self.window_start = Some(now);
             self.logged_in_window = 0;

@@ -189,7 +189,11 @@ impl PoseGate {
         let dt = t - prev.1;
         let distance = (pose.x - prev.0.x).hypot(pose.y - prev.0.y);
         let allowed = self.cfg.max_speed * dt + self.cfg.position_tolerance;
-        if !(distance <= allowed) {
+        // NaN-safe: anything not provably within the bound is a jump.
+        if distance
+            .partial_cmp(&allowed)
+            .is_none_or(|o| o == core::cmp::Ordering::Greater)
+        {
             return Some(PoseReject::Jump {
                 distance,
                 allowed,
@@ -198,7 +202,10 @@ impl PoseGate {
         }
         let change = heading_change(pose.heading, prev.0.heading).abs();
         let allowed = self.cfg.max_yaw_rate * dt + self.cfg.heading_tolerance;
-        if !(change <= allowed) {
+        if change
+            .partial_cmp(&allowed)
+            .is_none_or(|o| o == core::cmp::Ordering::Greater)
+        {
             return Some(PoseReject::HeadingJump {
                 change,
                 allowed,

@@ -86,6 +86,11 @@ pub mod qos {
     pub const STOP_MAX_ACTIVE_REQUESTS_PER_CLIENT: usize = 2;
 }
 
+/// A pose publisher and the notifier that wakes its subscribers.
+type PosePublisher = (
+    Publisher<IpcService, PoseEstimate, ()>,
+    Notifier<IpcService>,
+);
 type GoalFactory = request_response::PortFactory<IpcService, GoalRequest, (), GoalReply, ()>;
 type GoalServer = Server<IpcService, GoalRequest, (), GoalReply, ()>;
 type GoalClient = IoxClient<IpcService, GoalRequest, (), GoalReply, ()>;
@@ -955,12 +960,7 @@ pub struct Client {
     goal_notifier: Notifier<IpcService>,
     goal_listener: Listener<IpcService>,
     /// Created on first [`Client::publish_pose`], so read-only clients take no publisher slot.
-    pose_pub: std::sync::Mutex<
-        Option<(
-            Publisher<IpcService, PoseEstimate, ()>,
-            Notifier<IpcService>,
-        )>,
-    >,
+    pose_pub: std::sync::Mutex<Option<PosePublisher>>,
     next_id: AtomicU64,
     /// For the stop path ([`Client::stop`] opens a [`StopClient`] per stop).
     config: IpcConfig,

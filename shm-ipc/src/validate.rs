@@ -209,6 +209,8 @@ impl RejectReason {
 }
 
 /// A request that passed validation, decoded into Rust types.
+// The set-goal variant is large on purpose: a fixed array, so validation never allocates.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, PartialEq)]
 pub enum ValidRequest {
     /// Drive to `goal` avoiding `obstacles` (at most [`MAX_OBSTACLES`], all finite, radii > 0).

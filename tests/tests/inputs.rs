@@ -7,7 +7,7 @@ use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use e2e::{binaries, SimDaemon};
-use shm_ipc::{Client, IpcConfig, Mode, Pose2};
+use shm_ipc::{Client, IpcConfig, Mode};
 
 /// Helper process for the tests below (run as a child of this test binary): opens up to 40
 /// clients on `WLNAV_HOLD_PREFIX`, prints how many it holds, then sleeps until killed.
@@ -112,11 +112,17 @@ fn a_process_holding_every_client_slot_cannot_keep_a_stop_out() {
     d.stop();
 }
 
-/// Sends SIGINT to `child` once it has printed a line, and returns its exit code.
-fn interrupt(mut child: Child) -> (Option<i32>, String) {
+/// Sends SIGINT to `child` once it has printed a line on stdout (or after a second if
+/// `wait_for_line` is false), and returns its exit code and output.
+fn interrupt(mut child: Child, wait_for_line: bool) -> (Option<i32>, String) {
     let out = child.stdout.take().unwrap();
     let mut lines = BufReader::new(out).lines();
-    let first = lines.next().expect("a line").unwrap();
+    let first = if wait_for_line {
+        lines.next().expect("a line").unwrap()
+    } else {
+        std::thread::sleep(Duration::from_millis(700));
+        String::new()
+    };
     std::thread::sleep(Duration::from_millis(300));
     // SAFETY: kill(2) on our own child's pid.
     assert_eq!(unsafe { libc::kill(child.id() as i32, libc::SIGINT) }, 0);
@@ -142,12 +148,13 @@ fn ctrl_c_exits_130_and_a_lost_daemon_during_goal_wait_exits_4() {
             .spawn()
             .expect("spawn wlnav")
     };
-    let (code, out) = interrupt(wlnav_cmd(&["watch"]));
+    let (code, out) = interrupt(wlnav_cmd(&["watch"]), true);
     assert_eq!(code, Some(130), "watch:\n{out}");
     let file = dir.join("x.mcap");
-    let (code, out) = interrupt(wlnav_cmd(&["record", file.to_str().unwrap()]));
+    let (code, out) = interrupt(wlnav_cmd(&["record", file.to_str().unwrap()]), false);
+    assert!(out.contains("wrote"), "record finishes its file:\n{out}");
     assert_eq!(code, Some(130), "record:\n{out}");
-    let (code, out) = interrupt(wlnav_cmd(&["goal", "20", "0", "0", "--wait"]));
+    let (code, out) = interrupt(wlnav_cmd(&["goal", "20", "0", "0", "--wait"]), true);
     assert_eq!(code, Some(130), "goal --wait:\n{out}");
 
     // The daemon dies (kill -9) while `goal --wait` follows a goal: exit 4.

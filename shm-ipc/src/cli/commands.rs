@@ -434,7 +434,7 @@ pub fn watch(cli: &Cli, a: &WatchArgs) -> anyhow::Result<u8> {
         }
         last_tick = Some(t.tick);
         let ok = if a.table {
-            (shown % 20 != 0 || emit(&view::table_header())) && emit(&view::table_row(&t))
+            (!shown.is_multiple_of(20) || emit(&view::table_header())) && emit(&view::table_row(&t))
         } else {
             emit(&view::line(&t))
         };
