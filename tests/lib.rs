@@ -203,7 +203,11 @@ impl SimDaemon {
         let mut process = DaemonProcess::spawn_sim(&bins.wlnavd, &prefix, scale, &args, Some(&log))
             .expect("spawn wlnavd");
         let config = IpcConfig::new(prefix);
-        let client = Client::new(&config).expect("client");
+        // The daemon creates the services; the client waits for them.
+        let client = match process.connect(&config, Duration::from_secs(60)) {
+            Ok(c) => c,
+            Err(e) => panic!("wlnavd did not start: {e:#}"),
+        };
         let telemetry = client.subscribe_telemetry().expect("subscribe");
         let first = match process.wait_ready(&telemetry, Duration::from_secs(60)) {
             Ok(t) => t,

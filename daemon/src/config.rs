@@ -189,6 +189,20 @@ pub struct LoopConfig {
     pub rest_speed: f64,
     /// Stop after this many ticks (0 = run until signalled); for soak runs.
     pub max_ticks: u64,
+    /// A pose stamped more than this ahead of the daemon's clock is rejected (it could
+    /// otherwise never go stale). Default 0.05 s.
+    pub pose_max_future: f64,
+    /// Position jump tolerated on top of what the machine can drive since the last
+    /// accepted pose (v_max·(1 + plausibility_margin)·Δt) [m]. Default 0.5.
+    pub pose_jump_tolerance: f64,
+    /// Heading jump tolerated on top of the model's largest yaw rate times Δt [rad].
+    /// Default 0.3.
+    pub pose_heading_tolerance: f64,
+    /// Poses must lie inside `ipc.workspace` grown by this margin [m]. Default 10.
+    pub pose_workspace_margin: f64,
+    /// Consecutive rejected pose samples that make a pose fault → controlled stop; as many
+    /// consistent samples clear it. Default 5.
+    pub pose_reject_stop: u32,
 }
 
 impl Default for LoopConfig {
@@ -208,6 +222,11 @@ impl Default for LoopConfig {
             shutdown_timeout: 5.0,
             rest_speed: 0.02,
             max_ticks: 0,
+            pose_max_future: 0.05,
+            pose_jump_tolerance: 0.5,
+            pose_heading_tolerance: 0.3,
+            pose_workspace_margin: 10.0,
+            pose_reject_stop: 5,
         }
     }
 }
@@ -409,8 +428,11 @@ impl Config {
         Ok(config)
     }
 
-    /// Reads, parses and validates a file; relative paths in it are resolved
-    /// against the file's directory.
+    /// Reads, parses and validates a file; relative paths *given in the file* are
+    /// resolved against the file's directory. Keys the file leaves out keep their default
+    /// (relative) paths, for the caller to resolve like a run without a file
+    /// ([`Config::resolve_paths`] leaves absolute paths alone), so a file without
+    /// `[weights]` finds the weights where a run without a file would.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
         let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
             path: path.to_owned(),
@@ -418,8 +440,34 @@ impl Config {
         })?;
         let mut config = Self::from_toml(&text, &path.display().to_string())?;
         let base = path.parent().unwrap_or(Path::new("."));
+        let given = Self::paths_given(&text);
+        let defaults = (config.weights.clone(), config.can.log.clone());
         config.resolve_paths(&[base.to_path_buf()]);
+        if !given.critic {
+            config.weights.critic = defaults.0.critic;
+        }
+        if !given.actor {
+            config.weights.actor = defaults.0.actor;
+        }
+        if !given.can_log {
+            config.can.log = defaults.1;
+        }
         Ok(config)
+    }
+
+    /// Which path keys a configuration text sets.
+    fn paths_given(text: &str) -> PathsGiven {
+        let v: toml::Table = toml::from_str(text).unwrap_or_default();
+        let has = |section: &str, key: &str| {
+            v.get(section)
+                .and_then(|s| s.as_table())
+                .is_some_and(|s| s.contains_key(key))
+        };
+        PathsGiven {
+            critic: has("weights", "critic"),
+            actor: has("weights", "actor"),
+            can_log: has("can", "log"),
+        }
     }
 
     /// Makes relative weight and log paths absolute: the first of `bases` under which
@@ -492,6 +540,13 @@ impl Config {
         check_non_negative("loop.plausibility_margin", l.plausibility_margin)?;
         check_non_negative("loop.shutdown_timeout", l.shutdown_timeout)?;
         check_positive("loop.rest_speed", l.rest_speed)?;
+        check_non_negative("loop.pose_max_future", l.pose_max_future)?;
+        check_non_negative("loop.pose_jump_tolerance", l.pose_jump_tolerance)?;
+        check_non_negative("loop.pose_heading_tolerance", l.pose_heading_tolerance)?;
+        check_non_negative("loop.pose_workspace_margin", l.pose_workspace_margin)?;
+        if l.pose_reject_stop == 0 {
+            return Err(invalid("loop.pose_reject_stop", "must be >= 1"));
+        }
         if l.can_bad_frames_stop == 0 {
             return Err(invalid("loop.can_bad_frames_stop", "must be >= 1"));
         }
@@ -562,6 +617,25 @@ impl Config {
         Ok(())
     }
 
+    /// The pose gate's thresholds (DESIGN §11) from `[loop]`, `[machine]` and
+    /// `ipc.workspace`.
+    pub fn pose_gate(&self) -> crate::pose_gate::PoseGateConfig {
+        let l = &self.control;
+        let m = 1.0 + l.plausibility_margin;
+        let w = &self.ipc.workspace;
+        let g = l.pose_workspace_margin;
+        crate::pose_gate::PoseGateConfig {
+            timeout: l.pose_timeout,
+            max_future: l.pose_max_future,
+            max_speed: self.machine.v_max * m,
+            max_yaw_rate: crate::pose_gate::PoseGateConfig::model_yaw_rate(&self.machine) * m,
+            position_tolerance: l.pose_jump_tolerance,
+            heading_tolerance: l.pose_heading_tolerance,
+            region: [w.x_min - g, w.x_max + g, w.y_min - g, w.y_max + g],
+            reject_run: l.pose_reject_stop,
+        }
+    }
+
     /// The goal validator for the configured workspace.
     pub fn goal_validator(&self) -> shm_ipc::GoalValidator {
         let w = &self.ipc.workspace;
@@ -585,6 +659,13 @@ impl Config {
     pub fn to_toml(&self) -> String {
         toml::to_string_pretty(self).unwrap_or_else(|e| format!("# cannot serialise: {e}\n"))
     }
+}
+
+/// Which path keys a configuration file sets (see [`Config::load`]).
+struct PathsGiven {
+    critic: bool,
+    actor: bool,
+    can_log: bool,
 }
 
 fn can_max_lost_limit() -> u8 {
@@ -628,5 +709,25 @@ mod tests {
         assert!(unknown.contains("typo"), "{unknown}");
         let wrong_type = err("[loop]\nrate_hz = \"fast\"\n");
         assert!(wrong_type.contains("rate_hz"), "{wrong_type}");
+        assert!(err("[loop]\npose_reject_stop = 0\n").contains("`loop.pose_reject_stop`"));
+        assert!(err("[loop]\npose_max_future = -1\n").contains("`loop.pose_max_future`"));
+    }
+
+    #[test]
+    fn a_file_without_weights_keeps_the_default_paths_for_the_caller_to_resolve() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("wlnavd.toml");
+        std::fs::write(&file, "[loop]\nrate_hz = 5.0\n").unwrap();
+        let c = Config::load(&file).unwrap();
+        assert_eq!(
+            c.weights,
+            WeightsConfig::default(),
+            "defaults stay relative"
+        );
+        // Paths the file gives are relative to the file.
+        std::fs::write(&file, "[weights]\ncritic = \"w/c.safetensors\"\n").unwrap();
+        let c = Config::load(&file).unwrap();
+        assert_eq!(c.weights.critic, dir.path().join("w/c.safetensors"));
+        assert_eq!(c.weights.actor, WeightsConfig::default().actor);
     }
 }

@@ -5,7 +5,9 @@
 //! Per tick:
 //! 1. newest pose (from `{prefix}/v2/pose`), newest machine state and CAN integrity
 //!    counters (from the CAN I/O task);
-//! 2. staleness and plausibility checks;
+//! 2. staleness and plausibility checks: every pose sample passes the
+//!    [`crate::pose_gate`] (future stamps, jumps, workspace; a run of rejects is a
+//!    pose fault), the machine state its bounds;
 //! 3. the goal lifecycle's tick ([`crate::goal_lifecycle`]: the goal to drive, and
 //!    whether it ended: succeeded, aborted on a fault or for lack of progress), then
 //!    the mode decision (below);
@@ -17,7 +19,8 @@
 //!
 //! Safety (DESIGN §6): a controlled stop — velocities ramped to zero at no more
 //! than the machine's acceleration limits (β̈_max, a_max) from the last command —
-//! on: no goal, goal reached, stale or implausible pose or machine state,
+//! on: no goal, goal reached, stale or implausible pose (a run of gate rejects) or
+//! machine state,
 //! persistent CAN integrity failures (consecutive rejected frames ≥
 //! `loop.can_bad_frames_stop`; single ones are counted and flagged), a failed or
 //! non-finite solve that persists beyond `loop.fallback_ticks` ticks on the
@@ -43,7 +46,9 @@ use crate::config::Config;
 use crate::controller::{Controller, PlanStatus};
 use crate::goal_lifecycle::{Abort, AcceptedGoal, TickInput, TickPlan};
 use crate::ipc::{fault_names, SharedGoals};
+use crate::log_limit::{LogDecision, LogLimiter};
 use crate::notify::Notifier;
+use crate::pose_gate::{PoseGate, PoseVerdict};
 use crate::stats::LoopStats;
 
 /// Why the loop ended.
@@ -89,7 +94,10 @@ pub struct ControlLoop {
     /// Faults that hold until a new goal (solver failure).
     latched: u32,
     last_cmd: [f64; 2],
-    pose: Option<(Pose2, f64)>,
+    /// Every pose sample passes this gate (age, future stamps, plausibility).
+    pose_gate: PoseGate,
+    /// Rejected pose samples are logged at a limited rate.
+    pose_log: LogLimiter,
     fallback_count: u32,
     fallback_plan: Vec<State>,
     fallback_age: usize,
@@ -117,6 +125,7 @@ impl ControlLoop {
     pub fn new(ctx: LoopContext, controller: Box<dyn Controller>, notifier: Notifier) -> Self {
         let horizon = ctx.config.mpc.horizon;
         let params = ctx.config.machine;
+        let pose_gate = PoseGate::new(ctx.config.pose_gate());
         Self {
             ctx,
             controller,
@@ -126,7 +135,8 @@ impl ControlLoop {
             dropped_outcomes: 0,
             latched: 0,
             last_cmd: [0.0; 2],
-            pose: None,
+            pose_gate,
+            pose_log: LogLimiter::new(5, 10.0),
             fallback_count: 0,
             fallback_plan: Vec::with_capacity(horizon + 1),
             fallback_age: 0,
@@ -207,9 +217,45 @@ impl ControlLoop {
         ]
     }
 
-    fn pose_fresh(&self, now: f64) -> Option<Pose2> {
-        let (p, t) = self.pose?;
-        (now - t <= self.ctx.config.control.pose_timeout).then_some(p)
+    /// Feeds every waiting pose sample through the gate (oldest first, bounded per tick);
+    /// true if any was rejected.
+    fn read_poses(&mut self) -> bool {
+        // The subscriber buffer holds 16; the bound only guards against a publisher that
+        // refills it faster than we drain.
+        const MAX_SAMPLES_PER_TICK: usize = 64;
+        let mut rejected = false;
+        for _ in 0..MAX_SAMPLES_PER_TICK {
+            let sample = match self.ctx.endpoint.receive_pose() {
+                Ok(Some(p)) => p,
+                Ok(None) => break,
+                Err(e) => {
+                    tracing::warn!("pose: {e}");
+                    break;
+                }
+            };
+            let t = self.ctx.clock.from_monotonic_ns(sample.timestamp_ns);
+            let now = self.ctx.clock.now();
+            let valid = sample.flags & shm_ipc::pose_flags::VALID != 0;
+            if let PoseVerdict::Rejected(why) = self.pose_gate.offer(sample.pose(), valid, t, now) {
+                rejected = true;
+                if let LogDecision::Log { suppressed } = self.pose_log.check(now) {
+                    tracing::warn!(
+                        "pose sample {} rejected: {why} ({} in a row{})",
+                        sample.sequence,
+                        self.pose_gate.reject_run(),
+                        if suppressed > 0 {
+                            format!("; {suppressed} more rejected since the last report")
+                        } else {
+                            String::new()
+                        }
+                    );
+                }
+            }
+        }
+        if let Some(n) = self.pose_log.summary(self.ctx.clock.now()) {
+            tracing::warn!("{n} more pose samples rejected (not logged one by one)");
+        }
+        rejected
     }
 
     fn state_fresh(&self, can: &CanSnapshot, now: f64) -> Option<crate::can::MachineState> {
@@ -243,21 +289,22 @@ impl ControlLoop {
         }
 
         // Inputs.
-        match self.ctx.endpoint.latest_pose() {
-            Ok(Some(p)) if p.is_usable() => {
-                self.pose = Some((p.pose(), self.ctx.clock.from_monotonic_ns(p.timestamp_ns)));
-            }
-            Ok(_) => {}
-            Err(e) => tracing::warn!("pose: {e}"),
-        }
+        let pose_rejected = self.read_poses();
         let can = self.ctx.can.snapshot();
-        let pose = self.pose_fresh(start);
+        let pose = self.pose_gate.fresh(start);
         let state = self.state_fresh(&can, start);
 
         let mut flags = 0u32;
         let mut stop_faults = 0u32;
         if pose.is_none() {
             flags |= fault_flags::POSE_STALE;
+        }
+        if pose_rejected || self.pose_gate.faulted() {
+            flags |= fault_flags::POSE_REJECTED;
+        }
+        if self.pose_gate.faulted() {
+            // A run of implausible samples: the pose source is not to be trusted.
+            stop_faults |= fault_flags::POSE_REJECTED;
         }
         if state.is_none() {
             flags |= fault_flags::MACHINE_STATE_STALE;
@@ -285,6 +332,7 @@ impl ControlLoop {
         // Stale data and persistent integrity failures stop the machine.
         stop_faults |= flags
             & (fault_flags::POSE_STALE | fault_flags::MACHINE_STATE_STALE | fault_flags::CAN_BUS);
+        // (A pose-gate fault was added to `stop_faults` above.)
         if persistent_can {
             stop_faults |= flags & (fault_flags::CAN_CRC | fault_flags::CAN_ALIVE);
         }
@@ -304,7 +352,7 @@ impl ControlLoop {
             t.state = IpcState::from_array([x[0], x[1], x[2], x[3], x[4], x[5]]);
         } else {
             let mut a = [f64::NAN; 6];
-            if let Some(p) = self.pose {
+            if let Some(p) = self.pose_gate.last() {
                 a[0] = p.0.x;
                 a[1] = p.0.y;
                 a[2] = p.0.heading;

@@ -5,20 +5,30 @@
 //! it ends; [`crate::goal_lifecycle`]), and answers at once with accept or a reason. A
 //! rejected request leaves the current goal untouched.
 //!
-//! The task sleeps on the goal event service's file descriptor (tokio `AsyncFd`),
-//! with a slow periodic pass as a safety net against a peer that sends without
-//! notifying.
+//! Stops also arrive on the reserved stop service (`{prefix}/v2/stop`, its own client
+//! slots: a process holding every goal client slot cannot keep a stop out); they are
+//! served first in every pass.
+//!
+//! Rejected requests are logged through a [`LogLimiter`]: the first 5 in each 10 s in
+//! full, the rest counted and summarised in one line.
+//!
+//! The task sleeps on the goal and stop event services' file descriptors (tokio
+//! `AsyncFd`), with a slow periodic pass as a safety net against a peer that sends
+//! without notifying.
 
 use std::os::fd::{AsRawFd, RawFd};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Duration;
 
-use shm_ipc::{fault_flags, DaemonEndpoint, GoalReply, GoalValidator};
-use tokio::io::unix::AsyncFd;
+use shm_ipc::{
+    fault_flags, DaemonEndpoint, GoalKind, GoalReply, GoalValidator, RejectCode, ValidRequest,
+};
+use tokio::io::unix::{AsyncFd, AsyncFdReadyGuard};
 use tokio::sync::Notify;
 
 use crate::goal_lifecycle::{GoalLifecycle, LifecycleSettings};
+use crate::log_limit::{LogDecision, LogLimiter};
 
 /// The goal lifecycle, shared by the IPC task (requests, answered at once) and the
 /// control thread (one tick at a time), with request counters.
@@ -31,7 +41,7 @@ pub struct SharedGoals {
 
 /// Names of the fault bits, for reject reasons and logs.
 pub fn fault_names(flags: u32) -> String {
-    const NAMES: [(u32, &str); 9] = [
+    const NAMES: [(u32, &str); 10] = [
         (fault_flags::POSE_STALE, "pose stale"),
         (fault_flags::MACHINE_STATE_STALE, "machine state stale"),
         (fault_flags::CAN_CRC, "CAN CRC"),
@@ -41,6 +51,7 @@ pub fn fault_names(flags: u32) -> String {
         (fault_flags::OVERRUN, "overrun"),
         (fault_flags::STOP_REQUESTED, "stop requested"),
         (fault_flags::CAN_BUS, "CAN bus"),
+        (fault_flags::POSE_REJECTED, "pose rejected"),
     ];
     let names: Vec<&str> = NAMES
         .iter()
@@ -93,23 +104,71 @@ pub async fn serve_goals(
     stopping: Arc<AtomicBool>,
     stop: Arc<Notify>,
 ) {
-    // SAFETY: the fd belongs to the endpoint's goal listener, which `endpoint` (held
-    // by this task until it returns, after the AsyncFd is dropped) keeps open.
-    let registered = unsafe {
-        AsyncFd::register_with_interest(Fd(endpoint.goal_event_fd()), tokio::io::Interest::READABLE)
+    let register = |fd: RawFd, what: &str| {
+        // SAFETY: the fd belongs to one of the endpoint's listeners, which `endpoint`
+        // (held by this task until it returns, after the AsyncFd is dropped) keeps open.
+        match unsafe { AsyncFd::register_with_interest(Fd(fd), tokio::io::Interest::READABLE) } {
+            Ok(fd) => Some(fd),
+            Err(e) => {
+                tracing::warn!("cannot watch the {what} event fd ({e}); polling every 20 ms");
+                None
+            }
+        }
     };
-    let fd = match registered {
-        Ok(fd) => Some(fd),
-        Err(e) => {
-            tracing::warn!("cannot watch the goal event fd ({e}); polling every 20 ms");
-            None
+    let fd = register(endpoint.goal_event_fd(), "goal");
+    let stop_fd = register(endpoint.stop_event_fd(), "stop");
+    let origin = std::time::Instant::now();
+    let reject_log = Mutex::new(LogLimiter::new(5, 10.0));
+    let log_reject = |request_id: u64, text: &dyn std::fmt::Display| {
+        let now = origin.elapsed().as_secs_f64();
+        let mut limiter = reject_log.lock().unwrap_or_else(|p| p.into_inner());
+        if let LogDecision::Log { suppressed } = limiter.check(now) {
+            if suppressed > 0 {
+                tracing::info!(
+                    "goal request {request_id}: rejected: {text} ({suppressed} more rejected \
+                     requests not logged)"
+                );
+            } else {
+                tracing::info!("goal request {request_id}: rejected: {text}");
+            }
         }
     };
     let serve = || {
         if let Err(e) = endpoint.drain_events() {
             tracing::warn!("goal events: {e}");
         }
+        // The reserved stop path first.
         let shutting_down = stopping.load(Ordering::Relaxed);
+        let result = endpoint.serve_stops(|req| {
+            goals.requests.fetch_add(1, Ordering::Relaxed);
+            if req.kind() == Ok(GoalKind::Stop) {
+                tracing::info!("stop request {} (stop service)", req.request_id);
+                // The same lifecycle path as a stop on the goal service: ends the goal
+                // (cancelled) and latches until a resume.
+                let stop = ValidRequest::Stop {
+                    request_id: req.request_id,
+                };
+                match goals.lock().on_request(&stop, shutting_down) {
+                    Ok(()) => GoalReply::accept(req.request_id),
+                    Err(r) => {
+                        goals.rejected.fetch_add(1, Ordering::Relaxed);
+                        log_reject(req.request_id, &r.text);
+                        GoalReply::reject(req.request_id, r.code, &r.text)
+                    }
+                }
+            } else {
+                goals.rejected.fetch_add(1, Ordering::Relaxed);
+                let text = format!(
+                    "the stop service takes only stop requests (kind 3), got kind {}",
+                    req.kind
+                );
+                log_reject(req.request_id, &text);
+                GoalReply::reject(req.request_id, RejectCode::UnknownKind, &text)
+            }
+        });
+        if let Err(e) = result {
+            tracing::warn!("serving stops: {e}");
+        }
         let result = endpoint.serve_goals(|req| {
             goals.requests.fetch_add(1, Ordering::Relaxed);
             let (valid, reply) = validator.validate_and_reply(req);
@@ -128,7 +187,7 @@ pub async fn serve_goals(
                 }
                 Err((code, text)) => {
                     goals.rejected.fetch_add(1, Ordering::Relaxed);
-                    tracing::info!("goal request {}: rejected: {text}", req.request_id);
+                    log_reject(req.request_id, &text);
                     GoalReply::reject(req.request_id, code, &text)
                 }
             }
@@ -136,22 +195,40 @@ pub async fn serve_goals(
         if let Err(e) = result {
             tracing::warn!("serving goals: {e}");
         }
+        let now = origin.elapsed().as_secs_f64();
+        let summary = reject_log
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .summary(now);
+        if let Some(n) = summary {
+            tracing::info!("{n} more goal requests rejected (not logged one by one)");
+        }
     };
     serve();
-    let period = if fd.is_some() {
+    let period = if fd.is_some() && stop_fd.is_some() {
         Duration::from_millis(200)
     } else {
         Duration::from_millis(20)
     };
+    async fn readable(
+        fd: &Option<AsyncFd<Fd>>,
+    ) -> std::io::Result<Option<AsyncFdReadyGuard<'_, Fd>>> {
+        match fd {
+            Some(fd) => fd.readable().await.map(Some),
+            None => std::future::pending().await,
+        }
+    }
     loop {
         tokio::select! {
             _ = stop.notified() => break,
-            r = async {
-                match &fd {
-                    Some(fd) => fd.readable().await.map(Some),
-                    None => std::future::pending().await,
+            r = readable(&stop_fd) => {
+                serve();
+                if let Ok(Some(mut guard)) = r {
+                    guard.clear_ready();
                 }
-            } => {
+                serve();
+            }
+            r = readable(&fd) => {
                 serve();
                 if let Ok(Some(mut guard)) = r {
                     guard.clear_ready();

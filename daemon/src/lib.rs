@@ -18,8 +18,10 @@ pub mod controller;
 pub mod daemon;
 pub mod goal_lifecycle;
 pub mod ipc;
+pub mod log_limit;
 pub mod logging;
 pub mod notify;
+pub mod pose_gate;
 pub mod sim;
 pub mod stats;
 

@@ -82,7 +82,13 @@ fn default_bases() -> Vec<PathBuf> {
 
 fn build_config(args: &Args) -> Result<Config, String> {
     let mut config = match &args.config {
-        Some(path) => Config::load(path).map_err(|e| e.to_string())?,
+        Some(path) => {
+            // Paths the file gives are relative to it; the ones it leaves out are found
+            // like without a file.
+            let mut c = Config::load(path).map_err(|e| e.to_string())?;
+            c.resolve_paths(&default_bases());
+            c
+        }
         None => {
             let mut c = Config::default();
             c.resolve_paths(&default_bases());

@@ -10,7 +10,7 @@ pub const DEFAULT_PREFIX: &str = "wlnav";
 /// codes).
 pub const API_VERSION: &str = "v2";
 
-/// The three service names for one prefix. Each name is used twice: once for the data
+/// The service names for one prefix. Each name is used twice: once for the data
 /// service (request-response or publish-subscribe) and once for its paired event service;
 /// iceoryx2 tells services apart by name *and* messaging pattern.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -22,6 +22,10 @@ pub struct ServiceNames {
     pub pose: String,
     /// `{prefix}/v2/telemetry`: publish-subscribe [`crate::Telemetry`], plus event.
     pub telemetry: String,
+    /// `{prefix}/v2/stop`: request-response [`crate::GoalRequest`] (kind stop only) →
+    /// [`crate::GoalReply`], plus event: the reserved stop path (see
+    /// [`crate::StopClient`]).
+    pub stop: String,
 }
 
 impl ServiceNames {
@@ -32,6 +36,7 @@ impl ServiceNames {
             goal: format!("{prefix}/{API_VERSION}/goal"),
             pose: format!("{prefix}/{API_VERSION}/pose"),
             telemetry: format!("{prefix}/{API_VERSION}/telemetry"),
+            stop: format!("{prefix}/{API_VERSION}/stop"),
         })
     }
 }

@@ -19,6 +19,7 @@ use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::server::Server;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::{ipc_threadsafe, EventId, FileDescriptorBased, ServiceName, ZeroCopySend};
+use iceoryx2::service::messaging_pattern::MessagingPattern;
 use iceoryx2::service::port_factory::{event, publish_subscribe, request_response};
 use iceoryx2::signal_handling_mode::SignalHandlingMode;
 
@@ -41,6 +42,10 @@ pub mod event_ids {
     pub const POSE: usize = 3;
     /// A [`crate::Telemetry`] sample was published (on `{prefix}/v2/telemetry`).
     pub const TELEMETRY: usize = 4;
+    /// A client sent a stop request (on `{prefix}/v2/stop`).
+    pub const STOP_REQUEST: usize = 5;
+    /// The daemon replied to a stop request (on `{prefix}/v2/stop`).
+    pub const STOP_REPLY: usize = 6;
 }
 
 /// Service quality-of-service settings. They are requirements when opening an existing
@@ -59,8 +64,10 @@ pub mod qos {
     pub const TELEMETRY_MAX_SUBSCRIBERS: usize = 16;
     /// Telemetry publishers: the daemon (2 leaves room for a replay tool).
     pub const TELEMETRY_MAX_PUBLISHERS: usize = 2;
-    /// Pose publishers (localization, simulated backend, replay).
-    pub const POSE_MAX_PUBLISHERS: usize = 4;
+    /// Pose publishers: one. The daemon trusts one pose source only (DESIGN §11); a second
+    /// publisher is refused ([`crate::IpcError::PoseSourceTaken`]) instead of mixing its
+    /// samples with the localization's.
+    pub const POSE_MAX_PUBLISHERS: usize = 1;
     /// Pose subscribers.
     pub const POSE_MAX_SUBSCRIBERS: usize = 8;
     /// Per-subscriber buffer; older samples are overwritten (safe overflow) so a slow
@@ -71,8 +78,19 @@ pub mod qos {
     pub const HISTORY: usize = 1;
     /// Listeners and notifiers per event service.
     pub const EVENT_MAX_PORTS: usize = 64;
+    /// Clients of the reserved stop service. A [`crate::StopClient`] holds its port only
+    /// while one stop request is in flight, so these slots are free unless stops are being
+    /// sent right now.
+    pub const STOP_MAX_CLIENTS: usize = 16;
+    /// Stop requests one stop client may have in flight.
+    pub const STOP_MAX_ACTIVE_REQUESTS_PER_CLIENT: usize = 2;
 }
 
+/// A pose publisher and the notifier that wakes its subscribers.
+type PosePublisher = (
+    Publisher<IpcService, PoseEstimate, ()>,
+    Notifier<IpcService>,
+);
 type GoalFactory = request_response::PortFactory<IpcService, GoalRequest, (), GoalReply, ()>;
 type GoalServer = Server<IpcService, GoalRequest, (), GoalReply, ()>;
 type GoalClient = IoxClient<IpcService, GoalRequest, (), GoalReply, ()>;
@@ -105,11 +123,25 @@ pub struct CleanupReport {
     pub failed: u64,
 }
 
-/// The node and the three services, opened or created with the crate's QoS. Shared setup
-/// of both endpoints.
+/// How a process attaches to the services: the daemon creates them with the crate's
+/// settings (DESIGN §11: "the daemon creates its services"); everyone else only opens
+/// what the daemon created, so a client started first can never fix settings the daemon
+/// cannot use.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Access {
+    /// Open or create with the crate's QoS; refuse a foreign-created service that does
+    /// not fit ([`IpcError::ServiceHeld`]).
+    Create,
+    /// Open only, without requirements (the creator's settings rule); a missing service is
+    /// [`IpcError::NotServed`].
+    Open,
+}
+
+/// The node and the goal, pose and telemetry services, opened or created. Shared setup of
+/// both endpoints.
 struct Connection {
     /// Owns the node's registration; ports keep it alive too, this makes it explicit.
-    _node: Node<IpcService>,
+    node: Node<IpcService>,
     names: ServiceNames,
     goal: GoalFactory,
     goal_event: event::PortFactory<IpcService>,
@@ -127,89 +159,298 @@ fn service_name(name: &str) -> Result<ServiceName, IpcError> {
     })
 }
 
-/// A publish-subscribe service with the crate's buffer, history and overflow QoS.
+/// Who is attached to service `name` (any payload type): `node "x" (pid 12, python3)`, …
+fn service_holders(name: &ServiceName, pattern: MessagingPattern) -> String {
+    use iceoryx2::node::{NodeState, NodeView};
+    use iceoryx2::service::Service as _;
+    let details =
+        match IpcService::details(name, iceoryx2::config::Config::global_config(), pattern) {
+            Ok(Some(d)) => d,
+            Ok(None) => return "nobody (the service vanished meanwhile)".into(),
+            Err(e) => return format!("unknown ({e:?})"),
+        };
+    let Some(dynamic) = details.dynamic_details else {
+        return "unknown".into();
+    };
+    let describe = |view: &dyn Fn() -> Option<String>, state: &str| {
+        view().unwrap_or_else(|| format!("a {state} node without details"))
+    };
+    let mut holders: Vec<String> = dynamic
+        .nodes
+        .iter()
+        .map(|state| match state {
+            NodeState::Alive(v) => describe(
+                &|| {
+                    v.details().as_ref().map(|d| {
+                        format!(
+                            "node {:?} (pid {}, {})",
+                            d.name().to_string(),
+                            d.process_id().value(),
+                            d.executable()
+                        )
+                    })
+                },
+                "live",
+            ),
+            NodeState::Dead(v) => describe(
+                &|| {
+                    v.details().as_ref().map(|d| {
+                        format!(
+                            "dead node {:?} (pid {}, {})",
+                            d.name().to_string(),
+                            d.process_id().value(),
+                            d.executable()
+                        )
+                    })
+                },
+                "dead",
+            ),
+            NodeState::Inaccessible(_) => "a node of another user".into(),
+            NodeState::Undefined(_) => "a node in an undefined state".into(),
+        })
+        .collect();
+    if holders.is_empty() {
+        holders.push("no node".into());
+    }
+    holders.join(", ")
+}
+
+/// The error for a service the daemon could not open or create with its settings: if the
+/// service exists, who holds it ([`IpcError::ServiceHeld`]); else iceoryx2's reason.
+fn create_error<E: std::error::Error + Send + Sync + 'static>(
+    name: &str,
+    pattern: &'static str,
+    messaging: MessagingPattern,
+    e: E,
+) -> IpcError {
+    let exists = ServiceName::new(name).ok().and_then(|n| {
+        use iceoryx2::service::Service as _;
+        IpcService::details(&n, iceoryx2::config::Config::global_config(), messaging)
+            .ok()
+            .flatten()
+            .map(|_| n)
+    });
+    match exists {
+        Some(n) => IpcError::ServiceHeld {
+            service: name.to_owned(),
+            pattern,
+            problem: format!("{e:?}"),
+            holders: service_holders(&n, messaging),
+        },
+        None => IpcError::Service {
+            service: name.to_owned(),
+            pattern,
+            source: boxed(e),
+        },
+    }
+}
+
+/// The daemon found a foreign-created service whose `setting` is `got` where it needs
+/// `want` (the safety-relevant limits are checked exactly, not "at least").
+fn check_setting(
+    name: &str,
+    pattern: &'static str,
+    messaging: MessagingPattern,
+    setting: &str,
+    got: usize,
+    want: usize,
+) -> Result<(), IpcError> {
+    if got == want {
+        return Ok(());
+    }
+    let holders = ServiceName::new(name)
+        .map(|n| service_holders(&n, messaging))
+        .unwrap_or_else(|_| "unknown".into());
+    Err(IpcError::ServiceHeld {
+        service: name.to_owned(),
+        pattern,
+        problem: format!("{setting} is {got}, wlnavd needs {want}"),
+        holders,
+    })
+}
+
+/// A publish-subscribe service: created with the crate's buffer, history and overflow
+/// QoS, or opened as it is.
 fn pubsub<T: std::fmt::Debug + ZeroCopySend>(
     node: &Node<IpcService>,
     name: &str,
     max_publishers: usize,
     max_subscribers: usize,
+    access: Access,
 ) -> Result<publish_subscribe::PortFactory<IpcService, T, ()>, IpcError> {
-    node.service_builder(&service_name(name)?)
-        .publish_subscribe::<T>()
-        .max_publishers(max_publishers)
-        .max_subscribers(max_subscribers)
-        .subscriber_max_buffer_size(qos::SUBSCRIBER_BUFFER)
-        .history_size(qos::HISTORY)
-        .enable_safe_overflow(true)
-        .max_nodes(qos::MAX_NODES)
-        .open_or_create()
-        .map_err(|e| IpcError::Service {
-            service: name.to_owned(),
-            pattern: "publish-subscribe",
-            source: boxed(e),
-        })
+    const PATTERN: &str = "publish-subscribe";
+    let builder = node
+        .service_builder(&service_name(name)?)
+        .publish_subscribe::<T>();
+    match access {
+        Access::Open => builder.open().map_err(|e| {
+            if e == iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenError::DoesNotExist {
+                IpcError::NotServed {
+                    service: name.to_owned(),
+                }
+            } else {
+                IpcError::Service {
+                    service: name.to_owned(),
+                    pattern: PATTERN,
+                    source: boxed(e),
+                }
+            }
+        }),
+        Access::Create => {
+            let factory = builder
+                .max_publishers(max_publishers)
+                .max_subscribers(max_subscribers)
+                .subscriber_max_buffer_size(qos::SUBSCRIBER_BUFFER)
+                .history_size(qos::HISTORY)
+                .enable_safe_overflow(true)
+                .max_nodes(qos::MAX_NODES)
+                .open_or_create()
+                .map_err(|e| create_error(name, PATTERN, MessagingPattern::PublishSubscribe, e))?;
+            use iceoryx2::service::port_factory::PortFactory as _;
+            check_setting(
+                name,
+                PATTERN,
+                MessagingPattern::PublishSubscribe,
+                "max_publishers",
+                factory.static_config().max_publishers(),
+                max_publishers,
+            )?;
+            Ok(factory)
+        }
+    }
+}
+
+/// A request-response service of [`GoalRequest`] → [`GoalReply`] (the goal service and
+/// the stop service).
+fn goal_service(
+    node: &Node<IpcService>,
+    name: &str,
+    max_clients: usize,
+    max_active_requests_per_client: usize,
+    access: Access,
+) -> Result<GoalFactory, IpcError> {
+    const PATTERN: &str = "request-response";
+    let builder = node
+        .service_builder(&service_name(name)?)
+        .request_response::<GoalRequest, GoalReply>();
+    match access {
+        Access::Open => builder.open().map_err(|e| {
+            if e == iceoryx2::service::builder::request_response::RequestResponseOpenError::DoesNotExist {
+                IpcError::NotServed {
+                    service: name.to_owned(),
+                }
+            } else {
+                IpcError::Service {
+                    service: name.to_owned(),
+                    pattern: PATTERN,
+                    source: boxed(e),
+                }
+            }
+        }),
+        Access::Create => {
+            let factory = builder
+                .max_servers(qos::GOAL_MAX_SERVERS)
+                .max_clients(max_clients)
+                .max_active_requests_per_client(max_active_requests_per_client)
+                .max_nodes(qos::MAX_NODES)
+                .open_or_create()
+                .map_err(|e| create_error(name, PATTERN, MessagingPattern::RequestResponse, e))?;
+            use iceoryx2::service::port_factory::PortFactory as _;
+            check_setting(
+                name,
+                PATTERN,
+                MessagingPattern::RequestResponse,
+                "max_servers",
+                factory.static_config().max_servers(),
+                qos::GOAL_MAX_SERVERS,
+            )?;
+            Ok(factory)
+        }
+    }
+}
+
+/// An event service paired with a data service of the same name.
+fn event_service(
+    node: &Node<IpcService>,
+    name: &str,
+    access: Access,
+) -> Result<event::PortFactory<IpcService>, IpcError> {
+    const PATTERN: &str = "event";
+    let builder = node.service_builder(&service_name(name)?).event();
+    match access {
+        Access::Open => builder.open().map_err(|e| {
+            if e == iceoryx2::service::builder::event::EventOpenError::DoesNotExist {
+                IpcError::NotServed {
+                    service: name.to_owned(),
+                }
+            } else {
+                IpcError::Service {
+                    service: name.to_owned(),
+                    pattern: PATTERN,
+                    source: boxed(e),
+                }
+            }
+        }),
+        Access::Create => builder
+            .max_listeners(qos::EVENT_MAX_PORTS)
+            .max_notifiers(qos::EVENT_MAX_PORTS)
+            .max_nodes(qos::MAX_NODES)
+            .open_or_create()
+            .map_err(|e| create_error(name, PATTERN, MessagingPattern::Event, e)),
+    }
+}
+
+/// A node (after the optional stale-node clean-up) and its clean-up report.
+fn make_node(
+    config: &IpcConfig,
+    node_name: &str,
+) -> Result<(Node<IpcService>, CleanupReport), IpcError> {
+    let node_name = NodeName::new(node_name).map_err(|e| IpcError::Node(boxed(e)))?;
+    let cleanup = if config.cleanup_stale_nodes {
+        cleanup_stale_nodes()?
+    } else {
+        CleanupReport::default()
+    };
+    // Signal handling stays with the application (the daemon uses tokio's signals);
+    // iceoryx2 must not install its own SIGINT/SIGTERM handlers.
+    let node = NodeBuilder::new()
+        .name(&node_name)
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<IpcService>()
+        .map_err(|e| IpcError::Node(boxed(e)))?;
+    Ok((node, cleanup))
 }
 
 impl Connection {
-    fn open(config: &IpcConfig, node_name: &str) -> Result<Self, IpcError> {
+    fn open(config: &IpcConfig, node_name: &str, access: Access) -> Result<Self, IpcError> {
         let names = config.service_names()?;
-        let node_name = NodeName::new(node_name).map_err(|e| IpcError::Node(boxed(e)))?;
-        let cleanup = if config.cleanup_stale_nodes {
-            cleanup_stale_nodes()?
-        } else {
-            CleanupReport::default()
-        };
-        // Signal handling stays with the application (the daemon uses tokio's signals);
-        // iceoryx2 must not install its own SIGINT/SIGTERM handlers.
-        let node = NodeBuilder::new()
-            .name(&node_name)
-            .signal_handling_mode(SignalHandlingMode::Disabled)
-            .create::<IpcService>()
-            .map_err(|e| IpcError::Node(boxed(e)))?;
-
-        let goal = node
-            .service_builder(&service_name(&names.goal)?)
-            .request_response::<GoalRequest, GoalReply>()
-            .max_servers(qos::GOAL_MAX_SERVERS)
-            .max_clients(qos::GOAL_MAX_CLIENTS)
-            .max_active_requests_per_client(qos::GOAL_MAX_ACTIVE_REQUESTS_PER_CLIENT)
-            .max_nodes(qos::MAX_NODES)
-            .open_or_create()
-            .map_err(|e| IpcError::Service {
-                service: names.goal.clone(),
-                pattern: "request-response",
-                source: boxed(e),
-            })?;
+        let (node, cleanup) = make_node(config, node_name)?;
+        let goal = goal_service(
+            &node,
+            &names.goal,
+            qos::GOAL_MAX_CLIENTS,
+            qos::GOAL_MAX_ACTIVE_REQUESTS_PER_CLIENT,
+            access,
+        )?;
         let pose = pubsub::<PoseEstimate>(
             &node,
             &names.pose,
             qos::POSE_MAX_PUBLISHERS,
             qos::POSE_MAX_SUBSCRIBERS,
+            access,
         )?;
         let telemetry = pubsub::<Telemetry>(
             &node,
             &names.telemetry,
             qos::TELEMETRY_MAX_PUBLISHERS,
             qos::TELEMETRY_MAX_SUBSCRIBERS,
+            access,
         )?;
-        let event = |name: &str| -> Result<event::PortFactory<IpcService>, IpcError> {
-            node.service_builder(&service_name(name)?)
-                .event()
-                .max_listeners(qos::EVENT_MAX_PORTS)
-                .max_notifiers(qos::EVENT_MAX_PORTS)
-                .max_nodes(qos::MAX_NODES)
-                .open_or_create()
-                .map_err(|e| IpcError::Service {
-                    service: name.to_owned(),
-                    pattern: "event",
-                    source: boxed(e),
-                })
-        };
-        let goal_event = event(&names.goal)?;
-        let pose_event = event(&names.pose)?;
-        let telemetry_event = event(&names.telemetry)?;
+        let goal_event = event_service(&node, &names.goal, access)?;
+        let pose_event = event_service(&node, &names.pose, access)?;
+        let telemetry_event = event_service(&node, &names.telemetry, access)?;
         Ok(Self {
-            _node: node,
+            node,
             names,
             goal,
             goal_event,
@@ -282,12 +523,14 @@ pub struct Wakeup {
     pub goal: bool,
     /// Poses may be waiting: call [`DaemonEndpoint::latest_pose`].
     pub pose: bool,
+    /// Stop requests may be waiting: call [`DaemonEndpoint::receive_stop`] until `None`.
+    pub stop: bool,
 }
 
 impl Wakeup {
     /// True if anything woke the wait (false on timeout or a signal).
     pub fn any(&self) -> bool {
-        self.goal || self.pose
+        self.goal || self.pose || self.stop
     }
 }
 
@@ -385,6 +628,12 @@ pub struct DaemonEndpoint {
     telemetry_notifier: Notifier<IpcService>,
     pose_sub: Subscriber<IpcService, PoseEstimate, ()>,
     pose_listener: Listener<IpcService>,
+    /// The reserved stop path: its own service, so it has its own client slots.
+    _stop_factory: GoalFactory,
+    _stop_event: event::PortFactory<IpcService>,
+    stop_server: GoalServer,
+    stop_notifier: Notifier<IpcService>,
+    stop_listener: Listener<IpcService>,
 }
 
 impl core::fmt::Debug for DaemonEndpoint {
@@ -396,25 +645,42 @@ impl core::fmt::Debug for DaemonEndpoint {
 }
 
 impl DaemonEndpoint {
-    /// Opens or creates the services for `config.prefix` and the daemon's ports. Fails with
-    /// [`IpcError::AlreadyServed`] if a live daemon already serves that prefix.
+    /// Creates the services for `config.prefix` (or opens them if they survive from an
+    /// earlier daemon run with the same settings) and the daemon's ports. Fails with
+    /// [`IpcError::AlreadyServed`] if a live daemon already serves that prefix, and with
+    /// [`IpcError::ServiceHeld`] (naming the service and the processes attached to it) if
+    /// another process created a service with settings the daemon cannot use.
     pub fn new(config: &IpcConfig) -> Result<Self, IpcError> {
-        let conn = Connection::open(config, "wlnavd")?;
+        let conn = Connection::open(config, "wlnavd", Access::Create)?;
         let names = &conn.names;
-        let server = conn.goal.server_builder().create().map_err(|e| {
-            if e == iceoryx2::service::port_factory::server::ServerCreateError::ExceedsMaxSupportedServers
-            {
-                IpcError::AlreadyServed {
-                    service: names.goal.clone(),
+        let server_of = |factory: &GoalFactory, service: &str| {
+            factory.server_builder().create().map_err(|e| {
+                if e == iceoryx2::service::port_factory::server::ServerCreateError::ExceedsMaxSupportedServers
+                {
+                    IpcError::AlreadyServed {
+                        service: service.to_owned(),
+                    }
+                } else {
+                    IpcError::Port {
+                        port: "server",
+                        service: service.to_owned(),
+                        source: boxed(e),
+                    }
                 }
-            } else {
-                IpcError::Port {
-                    port: "server",
-                    service: names.goal.clone(),
-                    source: boxed(e),
-                }
-            }
-        })?;
+            })
+        };
+        let server = server_of(&conn.goal, &names.goal)?;
+        let stop_factory = goal_service(
+            &conn.node,
+            &names.stop,
+            qos::STOP_MAX_CLIENTS,
+            qos::STOP_MAX_ACTIVE_REQUESTS_PER_CLIENT,
+            Access::Create,
+        )?;
+        let stop_event = event_service(&conn.node, &names.stop, Access::Create)?;
+        let stop_server = server_of(&stop_factory, &names.stop)?;
+        let stop_notifier = Connection::notifier(&stop_event, &names.stop)?;
+        let stop_listener = Connection::listener(&stop_event, &names.stop)?;
         let goal_notifier = Connection::notifier(&conn.goal_event, &names.goal)?;
         let goal_listener = Connection::listener(&conn.goal_event, &names.goal)?;
         let telemetry_pub =
@@ -447,6 +713,11 @@ impl DaemonEndpoint {
             telemetry_notifier,
             pose_sub,
             pose_listener,
+            _stop_factory: stop_factory,
+            _stop_event: stop_event,
+            stop_server,
+            stop_notifier,
+            stop_listener,
         })
     }
 
@@ -472,7 +743,38 @@ impl DaemonEndpoint {
             request: *active.payload(),
             active: Some(active),
             endpoint: self,
+            via_stop_service: false,
         }))
+    }
+
+    /// Takes the next pending request of the reserved stop service without blocking.
+    /// Serve these before goals. Answer with [`IncomingGoal::reply`].
+    pub fn receive_stop(&self) -> Result<Option<IncomingGoal<'_>>, IpcError> {
+        let active = self.stop_server.receive().map_err(|e| IpcError::Receive {
+            service: self.conn.names.stop.clone(),
+            source: boxed(e),
+        })?;
+        Ok(active.map(|active| IncomingGoal {
+            request: *active.payload(),
+            active: Some(active),
+            endpoint: self,
+            via_stop_service: true,
+        }))
+    }
+
+    /// Answers every pending request of the stop service with `handler`'s reply; returns
+    /// how many were served.
+    pub fn serve_stops(
+        &self,
+        mut handler: impl FnMut(&GoalRequest) -> GoalReply,
+    ) -> Result<usize, IpcError> {
+        let mut n = 0;
+        while let Some(stop) = self.receive_stop()? {
+            let reply = handler(stop.request());
+            stop.reply(reply)?;
+            n += 1;
+        }
+        Ok(n)
     }
 
     /// Answers every pending request with `handler`'s reply; returns how many were served.
@@ -532,6 +834,7 @@ impl DaemonEndpoint {
             &[
                 listener_fd(&self.goal_listener),
                 listener_fd(&self.pose_listener),
+                listener_fd(&self.stop_listener),
             ],
             timeout,
         )
@@ -543,6 +846,7 @@ impl DaemonEndpoint {
         Ok(Wakeup {
             goal: ready.first().copied().unwrap_or(false),
             pose: ready.get(1).copied().unwrap_or(false),
+            stop: ready.get(2).copied().unwrap_or(false),
         })
     }
 
@@ -550,7 +854,14 @@ impl DaemonEndpoint {
     /// before reading the data, so the descriptors stop being readable).
     pub fn drain_events(&self) -> Result<(), IpcError> {
         drain(&self.goal_listener, &self.conn.names.goal)?;
-        drain(&self.pose_listener, &self.conn.names.pose)
+        drain(&self.pose_listener, &self.conn.names.pose)?;
+        drain(&self.stop_listener, &self.conn.names.stop)
+    }
+
+    /// File descriptor that becomes readable when a stop request may be waiting on the
+    /// reserved stop service.
+    pub fn stop_event_fd(&self) -> RawFd {
+        listener_fd(&self.stop_listener)
     }
 
     /// File descriptor that becomes readable when a goal request may be waiting.
@@ -570,6 +881,8 @@ pub struct IncomingGoal<'a> {
     request: GoalRequest,
     active: Option<GoalActive>,
     endpoint: &'a DaemonEndpoint,
+    /// Came through the reserved stop service (reply notifications go there).
+    via_stop_service: bool,
 }
 
 impl core::fmt::Debug for IncomingGoal<'_> {
@@ -586,12 +899,36 @@ impl IncomingGoal<'_> {
         &self.request
     }
 
+    /// True if the request came through the reserved stop service.
+    pub fn via_stop_service(&self) -> bool {
+        self.via_stop_service
+    }
+
+    /// The service name, notifier and reply event id of the service this came from.
+    fn reply_path(&self) -> (&String, &Notifier<IpcService>, usize) {
+        let ep = self.endpoint;
+        if self.via_stop_service {
+            (
+                &ep.conn.names.stop,
+                &ep.stop_notifier,
+                event_ids::STOP_REPLY,
+            )
+        } else {
+            (
+                &ep.conn.names.goal,
+                &ep.goal_notifier,
+                event_ids::GOAL_REPLY,
+            )
+        }
+    }
+
     /// Sends `reply` (its `request_id` is overwritten with the request's) and wakes the
     /// client. A client that already gave up is not an error.
     pub fn reply(mut self, mut reply: GoalReply) -> Result<(), IpcError> {
-        let service = &self.endpoint.conn.names.goal;
         reply.request_id = self.request.request_id;
-        if let Some(active) = self.active.take() {
+        let active = self.active.take();
+        let (service, notifier, id) = self.reply_path();
+        if let Some(active) = active {
             if active.is_connected() {
                 active.send_copy(reply).map_err(|e| IpcError::Send {
                     service: service.clone(),
@@ -599,7 +936,7 @@ impl IncomingGoal<'_> {
                 })?;
             }
         }
-        notify(&self.endpoint.goal_notifier, event_ids::GOAL_REPLY, service)
+        notify(notifier, id, service)
     }
 }
 
@@ -609,11 +946,8 @@ impl Drop for IncomingGoal<'_> {
             // Disconnect first, then wake the client so it sees the disconnect. A failed
             // notification only delays the client until its timeout: nothing to report.
             drop(active);
-            let _ = notify(
-                &self.endpoint.goal_notifier,
-                event_ids::GOAL_REPLY,
-                &self.endpoint.conn.names.goal,
-            );
+            let (service, notifier, id) = self.reply_path();
+            let _ = notify(notifier, id, service);
         }
     }
 }
@@ -634,6 +968,8 @@ pub struct Client {
     /// Created on first [`Client::publish_pose`], so read-only clients take no publisher slot.
     pose_pub: std::sync::Mutex<Option<PosePublisher>>,
     next_id: AtomicU64,
+    /// For the stop path ([`Client::stop`] opens a [`StopClient`] per stop).
+    config: IpcConfig,
 }
 
 impl core::fmt::Debug for Client {
@@ -645,10 +981,13 @@ impl core::fmt::Debug for Client {
 }
 
 impl Client {
-    /// Opens or creates the services for `config.prefix`. Succeeds without a daemon (the
-    /// services are created on demand); requests then fail with [`ClientError::NoDaemon`].
+    /// Opens the services the daemon created for `config.prefix` (a client never creates
+    /// a service). Fails with [`IpcError::NotServed`] when no daemon has created them
+    /// (not started yet, or another prefix); see [`Client::connect`] to wait for one. The
+    /// goal client port is taken here (one of 32 slots); [`Client::stop`] does not need
+    /// it.
     pub fn new(config: &IpcConfig) -> Result<Self, IpcError> {
-        let conn = Connection::open(config, "wlnav-client")?;
+        let conn = Connection::open(config, "wlnav-client", Access::Open)?;
         let names = &conn.names;
         let client = conn
             .goal
@@ -671,7 +1010,28 @@ impl Client {
             goal_listener,
             pose_pub: std::sync::Mutex::new(None),
             next_id: AtomicU64::new(start),
+            config: IpcConfig {
+                cleanup_stale_nodes: false,
+                ..config.clone()
+            },
         })
+    }
+
+    /// Like [`Client::new`], but waits up to `timeout` for a daemon to create the services
+    /// (polling every 20 ms); other errors return at once.
+    pub fn connect(config: &IpcConfig, timeout: Duration) -> Result<Self, IpcError> {
+        let deadline = Instant::now() + timeout;
+        let mut config = config.clone();
+        loop {
+            match Self::new(&config) {
+                Err(IpcError::NotServed { .. }) if Instant::now() < deadline => {
+                    // Clean once; the retries need not list the nodes again.
+                    config.cleanup_stale_nodes = false;
+                    std::thread::sleep(Duration::from_millis(20));
+                }
+                other => return other,
+            }
+        }
     }
 
     /// The service names in use.
@@ -742,10 +1102,11 @@ impl Client {
         self.request(&GoalRequest::cancel(self.next_request_id()), timeout)
     }
 
-    /// Asks the daemon for a controlled stop. The stop latches: goals are rejected until
-    /// [`Client::resume`].
+    /// Asks the daemon for a controlled stop through the reserved stop service (see
+    /// [`StopClient`]): it gets through even when every goal client slot is taken. The stop
+    /// latches: goals are rejected until [`Client::resume`].
     pub fn stop(&self, timeout: Duration) -> Result<GoalReply, ClientError> {
-        self.request(&GoalRequest::stop(self.next_request_id()), timeout)
+        StopClient::new(&self.config)?.stop_with_id(self.next_request_id(), timeout)
     }
 
     /// Releases an operator stop: goals are accepted again.
@@ -763,16 +1124,19 @@ impl Client {
             .lock()
             .unwrap_or_else(|poisoned| poisoned.into_inner());
         if guard.is_none() {
-            let publisher =
-                self.conn
-                    .pose
-                    .publisher_builder()
-                    .create()
-                    .map_err(|e| IpcError::Port {
+            let publisher = self.conn.pose.publisher_builder().create().map_err(|e| {
+                if e == iceoryx2::port::publisher::PublisherCreateError::ExceedsMaxSupportedPublishers {
+                    IpcError::PoseSourceTaken {
+                        service: service.clone(),
+                    }
+                } else {
+                    IpcError::Port {
                         port: "publisher",
                         service: service.clone(),
                         source: boxed(e),
-                    })?;
+                    }
+                }
+            })?;
             let notifier = Connection::notifier(&self.conn.pose_event, service)?;
             *guard = Some((publisher, notifier));
         }
@@ -833,58 +1197,175 @@ impl PendingGoal<'_> {
 
     /// The reply if it has arrived, without blocking.
     pub fn try_reply(&self) -> Result<Option<GoalReply>, ClientError> {
-        let response = self.pending.receive().map_err(|e| IpcError::Receive {
-            service: self.client.conn.names.goal.clone(),
-            source: boxed(e),
-        })?;
-        match response {
-            None => Ok(None),
-            Some(r) => {
-                let reply = *r.payload();
-                if reply.request_id != self.request_id {
-                    return Err(ClientError::ReplyMismatch {
-                        expected: self.request_id,
-                        got: reply.request_id,
-                    });
-                }
-                Ok(Some(reply))
-            }
-        }
+        try_reply(&self.pending, self.request_id, &self.client.conn.names.goal)
     }
 
-    /// Waits up to `timeout` for the reply, sleeping on the goal event service.
+    /// Waits up to `timeout` for the reply, sleeping on the goal event service. A signal
+    /// interrupting the wait is [`IpcError::Interrupted`].
     pub fn wait(self, timeout: Duration) -> Result<GoalReply, ClientError> {
-        let deadline = Instant::now() + timeout;
-        let service = &self.client.conn.names.goal;
-        loop {
-            if let Some(reply) = self.try_reply()? {
-                return Ok(reply);
-            }
-            if !self.pending.is_connected() {
-                // The server may have replied and dropped the request between the two
-                // checks; look once more before giving up.
-                return match self.try_reply()? {
-                    Some(reply) => Ok(reply),
-                    None => Err(ClientError::Dropped {
-                        request_id: self.request_id,
-                    }),
-                };
-            }
-            let now = Instant::now();
-            if now >= deadline {
-                return Err(ClientError::Timeout {
-                    request_id: self.request_id,
-                    timeout,
+        wait_reply(
+            &self.pending,
+            self.request_id,
+            &self.client.goal_listener,
+            &self.client.conn.names.goal,
+            timeout,
+        )
+    }
+}
+
+/// Maps a listener wait error: a signal is [`IpcError::Interrupted`] (the caller decides),
+/// anything else an event error on `service`.
+fn wait_error(e: iceoryx2::port::listener::ListenerWaitError, service: &str) -> IpcError {
+    if e == iceoryx2::port::listener::ListenerWaitError::InterruptSignal {
+        IpcError::Interrupted
+    } else {
+        IpcError::Event {
+            service: service.to_owned(),
+            source: boxed(e),
+        }
+    }
+}
+
+/// The reply to `pending`, if it has arrived (checked against `request_id`).
+fn try_reply(
+    pending: &GoalPending,
+    request_id: u64,
+    service: &str,
+) -> Result<Option<GoalReply>, ClientError> {
+    let response = pending.receive().map_err(|e| IpcError::Receive {
+        service: service.to_owned(),
+        source: boxed(e),
+    })?;
+    match response {
+        None => Ok(None),
+        Some(r) => {
+            let reply = *r.payload();
+            if reply.request_id != request_id {
+                return Err(ClientError::ReplyMismatch {
+                    expected: request_id,
+                    got: reply.request_id,
                 });
             }
-            self.client
-                .goal_listener
-                .timed_wait(|_| {}, deadline - now)
-                .map_err(|e| IpcError::Event {
-                    service: service.clone(),
-                    source: boxed(e),
-                })?;
+            Ok(Some(reply))
         }
+    }
+}
+
+/// Waits up to `timeout` for the reply to `pending`, sleeping on `listener`.
+fn wait_reply(
+    pending: &GoalPending,
+    request_id: u64,
+    listener: &Listener<IpcService>,
+    service: &str,
+    timeout: Duration,
+) -> Result<GoalReply, ClientError> {
+    let deadline = Instant::now() + timeout;
+    loop {
+        if let Some(reply) = try_reply(pending, request_id, service)? {
+            return Ok(reply);
+        }
+        if !pending.is_connected() {
+            // The server may have replied and dropped the request between the two
+            // checks; look once more before giving up.
+            return match try_reply(pending, request_id, service)? {
+                Some(reply) => Ok(reply),
+                None => Err(ClientError::Dropped { request_id }),
+            };
+        }
+        let now = Instant::now();
+        if now >= deadline {
+            return Err(ClientError::Timeout {
+                request_id,
+                timeout,
+            });
+        }
+        listener
+            .timed_wait(|_| {}, deadline - now)
+            .map_err(|e| wait_error(e, service))?;
+    }
+}
+
+/// The reserved stop path (DESIGN §11: "a stop must get through even when a misbehaving
+/// local process holds every ordinary client slot").
+///
+/// Stops travel on their own request-response service, `{prefix}/v2/stop` (payloads as on
+/// the goal service; only kind 3 is accepted there), with its own client slots and paired
+/// event service. Neither [`Client::new`] nor anything else holds a port there: a
+/// `StopClient` opens only the stop services (not the goal, pose or telemetry ones, whose
+/// node and client limits another process may exhaust) and creates its client port per
+/// [`StopClient::stop`] call, releasing it with the reply. So a process that leaks
+/// `Client`s, or holds every goal client slot, cannot keep a stop out; only one that
+/// deliberately sits on all 16 stop slots could, which is why the daemon also honours a
+/// stop (kind 3) on the goal service. A stop on either service latches the same way:
+/// set-goals are rejected until a resume ([`Client::resume`], on the goal service).
+pub struct StopClient {
+    _node: Node<IpcService>,
+    service: String,
+    factory: GoalFactory,
+    event: event::PortFactory<IpcService>,
+}
+
+impl core::fmt::Debug for StopClient {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("StopClient")
+            .field("service", &self.service)
+            .finish_non_exhaustive()
+    }
+}
+
+impl StopClient {
+    /// Opens the stop service of `config.prefix` (never creates it): [`IpcError::NotServed`]
+    /// without a daemon.
+    pub fn new(config: &IpcConfig) -> Result<Self, IpcError> {
+        let names = config.service_names()?;
+        let (node, _) = make_node(config, "wlnav-stop")?;
+        let factory = goal_service(&node, &names.stop, 0, 0, Access::Open)?;
+        let event = event_service(&node, &names.stop, Access::Open)?;
+        Ok(Self {
+            _node: node,
+            service: names.stop,
+            factory,
+            event,
+        })
+    }
+
+    /// Sends a stop request and waits up to `timeout` for the daemon's reply.
+    pub fn stop(&self, timeout: Duration) -> Result<GoalReply, ClientError> {
+        self.stop_with_id(crate::monotonic_now_ns().max(1), timeout)
+    }
+
+    /// [`StopClient::stop`] with a chosen request id.
+    pub fn stop_with_id(
+        &self,
+        request_id: u64,
+        timeout: Duration,
+    ) -> Result<GoalReply, ClientError> {
+        let service = &self.service;
+        // Ports for this request only: nothing stays attached after the reply.
+        let client = self
+            .factory
+            .client_builder()
+            .create()
+            .map_err(|e| IpcError::Port {
+                port: "client",
+                service: service.clone(),
+                source: boxed(e),
+            })?;
+        let notifier = Connection::notifier(&self.event, service)?;
+        let listener = Connection::listener(&self.event, service)?;
+        let pending = client
+            .send_copy(GoalRequest::stop(request_id))
+            .map_err(|e| IpcError::Send {
+                service: service.clone(),
+                source: boxed(e),
+            })?;
+        if pending.number_of_server_connections() == 0 {
+            return Err(ClientError::NoDaemon {
+                service: service.clone(),
+            });
+        }
+        notify(&notifier, event_ids::STOP_REQUEST, service)?;
+        wait_reply(&pending, request_id, &listener, service, timeout)
     }
 }
 
@@ -916,7 +1397,7 @@ impl TelemetrySubscriber {
     }
 
     /// The next sample, waiting up to `timeout` for one to be published (`Ok(None)` on
-    /// timeout).
+    /// timeout, [`IpcError::Interrupted`] if a signal interrupts the wait).
     pub fn recv_timeout(&self, timeout: Duration) -> Result<Option<Telemetry>, IpcError> {
         let deadline = Instant::now() + timeout;
         loop {
@@ -929,10 +1410,7 @@ impl TelemetrySubscriber {
             }
             self.listener
                 .timed_wait(|_| {}, deadline - now)
-                .map_err(|e| IpcError::Event {
-                    service: self.service.clone(),
-                    source: boxed(e),
-                })?;
+                .map_err(|e| wait_error(e, &self.service))?;
         }
     }
 

@@ -39,6 +39,37 @@ pub enum IpcError {
         /// iceoryx2's reason
         source: BoxedSource,
     },
+    /// The service does not exist: no daemon has created it (the client library only opens
+    /// services; `wlnavd` creates them).
+    #[error("no daemon serves {service:?} (no such service; is wlnavd running with this prefix?)")]
+    NotServed {
+        /// Service name
+        service: String,
+    },
+    /// The daemon cannot use a service that another process created before it started
+    /// (with settings other than the daemon's). Names the service and the processes
+    /// attached to it, so a field engineer knows what to stop.
+    #[error(
+        "service {service:?} ({pattern}) was created by another process with settings wlnavd \
+         cannot use ({problem}); attached: {holders}. Stop those processes (peers must only \
+         open the services, never create them) and start wlnavd again"
+    )]
+    ServiceHeld {
+        /// Service name
+        service: String,
+        /// Messaging pattern
+        pattern: &'static str,
+        /// What does not fit (iceoryx2's reason, or the setting that differs)
+        problem: String,
+        /// The processes attached to the service (node name, pid, executable)
+        holders: String,
+    },
+    /// Another process already publishes poses: the pose service admits one publisher.
+    #[error("another process already publishes poses on {service:?} (one pose source only)")]
+    PoseSourceTaken {
+        /// Service name
+        service: String,
+    },
     /// Another process already serves goals under this prefix.
     #[error("another daemon already serves {service:?}; use a different prefix")]
     AlreadyServed {

@@ -7,10 +7,15 @@
 //! * [`DaemonEndpoint`]: the daemon's side (serve goal requests, publish [`Telemetry`],
 //!   read [`PoseEstimate`]s, wait on events).
 //! * [`Client`]: everyone else (send a goal and get accept/reject with a reason, cancel,
-//!   stop, resume, publish poses, [`Client::subscribe_telemetry`]).
-//! * [`GoalValidator`]: finite numbers, inside the workspace, ≤ 8 obstacles with positive
-//!   radius; rejections carry a [`RejectReason`]. (The footprint checks against the
-//!   obstacles need the machine and are the daemon's.)
+//!   stop, resume, publish poses, [`Client::subscribe_telemetry`]). It only *opens* the
+//!   services the daemon created ([`IpcError::NotServed`] without a daemon;
+//!   [`Client::connect`] waits for one).
+//! * [`StopClient`]: the reserved stop path; gets through when every goal client slot is
+//!   taken. A stop on it latches like one on the goal service.
+//! * [`GoalValidator`]: finite numbers, inside the workspace, heading not absurd, ≤ 8
+//!   obstacles with positive radius; rejections carry a [`RejectReason`]; accepted headings
+//!   are normalised to (−π, π]. (The footprint checks against the obstacles need the
+//!   machine and are the daemon's.)
 //! * `cli` (default feature `cli`; the daemon uses `default-features = false`): the `wlnav`
 //!   command-line client (goal, cancel, stop, resume, watch, record to MCAP, demo) as a
 //!   library,
@@ -20,7 +25,7 @@
 //! use shm_ipc::{Client, IpcConfig, Pose2};
 //! use std::time::Duration;
 //! # fn main() -> Result<(), Box<dyn std::error::Error>> {
-//! let client = Client::new(&IpcConfig::default())?;
+//! let client = Client::connect(&IpcConfig::default(), Duration::from_secs(5))?;
 //! let reply = client.set_goal(Pose2::new(4.5, 0.0, 0.0), &[], Duration::from_secs(1))?;
 //! if !reply.is_accepted() {
 //!     eprintln!("rejected: {}", reply.reason_text());
@@ -36,8 +41,53 @@
 //! | service name | pattern | payload | paired event service (same name) |
 //! |---|---|---|---|
 //! | `P/v2/goal` | request-response | [`GoalRequest`] → [`GoalReply`] | event id 1 after a request, 2 after a reply |
+//! | `P/v2/stop` | request-response | [`GoalRequest`] (kind 3 only) → [`GoalReply`] | event id 5 after a request, 6 after a reply |
 //! | `P/v2/pose` | publish-subscribe | [`PoseEstimate`] | event id 3 after each sample |
 //! | `P/v2/telemetry` | publish-subscribe | [`Telemetry`] (one per control tick) | event id 4 after each sample |
+//!
+//! ## What a peer must know
+//!
+//! * **iceoryx2 version and flavour.** Use iceoryx2 **0.10.0** exactly (the shared-memory
+//!   layout of iceoryx2's own management structures changes between releases; 0.10.x
+//!   patch releases that keep it are compatible, a different minor version is not), with
+//!   the default configuration (no `iceoryx2.toml`, or one with the default root path and
+//!   prefixes). This crate uses the `ipc_threadsafe` service flavour; it is the same on
+//!   the wire as the plain `ipc` flavour (`iox2.ServiceType.Ipc` in Python,
+//!   `ServiceType::Ipc` in C/C++), which foreign peers use.
+//! * **The daemon creates the services; peers only open them** (`open()`, never
+//!   `open_or_create()`). A peer that creates a service before the daemon starts makes the
+//!   daemon refuse to start, with a message naming the service and the processes attached
+//!   to it. When opening, set no quality-of-service values (or values not above the
+//!   settings below).
+//! * **Replies and wake-ups.** After sending a request, notify the paired event service
+//!   with event id 1 (goal) or 5 (stop); the daemon notifies id 2 / 6 after each reply, so
+//!   a client sleeps on a listener of the same event service and then reads its pending
+//!   response. The daemon's goal server also wakes every **200 ms** by itself, so a
+//!   request sent without a notification is answered within about 200 ms. Telemetry is
+//!   published once per control tick (5 Hz) followed by event id 4. A localization that
+//!   publishes poses should notify id 3 (the control loop reads poses once per tick
+//!   anyway).
+//! * **The newest goal wins.** Each accepted set-goal replaces the previous goal at the
+//!   next tick; a rejected one leaves it in place. Cancel (2), stop (3) and resume (4)
+//!   are always accepted. A stop latches: set-goals are rejected (not ready) until a
+//!   resume (4) on `P/v2/goal`. A stop sent on `P/v2/stop` is handled (and latches) like
+//!   one on `P/v2/goal`.
+//! * **Goals.** Workspace bounds are **inclusive** (a goal exactly on the edge is
+//!   accepted), as is an obstacle boundary (distance = r). Headings are **normalised to
+//!   (−π, π]** on acceptance (telemetry reports the normalised value); a finite heading
+//!   with |heading| > 1e4 rad, or an obstacle number beyond 1e6 m, is rejected as absurd.
+//!   Reject reasons are UTF-8, at most 128 bytes, shortened at a word boundary with `…`.
+//! * **One pose source.** `P/v2/pose` admits a **single publisher**: a second one is
+//!   refused ([`IpcError::PoseSourceTaken`]), so nobody can mix samples into the
+//!   localization's. The daemon reads every sample and rejects (and counts) samples
+//!   stamped more than 50 ms in the future of its `CLOCK_MONOTONIC`, outside the
+//!   workspace (plus a margin), or implying a jump the machine cannot make since the last
+//!   accepted sample; a run of rejects is a pose fault (controlled stop, fault bit
+//!   [`fault_flags::POSE_REJECTED`]). Samples without the valid flag are ignored; age is
+//!   judged on accepted samples only.
+//! * **The stop path.** `P/v2/stop` has its own 16 client slots; the `wlnav` CLI and
+//!   [`StopClient`] hold a port there only while a stop is in flight, so a process that
+//!   holds all 32 goal client slots cannot keep a stop out.
 //!
 //! iceoryx2 has no async API, so every data service has an event service of the **same
 //! name** (iceoryx2 distinguishes services by name and messaging pattern). A sender
@@ -46,13 +96,14 @@
 //! Nobody busy-polls. A foreign peer that sends must notify likewise, or the daemon only
 //! sees its message at its next periodic wake-up.
 //!
-//! Service settings used when creating (a peer that only *opens* may keep iceoryx2's
-//! defaults; if it sets values, they must not exceed these): goal: max 1 server, 32
-//! clients, 16 active requests per client, 64 nodes, safe overflow on; pose: 4 publishers,
-//! 8 subscribers; telemetry: 2 publishers, 16 subscribers; both: subscriber buffer 16, history
-//! 1, safe overflow on, 64 nodes; events: 64 listeners, 64 notifiers, 64 nodes. User headers
-//! are empty (`()`, size 0). Each payload is registered under the type name given below
-//! (the `type_name` iceoryx2 compares when opening; in C++ set `IOX2_TYPE_NAME` to it).
+//! Service settings the daemon creates the services with (a peer opens without
+//! requirements, or with values not above these): goal: max 1 server, 32 clients, 16
+//! active requests per client, 64 nodes, safe overflow on; stop: max 1 server, 16
+//! clients, 2 active requests per client, 64 nodes; pose: **1 publisher**, 8 subscribers;
+//! telemetry: 2 publishers, 16 subscribers; both: subscriber buffer 16, history 1, safe
+//! overflow on, 64 nodes; events: 64 listeners, 64 notifiers, 64 nodes. User headers are
+//! empty (`()`, size 0). Each payload is registered under the type name given below (the
+//! `type_name` iceoryx2 compares when opening; in C++ set `IOX2_TYPE_NAME` to it).
 //!
 //! ## Payload layout (wire format v2)
 //!
@@ -78,7 +129,7 @@
 //! | offset | type | field | meaning |
 //! |---|---|---|---|
 //! | 0 | u64 | request_id | chosen by the client, echoed in the reply |
-//! | 8 | u32 | kind | 1 set goal, 2 cancel, 3 stop (latches), 4 resume ([`GoalKind`]) |
+//! | 8 | u32 | kind | 1 set goal, 2 cancel, 3 stop (latches), 4 resume ([`GoalKind`]); the stop service takes 3 only |
 //! | 12 | u32 | obstacle_count | 0..=8 valid entries in `obstacles` |
 //! | 16 | Pose2 | goal | front-axle goal pose (set goal only) |
 //! | 40 | Obstacle\[8\] | obstacles | circular obstacles, radius already inflated; unused entries zero |
@@ -89,8 +140,8 @@
 //! |---|---|---|---|
 //! | 0 | u64 | request_id | the request answered |
 //! | 8 | u32 | accepted | 1 accepted, 0 rejected |
-//! | 12 | u32 | reason_code | [`RejectCode`]: 0 none, 1 non-finite, 2 out of workspace, 3 too many obstacles, 4 bad obstacle radius, 5 goal-in-collision, 6 unknown kind, 7 not ready, 8 other, 9 machine-in-collision |
-//! | 16 | u32 | reason_len | valid bytes in `reason` (≤ 128) |
+//! | 12 | u32 | reason_code | [`RejectCode`]: 0 none, 1 non-finite, 2 out of workspace (or absurd heading), 3 too many obstacles, 4 bad obstacle (radius, or a number beyond 1e6 m), 5 goal-in-collision, 6 unknown kind, 7 not ready, 8 other, 9 machine-in-collision |
+//! | 16 | u32 | reason_len | valid bytes in `reason` (≤ 128; a longer text is shortened at a word boundary and ends with `…`) |
 //! | 20 | u32 | _reserved | 0 |
 //! | 24 | u8\[128\] | reason | UTF-8 text, zero-filled after `reason_len` |
 //!
@@ -219,7 +270,7 @@ pub use config::{
 };
 pub use endpoint::{
     cleanup_stale_nodes, event_ids, qos, CleanupReport, Client, DaemonEndpoint, IncomingGoal,
-    IpcService, PendingGoal, TelemetrySubscriber, Wakeup,
+    IpcService, PendingGoal, StopClient, TelemetrySubscriber, Wakeup,
 };
 pub use error::{BoxedSource, ClientError, IpcError};
 pub use msg::{
@@ -227,7 +278,10 @@ pub use msg::{
     MachineState, Mode, Obstacle, Pose2, PoseEstimate, RejectCode, Telemetry, MAX_OBSTACLES,
     MAX_ROUTE, MAX_TRAJECTORY, REASON_TEXT_CAPACITY,
 };
-pub use validate::{heapless_obstacles, GoalValidator, RejectReason, ValidRequest, Workspace};
+pub use validate::{
+    heapless_obstacles, normalize_angle, GoalValidator, Num, RejectReason, ValidRequest, Workspace,
+    MAX_HEADING_ABS, MAX_OBSTACLE_ABS,
+};
 
 /// Now, in nanoseconds of `CLOCK_MONOTONIC`: the clock of [`PoseEstimate::timestamp_ns`] and
 /// [`Telemetry::timestamp_ns`]. Monotonic because poses are judged stale by age, which must

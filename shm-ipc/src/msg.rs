@@ -365,8 +365,9 @@ impl GoalReply {
         }
     }
 
-    /// A rejection of `request_id` with a code and a message. The message is truncated at a
-    /// character boundary to [`REASON_TEXT_CAPACITY`] bytes.
+    /// A rejection of `request_id` with a code and a message. A message longer than
+    /// [`REASON_TEXT_CAPACITY`] bytes is shortened at a word boundary (never inside a number,
+    /// a word or a UTF-8 character) and ends with `…`.
     pub fn reject(request_id: u64, code: RejectCode, message: &str) -> Self {
         let mut reply = Self {
             request_id,
@@ -376,7 +377,14 @@ impl GoalReply {
             _reserved: 0,
             reason: [0; REASON_TEXT_CAPACITY],
         };
-        reply.reason_len = write_reason(&mut reply.reason, message);
+        let (kept, ellipsis) = fit_reason(message);
+        let mut len = kept.len();
+        reply.reason[..len].copy_from_slice(kept.as_bytes());
+        if ellipsis {
+            reply.reason[len..len + ELLIPSIS.len()].copy_from_slice(ELLIPSIS.as_bytes());
+            len += ELLIPSIS.len();
+        }
+        reply.reason_len = len as u32;
         reply
     }
 
@@ -395,6 +403,32 @@ impl GoalReply {
     pub fn reason_text(&self) -> &str {
         read_reason(&self.reason, self.reason_len)
     }
+}
+
+/// Appended to a shortened reason text.
+const ELLIPSIS: &str = "…";
+
+/// The part of `message` that fits in a reason, and whether `…` must follow it. A message
+/// that fits is kept whole; a longer one is cut after the last whole word that leaves room
+/// for `…` (at a character boundary if a single word is longer than that).
+fn fit_reason(message: &str) -> (&str, bool) {
+    if message.len() <= REASON_TEXT_CAPACITY {
+        return (message, false);
+    }
+    let budget = REASON_TEXT_CAPACITY - ELLIPSIS.len();
+    let mut end = budget;
+    while !message.is_char_boundary(end) {
+        end -= 1;
+    }
+    // The cut is clean if the next character starts a new word.
+    let next_is_space = message[end..].starts_with(char::is_whitespace);
+    if !next_is_space {
+        if let Some(space) = message[..end].rfind(char::is_whitespace) {
+            end = space;
+        }
+    }
+    let kept = message[..end].trim_end_matches(|c: char| c.is_whitespace() || c == ',');
+    (kept, true)
 }
 
 /// Bits of [`PoseEstimate::flags`].
@@ -624,6 +658,11 @@ pub mod fault_flags {
     pub const STOP_REQUESTED: u32 = 1 << 7;
     /// The CAN bus reported an error or is off.
     pub const CAN_BUS: u32 = 1 << 8;
+    /// Pose samples were rejected by the daemon's gate (timestamp in the future, a jump the
+    /// machine cannot make, outside the workspace, non-finite). Set on the tick that saw a
+    /// rejected sample and while a run of rejects holds; a run of
+    /// `loop.pose_reject_stop` consecutive rejects is a pose fault (controlled stop).
+    pub const POSE_REJECTED: u32 = 1 << 9;
 }
 
 /// Published on `{prefix}/v2/telemetry` by the daemon once per control tick. 2704 bytes,

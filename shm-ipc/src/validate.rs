@@ -6,7 +6,66 @@
 //! is the daemon's ([`crate::RejectCode::GoalInCollision`],
 //! [`crate::RejectCode::MachineInCollision`]).
 
+use core::fmt;
+
 use crate::msg::{GoalKind, GoalReply, GoalRequest, Pose2, RejectCode, MAX_OBSTACLES};
+
+/// Largest goal heading magnitude accepted [rad] (about 1,600 turns). Beyond it a heading
+/// is absurd rather than merely unwrapped: at 1e300 the spacing of `f64` values is far
+/// larger than a turn, so "the heading modulo 2π" has no meaning.
+pub const MAX_HEADING_ABS: f64 = 1.0e4;
+
+/// Largest obstacle centre coordinate or radius magnitude accepted [m]. Squares of larger
+/// values approach the range where the MPC's distance constraints overflow.
+pub const MAX_OBSTACLE_ABS: f64 = 1.0e6;
+
+/// An angle wrapped to (−π, π] (DESIGN §11: goal headings are normalised). NaN stays NaN.
+pub fn normalize_angle(a: f64) -> f64 {
+    use core::f64::consts::{PI, TAU};
+    let r = a.rem_euclid(TAU);
+    // `rem_euclid` may round up to exactly 2π for tiny negative inputs; both branches
+    // then land in (−π, π].
+    if r > PI {
+        r - TAU
+    } else {
+        r
+    }
+}
+
+/// A number as people read it in a reason text: plain decimals for ordinary magnitudes,
+/// scientific notation (4 significant digits) for huge or tiny ones, so `1e308` reads
+/// `1.000e308` and not 309 digits. At most ~12 bytes.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Num {
+    value: f64,
+    decimals: usize,
+}
+
+impl Num {
+    /// `value` with 3 decimals (millimetres, milliradians).
+    pub const fn new(value: f64) -> Self {
+        Self { value, decimals: 3 }
+    }
+
+    /// `value` with `decimals` decimals.
+    pub const fn with_decimals(value: f64, decimals: usize) -> Self {
+        Self { value, decimals }
+    }
+}
+
+impl fmt::Display for Num {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let v = self.value;
+        let a = v.abs();
+        if !v.is_finite() {
+            write!(f, "{v}")
+        } else if a != 0.0 && !(1e-3..1e6).contains(&a) {
+            write!(f, "{v:.3e}")
+        } else {
+            write!(f, "{v:.*}", self.decimals)
+        }
+    }
+}
 
 /// An axis-aligned rectangle of the world frame inside which goals may lie [m].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -61,7 +120,7 @@ impl Default for Workspace {
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum RejectReason {
     /// A goal component is NaN or infinite.
-    #[error("goal {field} is not finite ({value})")]
+    #[error("goal {field} is not finite ({})", Num::new(*value))]
     NonFiniteGoal {
         /// `x`, `y` or `heading`
         field: &'static str,
@@ -69,7 +128,7 @@ pub enum RejectReason {
         value: f64,
     },
     /// An obstacle centre is NaN or infinite.
-    #[error("obstacle {index} centre {field} is not finite ({value})")]
+    #[error("obstacle {index} centre {field} is not finite ({})", Num::new(*value))]
     NonFiniteObstacle {
         /// Obstacle index
         index: usize,
@@ -80,8 +139,9 @@ pub enum RejectReason {
     },
     /// The goal lies outside the workspace rectangle.
     #[error(
-        "goal ({x:.3}, {y:.3}) m is outside the workspace x [{:.1}, {:.1}] y [{:.1}, {:.1}] m",
-        workspace.x_min, workspace.x_max, workspace.y_min, workspace.y_max
+        "goal ({}, {}) m is outside the workspace x [{}, {}] y [{}, {}] m",
+        Num::new(*x), Num::new(*y), Num::with_decimals(workspace.x_min, 1), Num::with_decimals(workspace.x_max, 1),
+        Num::with_decimals(workspace.y_min, 1), Num::with_decimals(workspace.y_max, 1)
     )]
     OutOfWorkspace {
         /// Goal x [m]
@@ -98,7 +158,7 @@ pub enum RejectReason {
         count: u32,
     },
     /// An obstacle radius is zero, negative or not finite.
-    #[error("obstacle {index} radius {r} m must be positive and finite")]
+    #[error("obstacle {index} radius {} m must be positive and finite", Num::new(*r))]
     BadObstacleRadius {
         /// Obstacle index
         index: usize,
@@ -108,6 +168,22 @@ pub enum RejectReason {
     /// The request kind code is not one of [`GoalKind`].
     #[error("unknown request kind {0}")]
     UnknownKind(u32),
+    /// The goal heading is finite but absurd (|heading| > [`MAX_HEADING_ABS`]).
+    #[error("goal heading {} rad is out of range (|heading| <= {} rad)", Num::new(*heading), Num::with_decimals(MAX_HEADING_ABS, 0))]
+    HeadingOutOfRange {
+        /// The heading received [rad]
+        heading: f64,
+    },
+    /// An obstacle number is finite but absurd (|x|, |y| or r > [`MAX_OBSTACLE_ABS`]).
+    #[error("obstacle {index} {field} {} m is out of range (|{field}| <= {} m)", Num::new(*value), Num::new(MAX_OBSTACLE_ABS))]
+    ObstacleOutOfRange {
+        /// Obstacle index
+        index: usize,
+        /// `x`, `y` or `r`
+        field: &'static str,
+        /// The offending value [m]
+        value: f64,
+    },
 }
 
 impl RejectReason {
@@ -115,9 +191,13 @@ impl RejectReason {
     pub fn code(&self) -> RejectCode {
         match self {
             Self::NonFiniteGoal { .. } | Self::NonFiniteObstacle { .. } => RejectCode::NonFinite,
-            Self::OutOfWorkspace { .. } => RejectCode::OutOfWorkspace,
+            Self::OutOfWorkspace { .. } | Self::HeadingOutOfRange { .. } => {
+                RejectCode::OutOfWorkspace
+            }
             Self::TooManyObstacles { .. } => RejectCode::TooManyObstacles,
-            Self::BadObstacleRadius { .. } => RejectCode::BadObstacle,
+            Self::BadObstacleRadius { .. } | Self::ObstacleOutOfRange { .. } => {
+                RejectCode::BadObstacle
+            }
             Self::UnknownKind(_) => RejectCode::UnknownKind,
         }
     }
@@ -227,9 +307,11 @@ impl GoalValidator {
     }
 
     /// Validates one request. Checks run in a fixed order (kind, obstacle count, finiteness,
-    /// workspace, obstacle radii) so the reported reason is deterministic when several
-    /// apply. Cancel, stop and resume are always valid: the goal fields of such a request
-    /// are ignored, and refusing to stop over garbage there would be unsafe.
+    /// workspace (inclusive bounds), heading range, obstacle radii and ranges) so the
+    /// reported reason is deterministic when several apply. Cancel, stop and resume are
+    /// always valid: the goal fields of such a request are ignored, and refusing to stop
+    /// over garbage there would be unsafe. An accepted goal's heading is normalised to
+    /// (−π, π] ([`normalize_angle`]).
     pub fn validate(&self, req: &GoalRequest) -> Result<ValidRequest, RejectReason> {
         let request_id = req.request_id;
         let kind = req.kind().map_err(RejectReason::UnknownKind)?;
@@ -266,10 +348,22 @@ impl GoalValidator {
                 workspace: self.workspace,
             });
         }
+        if g.heading.abs() > MAX_HEADING_ABS {
+            return Err(RejectReason::HeadingOutOfRange { heading: g.heading });
+        }
         for (index, o) in obstacles.iter().enumerate() {
             // `!(r > 0)` also catches NaN.
             if !(o.r > 0.0 && o.r.is_finite()) {
                 return Err(RejectReason::BadObstacleRadius { index, r: o.r });
+            }
+            for (field, value) in [("x", o.x), ("y", o.y), ("r", o.r)] {
+                if value.abs() > MAX_OBSTACLE_ABS {
+                    return Err(RejectReason::ObstacleOutOfRange {
+                        index,
+                        field,
+                        value,
+                    });
+                }
             }
         }
         let obstacles = heapless_obstacles::Obstacles::from_slice(obstacles).ok_or(
@@ -279,7 +373,7 @@ impl GoalValidator {
         )?;
         Ok(ValidRequest::SetGoal {
             request_id,
-            goal: g,
+            goal: Pose2::new(g.x, g.y, normalize_angle(g.heading)),
             obstacles,
         })
     }

@@ -51,6 +51,9 @@ impl TestServer {
                 let n = ep
                     .serve_goals(|req| validator.validate_and_reply(req).1)
                     .expect("serve");
+                let n = n + ep
+                    .serve_stops(|req| validator.validate_and_reply(req).1)
+                    .expect("serve stops");
                 for _ in 0..n {
                     served += 1;
                     ep.publish_telemetry(&telemetry(tick_base + served as u64))
@@ -145,13 +148,60 @@ fn goal_request_is_answered_by_server_thread() {
 
 #[test]
 fn no_daemon_is_reported_not_hung() {
-    let client = Client::new(&unique_config("no_daemon")).expect("client");
+    // Without a daemon the services do not exist, and a client does not create them.
+    let config = unique_config("no_daemon");
     let start = Instant::now();
+    match Client::new(&config) {
+        Err(shm_ipc::IpcError::NotServed { service }) => assert!(service.ends_with("/v2/goal")),
+        other => panic!("expected NotServed, got {other:?}"),
+    }
+    assert!(matches!(
+        Client::connect(&config, Duration::from_millis(100)),
+        Err(shm_ipc::IpcError::NotServed { .. })
+    ));
+    assert!(start.elapsed() < Duration::from_secs(1));
+    // A daemon that has gone (its services kept alive by a client) answers NoDaemon.
+    let ep = DaemonEndpoint::new(&config).expect("daemon");
+    let client = Client::new(&config).expect("client");
+    drop(ep);
     match client.set_goal(Pose2::new(1.0, 0.0, 0.0), &[], TIMEOUT) {
         Err(ClientError::NoDaemon { service }) => assert!(service.ends_with("/v2/goal")),
         other => panic!("expected NoDaemon, got {other:?}"),
     }
-    assert!(start.elapsed() < Duration::from_secs(1));
+    // The stop service went with the daemon (no client holds it).
+    match client.stop(TIMEOUT) {
+        Err(ClientError::Ipc(shm_ipc::IpcError::NotServed { service }))
+        | Err(ClientError::NoDaemon { service }) => assert!(service.ends_with("/v2/stop")),
+        other => panic!("expected NotServed or NoDaemon, got {other:?}"),
+    }
+}
+
+#[test]
+fn a_stop_gets_through_when_every_goal_client_slot_is_taken() {
+    let config = unique_config("stop_slots");
+    let server = TestServer::start(config.clone());
+    let mut held = Vec::new();
+    for _ in 0..40 {
+        match Client::new(&config) {
+            Ok(c) => held.push(c),
+            Err(shm_ipc::IpcError::Port { port: "client", .. }) => {}
+            Err(e) => panic!("unexpected {e}"),
+        }
+    }
+    assert_eq!(
+        held.len(),
+        shm_ipc::qos::GOAL_MAX_CLIENTS,
+        "every goal slot taken"
+    );
+    assert!(Client::new(&config).is_err(), "no goal slot left");
+    let stop = shm_ipc::StopClient::new(&config).expect("stop client");
+    for _ in 0..3 {
+        assert!(stop.stop(TIMEOUT).expect("stop").is_accepted());
+    }
+    // Each `Client::stop` also goes the reserved way.
+    assert!(held[0].stop(TIMEOUT).expect("stop").is_accepted());
+    drop(held);
+    assert_eq!(server.finish(), 4);
 }
 
 #[test]

@@ -57,8 +57,88 @@ fn boundaries_are_accepted() {
     // Exactly eight obstacles.
     let eight = [Obstacle::new(-8.0, 4.0, 0.1); MAX_OBSTACLES];
     assert!(validator().validate(&goal(0.0, 0.0, 0.0, &eight)).is_ok());
-    // Headings need not be wrapped.
+    // Headings need not be wrapped (they are normalised), up to the absurd.
     assert!(validator().validate(&goal(0.0, 0.0, 100.0, &[])).is_ok());
+    assert!(validator()
+        .validate(&goal(0.0, 0.0, shm_ipc::MAX_HEADING_ABS, &[]))
+        .is_ok());
+}
+
+fn accepted_heading(heading: f64) -> f64 {
+    match validator().validate(&goal(1.0, 1.0, heading, &[])) {
+        Ok(ValidRequest::SetGoal { goal, .. }) => goal.heading,
+        other => panic!("{heading}: {other:?}"),
+    }
+}
+
+#[test]
+fn headings_are_normalised_to_minus_pi_exclusive_pi_inclusive() {
+    use std::f64::consts::PI;
+    assert_eq!(accepted_heading(PI), PI);
+    assert_eq!(accepted_heading(-PI), PI);
+    assert_eq!(accepted_heading(3.0 * PI), PI);
+    assert!((accepted_heading(100.0) - (100.0 - 32.0 * PI)).abs() < 1e-12);
+    assert!((accepted_heading(-0.5 - 4.0 * PI) + 0.5).abs() < 1e-12);
+    assert_eq!(accepted_heading(0.0), 0.0);
+    for k in -2000..2000 {
+        let h = accepted_heading(k as f64 * 0.37);
+        assert!(h > -PI && h <= PI, "{k}: {h}");
+    }
+    assert!(shm_ipc::normalize_angle(-1e-18).abs() < 1e-15);
+}
+
+#[test]
+fn absurd_finite_values_are_rejected_with_readable_numbers() {
+    let reason = reject(&goal(1.0, 1.0, 1e300, &[]));
+    assert_eq!(reason.code(), RejectCode::OutOfWorkspace);
+    assert!(matches!(reason, RejectReason::HeadingOutOfRange { .. }));
+    let text = reason.to_string();
+    assert!(text.contains("1.000e300"), "{text}");
+    assert!(text.len() < 100, "{text}");
+    let reason = reject(&goal(-1e300, 1.0, 0.0, &[]));
+    assert!(reason.to_string().contains("-1.000e300"), "{reason}");
+    // Obstacles far beyond any site.
+    let reason = reject(&goal(1.0, 1.0, 0.0, &[Obstacle::new(1e300, 0.0, 1.0)]));
+    assert_eq!(reason.code(), RejectCode::BadObstacle);
+    assert!(reason.to_string().contains("1.000e300"), "{reason}");
+    let reason = reject(&goal(1.0, 1.0, 0.0, &[Obstacle::new(0.0, 10.0, 1e7)]));
+    assert!(matches!(
+        reason,
+        RejectReason::ObstacleOutOfRange { field: "r", .. }
+    ));
+}
+
+#[test]
+fn huge_numbers_print_short_and_reasons_are_never_cut_inside_a_number() {
+    let reason = reject(&goal(1e308, 1e308, 0.0, &[]));
+    let text = reason.to_string();
+    assert!(text.contains("(1.000e308, 1.000e308)"), "{text}");
+    assert!(
+        text.len() <= REASON_TEXT_CAPACITY,
+        "{} bytes: {text}",
+        text.len()
+    );
+    let reply = reason.to_reply(1);
+    assert_eq!(reply.reason_text(), text, "fits whole");
+    // A message that does not fit is cut between words: every number kept is whole.
+    let numbers: Vec<String> = (0..40)
+        .map(|i| format!("{}", 1234.5678 + i as f64))
+        .collect();
+    let message = numbers.join(" ");
+    let reply = GoalReply::reject(1, RejectCode::Other, &message);
+    let kept = reply.reason_text();
+    assert!(kept.len() <= REASON_TEXT_CAPACITY);
+    assert!(kept.ends_with('…'), "{kept}");
+    for word in kept.trim_end_matches('…').split_whitespace() {
+        assert!(
+            numbers.iter().any(|n| n == word),
+            "cut number {word:?} in {kept:?}"
+        );
+    }
+    for n in [0.0, 1.5, -2.25, 999_999.0, 1e6, 1e-4, f64::NAN] {
+        let s = shm_ipc::Num::new(n).to_string();
+        assert!(s.len() <= 12, "{n}: {s}");
+    }
 }
 
 #[test]
@@ -210,15 +290,28 @@ fn workspace_rejects_bad_bounds() {
 
 #[test]
 fn reason_text_is_truncated_at_char_boundary_and_never_panics() {
+    // One long "word": cut at a character boundary, marked with an ellipsis.
     let long = "é".repeat(200); // 400 bytes, 2 per char
     let reply = GoalReply::reject(1, RejectCode::Other, &long);
-    assert_eq!(reply.reason_len as usize, REASON_TEXT_CAPACITY);
-    assert_eq!(reply.reason_text(), "é".repeat(REASON_TEXT_CAPACITY / 2));
+    assert!(reply.reason_len as usize <= REASON_TEXT_CAPACITY);
+    assert_eq!(
+        reply.reason_text(),
+        format!("{}…", "é".repeat((REASON_TEXT_CAPACITY - 3) / 2))
+    );
 
     let three = "€".repeat(100); // 3 bytes per char: 128 is not a boundary
     let reply = GoalReply::reject(1, RejectCode::Other, &three);
-    assert_eq!(reply.reason_len, 126);
-    assert!(reply.reason_text().chars().all(|c| c == '€'));
+    assert!(reply.reason_len as usize <= REASON_TEXT_CAPACITY);
+    assert!(reply.reason_text().ends_with('…'));
+    assert!(reply
+        .reason_text()
+        .trim_end_matches('…')
+        .chars()
+        .all(|c| c == '€'));
+
+    // A short message is kept whole.
+    let reply = GoalReply::reject(1, RejectCode::Other, "fits");
+    assert_eq!(reply.reason_text(), "fits");
 
     // Garbage from a foreign peer: a length beyond the buffer, invalid UTF-8, unknown code.
     let mut bad = GoalReply::reject(1, RejectCode::Other, "ok");

@@ -11,8 +11,8 @@ use e2e::{binaries, SimDaemon};
 use shm_ipc::cli::commands::{follow, FollowEnd, FollowOptions};
 use shm_ipc::cli::follow::GoalTracker;
 use shm_ipc::{
-    fault_flags, AbortReason, Client, ClientError, GoalOutcome, GoalRequest, Mode, Obstacle, Pose2,
-    RejectCode, Telemetry, MAX_OBSTACLES,
+    fault_flags, AbortReason, Client, GoalOutcome, GoalRequest, Mode, Obstacle, Pose2, RejectCode,
+    Telemetry, MAX_OBSTACLES,
 };
 
 const REPLY: Duration = Duration::from_secs(2);
@@ -368,11 +368,10 @@ fn two_daemons_with_different_prefixes_do_not_interfere() {
     let t0 = b.next(Duration::from_secs(2)).tick;
     let t1 = b.next(Duration::from_secs(2)).tick;
     assert!(t1 > t0);
-    // A prefix nobody serves has no daemon.
-    let nobody = Client::new(&shm_ipc::IpcConfig::new(e2e::unique_prefix("nobody"))).unwrap();
+    // A prefix nobody serves has no services (clients never create them).
     assert!(matches!(
-        nobody.set_goal(ga, &[], REPLY),
-        Err(ClientError::NoDaemon { .. })
+        Client::new(&shm_ipc::IpcConfig::new(e2e::unique_prefix("nobody"))),
+        Err(shm_ipc::IpcError::NotServed { .. })
     ));
     b.stop();
 }

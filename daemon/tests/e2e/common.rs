@@ -319,3 +319,78 @@ pub fn ring(x: f64, y: f64, ring: f64, r: f64) -> Vec<Obstacle> {
         })
         .collect()
 }
+
+/// Simulated machine without its built-in localization: the test publishes the poses
+/// (the pose service admits one publisher).
+pub fn sim_config_external_pose(name: &str) -> Config {
+    let mut c = sim_config(name);
+    c.sim.publish_pose = false;
+    c.validate().unwrap();
+    c
+}
+
+/// The simulated machine's true pose as a pose estimate stamped `now_ns`.
+pub fn true_pose(log: &SimLog, now_ns: u64) -> shm_ipc::PoseEstimate {
+    let x = log.true_state;
+    shm_ipc::PoseEstimate::new(now_ns, 0, Pose2::new(x[0], x[1], x[2]))
+}
+
+/// What an external localization publishes for one sample: the true pose (from the
+/// simulated machine), a substitute, or nothing.
+pub enum Sample {
+    /// Publish this estimate.
+    Publish(shm_ipc::PoseEstimate),
+    /// Publish nothing this time.
+    Skip,
+}
+
+/// An external localization on its own thread: every 20 ms (real) it asks `f` what to
+/// publish, given the simulated machine's log (true pose, daemon time) and the current
+/// `CLOCK_MONOTONIC` time, and publishes it on the daemon's pose service through shared
+/// memory.
+pub struct Localization {
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl Localization {
+    pub fn start(
+        prefix: &str,
+        sim: SimHandle,
+        mut f: impl FnMut(&SimLog, u64) -> Sample + Send + 'static,
+    ) -> Self {
+        let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let config = IpcConfig::new(prefix.to_owned());
+        let client = Client::new(&config).expect("localization client");
+        let s = stop.clone();
+        let thread = std::thread::spawn(move || {
+            while !s.load(Ordering::Relaxed) {
+                let log = sim.snapshot();
+                if let Sample::Publish(p) = f(&log, shm_ipc::monotonic_now_ns()) {
+                    client.publish_pose(&p).expect("publish pose");
+                }
+                std::thread::sleep(Duration::from_millis(20));
+            }
+        });
+        Self {
+            stop,
+            thread: Some(thread),
+        }
+    }
+}
+
+impl Drop for Localization {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+/// [`sim_config`] with a given prefix.
+pub fn sim_config_with_prefix(prefix: &str) -> Config {
+    let mut c = sim_config("with-prefix");
+    c.ipc.prefix = prefix.to_owned();
+    c
+}

@@ -3,6 +3,7 @@
 //! them. Each test has its own service prefix.
 
 mod common;
+mod faults;
 mod outcomes;
 mod process;
 

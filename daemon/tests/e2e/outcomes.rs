@@ -6,7 +6,8 @@
 use std::time::{Duration, Instant};
 
 use shm_ipc::{
-    fault_flags, AbortReason, GoalOutcome, Mode, Obstacle, Pose2, RejectCode, Telemetry,
+    fault_flags, AbortReason, GoalOutcome, GoalRequest, IpcConfig, Mode, Obstacle, Pose2,
+    RejectCode, StopClient, Telemetry,
 };
 
 use crate::common::*;
@@ -240,6 +241,72 @@ fn an_operator_stop_latches_until_resume() {
         "{}",
         o.outcome_text()
     );
+    d.stop();
+}
+
+/// The two stop paths (a stop request on the goal service, and one on the reserved stop
+/// service, as `wlnav stop` sends it) end the goal `cancelled` and latch alike; a resume
+/// on the goal service releases either.
+#[test]
+fn a_stop_on_either_service_latches_until_resume() {
+    let d = start(sim_config("latch-both"), None);
+    let stop_client = StopClient::new(&IpcConfig::new(d.config.ipc.prefix.clone())).unwrap();
+    let mut log = Vec::new();
+    let mut ended = Vec::new();
+    for via_stop_service in [false, true] {
+        let a = accepted(&d, Pose2::new(10.0, 0.0, 0.0), &[]);
+        ended.push(a);
+        d.record_until(&mut log, T, "driving", |t| {
+            t.goal_request_id == a && t.command.v > 0.3
+        });
+        let reply = if via_stop_service {
+            stop_client.stop(Duration::from_secs(2)).unwrap()
+        } else {
+            let req = GoalRequest::stop(d.client.next_request_id());
+            d.client.request(&req, Duration::from_secs(2)).unwrap()
+        };
+        assert!(reply.is_accepted(), "{}", reply.reason_text());
+        d.record_until(&mut log, T, "stop latched and at rest", |t| {
+            t.fault_flags & fault_flags::STOP_REQUESTED != 0 && at_rest(t)
+        });
+        let (id, reply) = d.request_goal(Pose2::new(5.0, 0.0, 0.0), &[]);
+        assert!(!reply.is_accepted(), "goal {id} accepted while stopped");
+        assert_eq!(reply.reject_code(), Ok(RejectCode::NotReady));
+        assert!(
+            reply.reason_text().contains("stopped by an operator"),
+            "{}",
+            reply.reason_text()
+        );
+        assert!(d
+            .client
+            .resume(Duration::from_secs(2))
+            .unwrap()
+            .is_accepted());
+        let b = accepted(&d, Pose2::new(5.0, 2.0, 0.0), &[]);
+        ended.push(b);
+        let driving = d.record_until(&mut log, T, "tracking after resume", |t| {
+            t.goal_request_id == b && mode(t) == Mode::Tracking
+        });
+        assert_eq!(driving.fault_flags & fault_flags::STOP_REQUESTED, 0);
+        // Cancel it so the next round starts from rest without a goal.
+        assert!(d
+            .client
+            .cancel(Duration::from_secs(2))
+            .unwrap()
+            .is_accepted());
+        d.record_until(&mut log, T, "cancelled, at rest", |t| {
+            t.goal_active == 0 && at_rest(t)
+        });
+    }
+    let outcomes = assert_each_ends_once(&log, &ended);
+    for o in outcomes {
+        assert_eq!(
+            o.outcome(),
+            Ok(GoalOutcome::Cancelled),
+            "{}",
+            o.outcome_text()
+        );
+    }
     d.stop();
 }
 

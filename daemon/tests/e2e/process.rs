@@ -55,7 +55,7 @@ fn sigterm_stops_the_machine_and_the_stop_is_the_last_frame() {
         .stderr(Stdio::null())
         .spawn()
         .unwrap();
-    let client = Client::new(&IpcConfig::new(prefix)).unwrap();
+    let client = Client::connect(&IpcConfig::new(prefix), Duration::from_secs(30)).unwrap();
     let telemetry = client.subscribe_telemetry().unwrap();
     let deadline = Instant::now() + Duration::from_secs(30);
     loop {
@@ -297,4 +297,63 @@ fn systemd_analyze_verify_accepts_the_unit() {
     ] {
         assert!(unit.contains(key), "unit lacks {key}");
     }
+}
+
+#[test]
+fn a_config_file_without_weights_finds_the_default_weights() {
+    // "Every key is optional": a file that leaves out [weights] behaves like no file.
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("wlnavd.toml");
+    std::fs::write(&path, "[loop]\nrate_hz = 5.0\n").unwrap();
+    let out = Command::new(BIN)
+        .current_dir(repo_root())
+        .arg("--config")
+        .arg(&path)
+        .arg("--check-config")
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+#[test]
+fn a_flood_of_bad_goals_is_logged_at_a_limited_rate() {
+    let prefix = unique_prefix("reject-log");
+    let mut child = Command::new(BIN)
+        .args(["--sim", "--cost", "quadratic", "--log", "terminal"])
+        .args(["--prefix", &prefix])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let client = Client::connect(&IpcConfig::new(prefix), Duration::from_secs(30)).unwrap();
+    const N: usize = 500;
+    let mut rejected = 0;
+    for i in 0..N {
+        let bad = Pose2::new(f64::NAN, i as f64, 0.0);
+        let r = client.set_goal(bad, &[], Duration::from_secs(2)).unwrap();
+        rejected += usize::from(!r.is_accepted());
+    }
+    assert_eq!(rejected, N);
+    // SAFETY: kill(2) on our own child's pid.
+    assert_eq!(unsafe { libc::kill(child.id() as i32, libc::SIGTERM) }, 0);
+    let status = wait_exit(&mut child, Duration::from_secs(30));
+    assert!(status.success());
+    let mut err = String::new();
+    use std::io::Read;
+    child
+        .stderr
+        .take()
+        .unwrap()
+        .read_to_string(&mut err)
+        .unwrap();
+    let lines = err.lines().filter(|l| l.contains("rejected")).count();
+    assert!(
+        (1..=12).contains(&lines),
+        "{lines} log lines about rejected requests for {N} bad goals:\n{}",
+        err.lines().take(20).collect::<Vec<_>>().join("\n")
+    );
 }

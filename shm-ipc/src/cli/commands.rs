@@ -6,7 +6,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context;
 
-use crate::endpoint::{Client, TelemetrySubscriber};
+use crate::endpoint::{Client, StopClient, TelemetrySubscriber};
 use crate::error::{ClientError, IpcError};
 use crate::msg::{GoalReply, GoalRequest, Pose2, RejectCode, Telemetry};
 
@@ -30,6 +30,37 @@ pub fn connect(cli: &Cli) -> anyhow::Result<Client> {
             config.prefix
         )
     })
+}
+
+/// Connects a client, waiting up to `timeout` for a daemon to create the services (the
+/// client never creates them) unless Ctrl-C comes first. `Ok(None)` when interrupted.
+pub fn connect_waiting(cli: &Cli, timeout: Duration) -> anyhow::Result<Option<Client>> {
+    let mut config = cli.ipc_config();
+    let deadline = Instant::now() + timeout;
+    let mut hinted = false;
+    loop {
+        if signal::requested() {
+            return Ok(None);
+        }
+        match Client::new(&config) {
+            Err(IpcError::NotServed { .. }) if Instant::now() < deadline => {
+                if !hinted {
+                    eprintln!("wlnav: waiting for wlnavd on prefix {:?} …", config.prefix);
+                    hinted = true;
+                }
+                config.cleanup_stale_nodes = false;
+                std::thread::sleep(Duration::from_millis(100));
+            }
+            other => {
+                return other.map(Some).with_context(|| {
+                    format!(
+                        "cannot open the shared-memory services of prefix {:?}",
+                        config.prefix
+                    )
+                })
+            }
+        }
+    }
 }
 
 /// A reject code's short name.
@@ -133,9 +164,16 @@ pub fn goal(cli: &Cli, a: &GoalArgs) -> anyhow::Result<u8> {
             emit(&line);
         }
     })?;
-    if end == FollowEnd::Interrupted {
-        emit("interrupted: the goal stays active (`wlnav cancel` drops it)");
-        return Ok(exit::INTERRUPTED);
+    match end {
+        FollowEnd::Interrupted => {
+            emit("interrupted: the goal stays active (`wlnav cancel` drops it)");
+            return Ok(exit::INTERRUPTED);
+        }
+        FollowEnd::DaemonLost => {
+            emit(&outcome_line(&tracker, cli.tick_s()));
+            return Ok(exit::ERROR);
+        }
+        FollowEnd::Final => {}
     }
     emit(&outcome_line(&tracker, cli.tick_s()));
     Ok(exit::for_status(tracker.status()))
@@ -258,6 +296,9 @@ pub enum FollowEnd {
     Final,
     /// Ctrl-C / SIGTERM.
     Interrupted,
+    /// No telemetry for [`FollowOptions::silence`]: the daemon is gone (the tracker is
+    /// marked failed with the reason too).
+    DaemonLost,
 }
 
 /// Feeds telemetry to `tracker` until its status is final (the goal's outcome, silence, a
@@ -275,7 +316,12 @@ pub fn follow(
         if signal::requested() {
             return Ok(FollowEnd::Interrupted);
         }
-        if let Some(t) = sub.recv_timeout(Duration::from_millis(100))? {
+        let sample = match sub.recv_timeout(Duration::from_millis(100)) {
+            // A signal woke the wait: the check at the top of the loop decides.
+            Err(IpcError::Interrupted) => continue,
+            other => other?,
+        };
+        if let Some(t) = sample {
             last_sample = Instant::now();
             tracker.update(&t);
             if *tracker.status() == GoalStatus::Pending {
@@ -298,6 +344,7 @@ pub fn follow(
                 "no telemetry for {:.1} s: is the daemon still running?",
                 opts.silence.as_secs_f64()
             ));
+            return Ok(FollowEnd::DaemonLost);
         }
         if !tracker.status().is_final() && start.elapsed() >= opts.timeout {
             tracker.time_out(format!(
@@ -311,14 +358,21 @@ pub fn follow(
     }
 }
 
-/// `wlnav cancel`, `wlnav stop`, `wlnav resume`.
+/// `wlnav cancel`, `wlnav stop`, `wlnav resume`. A stop goes through the reserved stop
+/// service ([`StopClient`]): it needs none of the goal service's client slots, and it
+/// latches like a stop on the goal service (`wlnav resume` releases it).
 pub fn simple_request(cli: &Cli, a: &RequestArgs, what: SimpleRequest) -> anyhow::Result<u8> {
-    let client = connect(cli)?;
     let timeout = Duration::from_secs_f64(a.reply_timeout);
     let result = match what {
-        SimpleRequest::Cancel => client.cancel(timeout),
-        SimpleRequest::Stop => client.stop(timeout),
-        SimpleRequest::Resume => client.resume(timeout),
+        SimpleRequest::Stop => {
+            let config = cli.ipc_config();
+            let client = StopClient::new(&config).with_context(|| {
+                format!("cannot open the stop service of prefix {:?}", config.prefix)
+            })?;
+            client.stop(timeout)
+        }
+        SimpleRequest::Cancel => connect(cli)?.cancel(timeout),
+        SimpleRequest::Resume => connect(cli)?.resume(timeout),
     };
     let reply = match result {
         Ok(r) => r,
@@ -334,9 +388,11 @@ pub fn simple_request(cli: &Cli, a: &RequestArgs, what: SimpleRequest) -> anyhow
 
 /// `wlnav watch [--table] [--count N]`.
 pub fn watch(cli: &Cli, a: &WatchArgs) -> anyhow::Result<u8> {
-    let client = connect(cli)?;
-    let sub = client.subscribe_telemetry()?;
     let silence = Duration::from_secs_f64(a.silence_timeout);
+    let Some(client) = connect_waiting(cli, silence)? else {
+        return Ok(exit::INTERRUPTED);
+    };
+    let sub = client.subscribe_telemetry()?;
     let mut last_sample = Instant::now();
     let mut last_tick: Option<u64> = None;
     let mut shown = 0u64;
@@ -345,7 +401,11 @@ pub fn watch(cli: &Cli, a: &WatchArgs) -> anyhow::Result<u8> {
         if a.count.is_some_and(|c| shown >= c) {
             break;
         }
-        let Some(t) = sub.recv_timeout(Duration::from_millis(200))? else {
+        let sample = match sub.recv_timeout(Duration::from_millis(200)) {
+            Err(IpcError::Interrupted) => continue,
+            other => other?,
+        };
+        let Some(t) = sample else {
             if !hinted && last_sample.elapsed() > Duration::from_secs(1) {
                 eprintln!(
                     "wlnav: waiting for telemetry on {:?} …",
@@ -386,5 +446,9 @@ pub fn watch(cli: &Cli, a: &WatchArgs) -> anyhow::Result<u8> {
         }
         shown += 1;
     }
-    Ok(exit::OK)
+    Ok(if signal::requested() {
+        exit::INTERRUPTED
+    } else {
+        exit::OK
+    })
 }

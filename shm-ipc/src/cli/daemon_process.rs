@@ -157,6 +157,45 @@ impl DaemonProcess {
         all[all.len().saturating_sub(lines)..].join("\n")
     }
 
+    /// Connects a client once the daemon has created its services (a client never creates
+    /// them), or fails if the daemon exits, Ctrl-C arrives or `timeout` passes.
+    pub fn connect(
+        &mut self,
+        config: &crate::config::IpcConfig,
+        timeout: Duration,
+    ) -> anyhow::Result<crate::endpoint::Client> {
+        let start = Instant::now();
+        let mut config = config.clone();
+        loop {
+            match crate::endpoint::Client::new(&config) {
+                Ok(c) => return Ok(c),
+                Err(crate::error::IpcError::NotServed { service }) => {
+                    if let Some(status) = self.try_wait()? {
+                        bail!(
+                            "{} exited during start-up ({status}){}",
+                            self.binary.display(),
+                            self.log_hint()
+                        );
+                    }
+                    if super::signal::requested() {
+                        bail!("interrupted while waiting for the daemon");
+                    }
+                    if start.elapsed() >= timeout {
+                        bail!(
+                            "{} did not create {service:?} within {:.0} s{}",
+                            self.binary.display(),
+                            timeout.as_secs_f64(),
+                            self.log_hint()
+                        );
+                    }
+                    config.cleanup_stale_nodes = false;
+                    std::thread::sleep(Duration::from_millis(20));
+                }
+                Err(e) => return Err(e.into()),
+            }
+        }
+    }
+
     /// Waits until the daemon publishes telemetry in a driving-ready mode (idle, tracking or
     /// reached: weights loaded, first solve done, pose and machine state fresh), or fails if
     /// it exits or `timeout` passes. Returns the first such sample.

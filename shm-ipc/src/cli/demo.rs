@@ -145,11 +145,9 @@ pub fn run(cli: &Cli, a: &DemoArgs) -> anyhow::Result<u8> {
     let log = std::env::temp_dir().join(format!("wlnav-demo-{}.log", std::process::id()));
     emit("wlnav demo: a loading cycle on the simulated machine, through shared memory");
     let config = IpcConfig::new(prefix.clone());
-    let client = Client::new(&config).context("cannot open the shared-memory services")?;
-    let sub = client.subscribe_telemetry()?;
     let started = Instant::now();
     let mut cost = a.cost.clone();
-    let (mut daemon, first) = loop {
+    let (mut daemon, first, client, sub) = loop {
         let mut extra: Vec<OsString> = Vec::new();
         if let Some(cost) = &cost {
             extra.push("--cost".into());
@@ -172,8 +170,19 @@ pub fn run(cli: &Cli, a: &DemoArgs) -> anyhow::Result<u8> {
             daemon.pid().unwrap_or(0),
             log.display()
         ));
-        match daemon.wait_ready(&sub, Duration::from_secs_f64(a.ready_timeout)) {
-            Ok(t) => break (daemon, t),
+        let ready_timeout = Duration::from_secs_f64(a.ready_timeout);
+        let connected = daemon.connect(&config, ready_timeout).and_then(|client| {
+            let sub = client
+                .subscribe_telemetry()
+                .context("cannot subscribe to telemetry")?;
+            Ok((client, sub))
+        });
+        let ready = connected.and_then(|(client, sub)| {
+            let t = daemon.wait_ready(&sub, ready_timeout)?;
+            Ok((client, sub, t))
+        });
+        match ready {
+            Ok((client, sub, t)) => break (daemon, t, client, sub),
             Err(e) => {
                 let tail = daemon.log_tail(50);
                 let no_weights = tail.contains("weights file") && tail.contains("cannot read");

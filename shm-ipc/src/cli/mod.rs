@@ -5,10 +5,10 @@
 //!
 //! | command | what it does | exit code |
 //! |---|---|---|
-//! | `goal X Y HEADING [--obstacle x,y,r]... [--wait]` | send a goal, print the daemon's accept/reject and reason; with `--wait` follow telemetry until the goal's outcome | 0 accepted (succeeded with `--wait`), 1 rejected; with `--wait`: 3 aborted, 5 cancelled, 6 preempted, 7 no outcome within `--timeout`; 4 no daemon |
-//! | `cancel`, `stop`, `resume` | drop the goal / controlled stop that latches / release the stop | 0, 1 rejected, 4 no daemon |
-//! | `watch [--table] [--count N]` | one line per tick, or a table | 0, 4 no telemetry |
-//! | `record FILE.mcap [--duration S] [--ticks N]` | telemetry to MCAP (JSON schema, `json` messages: opens in Foxglove) | 0 |
+//! | `goal X Y HEADING [--obstacle x,y,r]... [--wait]` | send a goal, print the daemon's accept/reject and reason; with `--wait` follow telemetry until the goal's outcome | 0 accepted (succeeded with `--wait`), 1 rejected, 4 no daemon; with `--wait`: 3 aborted, 5 cancelled, 6 preempted, 7 no outcome within `--timeout`, 4 the daemon's telemetry stopped, 130 Ctrl-C |
+//! | `cancel`, `stop`, `resume` | drop the goal / controlled stop that latches (`stop` uses the reserved stop service: it gets through when every goal client slot is taken) / release the stop | 0, 1 rejected, 4 no daemon |
+//! | `watch [--table] [--count N]` | one line per tick, or a table | 0, 4 no telemetry, 130 Ctrl-C |
+//! | `record FILE.mcap [--duration S] [--ticks N]` | telemetry to MCAP (JSON schema, `json` messages: opens in Foxglove) | 0, 130 Ctrl-C (the file is finished either way) |
 //! | `demo` | start `wlnavd --sim`, drive a loading cycle, print times, write an SVG | 0 all legs reached, 3 a leg failed, 4 daemon trouble |
 //!
 //! Usage errors (bad numbers, NaN, malformed `--obstacle`) exit with 2 and name the
@@ -245,6 +245,9 @@ pub fn run(cli: Cli) -> u8 {
     };
     match result {
         Ok(code) => code,
+        // Ctrl-C during a wait is an interruption, not an error (whatever the wait
+        // reported).
+        Err(_) if signal::requested() => exit::INTERRUPTED,
         Err(e) => {
             eprintln!("wlnav: error: {e:#}");
             exit::ERROR

@@ -224,7 +224,21 @@ pub fn record(
     limits: &RecordLimits,
     stop: &AtomicBool,
 ) -> anyhow::Result<RecordSummary> {
-    let client = Client::new(config)?;
+    let start_wait = Instant::now();
+    // The client never creates services: wait for the daemon (or a stop) to appear.
+    let client = loop {
+        match Client::new(config) {
+            Err(crate::error::IpcError::NotServed { .. })
+                if !(stop.load(Ordering::SeqCst) || signal::requested())
+                    && limits
+                        .duration
+                        .is_none_or(|d| Instant::now() < start_wait + d) =>
+            {
+                std::thread::sleep(Duration::from_millis(100));
+            }
+            other => break other?,
+        }
+    };
     let sub = client.subscribe_telemetry()?;
     let mut out = TelemetryWriter::create(path, &config.prefix)?;
     let start = Instant::now();
@@ -240,7 +254,12 @@ pub fn record(
             if limits.ticks.is_some_and(|n| summary.messages >= n) {
                 return Ok(());
             }
-            let Some(t) = sub.recv_timeout(Duration::from_millis(100))? else {
+            let sample = match sub.recv_timeout(Duration::from_millis(100)) {
+                // A signal woke the wait: the check at the top of the loop decides.
+                Err(crate::error::IpcError::Interrupted) => continue,
+                other => other?,
+            };
+            let Some(t) = sample else {
                 continue;
             };
             if let Some(last) = summary.last_tick {
@@ -281,6 +300,7 @@ pub fn run(cli: &Cli, a: &RecordArgs) -> anyhow::Result<u8> {
         (Some(f), Some(l)) => format!(", ticks {f}..={l}"),
         _ => String::new(),
     };
+    let interrupted = signal::requested();
     println!(
         "wrote {} ticks to {}{}{}",
         s.messages,
@@ -292,5 +312,9 @@ pub fn run(cli: &Cli, a: &RecordArgs) -> anyhow::Result<u8> {
             String::new()
         }
     );
-    Ok(exit::OK)
+    Ok(if interrupted {
+        exit::INTERRUPTED
+    } else {
+        exit::OK
+    })
 }

@@ -4,7 +4,7 @@
 use crate::msg::{fault_flags, AbortReason, GoalOutcome, Mode, Telemetry};
 
 /// Fault bits and their names, in bit order.
-pub const FAULT_NAMES: [(u32, &str); 9] = [
+pub const FAULT_NAMES: [(u32, &str); 10] = [
     (fault_flags::POSE_STALE, "pose-stale"),
     (fault_flags::MACHINE_STATE_STALE, "machine-state-stale"),
     (fault_flags::CAN_CRC, "can-crc"),
@@ -14,6 +14,7 @@ pub const FAULT_NAMES: [(u32, &str); 9] = [
     (fault_flags::OVERRUN, "overrun"),
     (fault_flags::STOP_REQUESTED, "stop-requested"),
     (fault_flags::CAN_BUS, "can-bus"),
+    (fault_flags::POSE_REJECTED, "pose-rejected"),
 ];
 
 /// Names of the set fault bits (unknown bits as `bit-N`).
