@@ -952,12 +952,6 @@ impl Drop for IncomingGoal<'_> {
     }
 }
 
-/// A pose publisher with the notifier that wakes the daemon after each sample.
-type PosePublisher = (
-    Publisher<IpcService, PoseEstimate, ()>,
-    Notifier<IpcService>,
-);
-
 /// The client's side: sends goals, cancels, stops, resumes; publishes poses; subscribes
 /// to telemetry.
 pub struct Client {
