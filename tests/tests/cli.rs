@@ -219,21 +219,16 @@ fn wait_in_background(prefix: &str, goal: &[&str], obstacles: &[&str]) -> std::p
         .expect("spawn wlnav goal --wait")
 }
 
-/// The id of the goal the daemon drives now (0 if none), from the newest sample.
-fn current_goal(d: &SimDaemon) -> u64 {
-    d.telemetry
-        .latest()
-        .expect("telemetry")
-        .map_or(0, |t| t.goal_request_id)
-}
-
-/// Waits until the daemon tracks a goal other than `previous` (the one a background
-/// `--wait` sent) and moves.
-fn wait_tracking_new(d: &SimDaemon, previous: u64) {
+/// Waits until the daemon's telemetry shows the goal at (`x`, `y`) being tracked (so a
+/// goal still active from before is not mistaken for the one just sent).
+fn wait_tracking(d: &SimDaemon, x: f64, y: f64) {
     let deadline = std::time::Instant::now() + Duration::from_secs(20);
     loop {
         let t = d.next(Duration::from_secs(2));
-        if t.goal_request_id != previous && t.mode() == Ok(Mode::Tracking) && t.command.v > 0.1 {
+        let ours = t
+            .active_goal()
+            .is_some_and(|g| (g.x - x).abs() < 1e-6 && (g.y - y).abs() < 1e-6);
+        if ours && t.mode() == Ok(Mode::Tracking) && t.command.v > 0.1 {
             return;
         }
         assert!(std::time::Instant::now() < deadline, "never tracking");
@@ -248,9 +243,8 @@ fn goal_wait_exit_codes_follow_the_outcome_and_stop_latches_until_resume() {
 
     // Goals far enough (~20 s of driving) that none is reached before the next command,
     // even on a loaded machine. Preempted by a newer goal: exit 6.
-    let previous = current_goal(&d);
     let first = wait_in_background(&p, &["20", "0", "0"], &[]);
-    wait_tracking_new(&d, previous);
+    wait_tracking(&d, 20.0, 0.0);
     let o = wlnav(&["--prefix", &p, "goal", "9", "1", "0"]);
     assert_eq!(o.status.code(), Some(0), "{}", text(&o));
     let o = first.wait_with_output().expect("wait");
@@ -262,9 +256,8 @@ fn goal_wait_exit_codes_follow_the_outcome_and_stop_latches_until_resume() {
     );
 
     // Cancelled by an operator stop: exit 5; the stop latches.
-    let previous = current_goal(&d);
     let second = wait_in_background(&p, &["20", "-2", "0"], &[]);
-    wait_tracking_new(&d, previous);
+    wait_tracking(&d, 20.0, -2.0);
     let o = wlnav(&["--prefix", &p, "stop"]);
     assert_eq!(o.status.code(), Some(0), "{}", text(&o));
     let o = second.wait_with_output().expect("wait");
@@ -304,9 +297,8 @@ fn goal_wait_exit_codes_follow_the_outcome_and_stop_latches_until_resume() {
     );
 
     // After resume a goal is accepted again; cancel it: exit 5.
-    let previous = current_goal(&d);
     let third = wait_in_background(&p, &["20", "3", "0"], &[]);
-    wait_tracking_new(&d, previous);
+    wait_tracking(&d, 20.0, 3.0);
     let o = wlnav(&["--prefix", &p, "cancel"]);
     assert_eq!(o.status.code(), Some(0), "{}", text(&o));
     let o = third.wait_with_output().expect("wait");
