@@ -20,7 +20,6 @@
 //! (pool and heap preallocated), a grid allocated once. Allocation-free after
 //! construction.
 
-use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 use std::time::{Duration, Instant};
 
@@ -29,6 +28,7 @@ use crate::model::{ix, wrap_angle, Goal, MachineParams, State};
 
 use super::grid::{GridFrame, ObstacleHeuristic};
 use super::primitives::{self, compose, Primitive};
+use super::queue::Open;
 use super::rollout::{roll_out, Arrival};
 use super::world::World;
 use super::{NavigatorSettings, PathPose};
@@ -61,26 +61,6 @@ struct Node {
     g: f64,
     parent: u32,
     closed: bool,
-}
-
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct Open {
-    f: f64,
-    node: u32,
-}
-
-impl Eq for Open {}
-
-impl Ord for Open {
-    fn cmp(&self, other: &Self) -> Ordering {
-        other.f.total_cmp(&self.f)
-    }
-}
-
-impl PartialOrd for Open {
-    fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
-        Some(self.cmp(other))
-    }
 }
 
 const NO_PARENT: u32 = u32::MAX;

@@ -22,6 +22,7 @@
 pub mod grid;
 pub mod hybrid_astar;
 pub mod primitives;
+mod queue;
 pub mod rollout;
 pub mod route;
 pub mod waypoint_graph;

@@ -23,7 +23,6 @@
 //!
 //! Needs the networks. Allocation-free after construction.
 
-use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 use std::time::Instant;
 
@@ -32,6 +31,7 @@ use crate::critic::{Critic, CriticWorkspace};
 use crate::model::{ix, wrap_angle, Control, Goal, MachineParams, State};
 
 use super::hybrid_astar::{SearchFailure, SearchStats};
+use super::queue::Open;
 use super::rollout::{roll_out, Arrival};
 use super::world::World;
 use super::{NavigatorSettings, PathPose};
@@ -54,26 +54,6 @@ struct Edge {
     to: u32,
     cost: f64,
     state: EdgeState,
-}
-
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct Open {
-    f: f64,
-    node: u32,
-}
-
-impl Eq for Open {}
-
-impl Ord for Open {
-    fn cmp(&self, other: &Self) -> Ordering {
-        other.f.total_cmp(&self.f)
-    }
-}
-
-impl PartialOrd for Open {
-    fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
-        Some(self.cmp(other))
-    }
 }
 
 /// The graph with its preallocated buffers.
