@@ -11,6 +11,7 @@
 //! [mpc]                # control::mpc::MpcSettings: horizon, dt, hessian, delay, time_budget, ...
 //! [controller]
 //! cost = "critic"      # "critic" (the trained network) or "quadratic" (no weights; for bring-up)
+//! planner = "hybrid-astar"  # the global layer (DESIGN §10): "hybrid-astar", "waypoint-graph" or "none"
 //! [weights]
 //! critic = "critic-weights/critic.safetensors"
 //! actor = "critic-weights/actor.safetensors"   # "" = no actor (zero-control warm start)
@@ -109,12 +110,41 @@ pub struct Config {
 pub struct ControllerConfig {
     /// `critic` (default) or `quadratic`.
     pub cost: CostKind,
+    /// The global layer above the MPC: `hybrid-astar` (default, the better of the two
+    /// compared in `docs/global-layer.md`), `waypoint-graph` (needs the actor and the
+    /// critic) or `none` (the MPC drives straight to the goal and stops behind
+    /// obstacles).
+    pub planner: PlannerChoice,
 }
 
 impl Default for ControllerConfig {
     fn default() -> Self {
         Self {
             cost: CostKind::Critic,
+            planner: PlannerChoice::HybridAstar,
+        }
+    }
+}
+
+/// `controller.planner`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum PlannerChoice {
+    /// Hybrid A* over (x, y, θ) with the model's motion primitives.
+    HybridAstar,
+    /// A critic-cost graph over waypoints around the circles.
+    WaypointGraph,
+    /// No global layer.
+    None,
+}
+
+impl PlannerChoice {
+    /// The planner, or `None` without a global layer.
+    pub fn kind(self) -> Option<control::planner::PlannerKind> {
+        match self {
+            PlannerChoice::HybridAstar => Some(control::planner::PlannerKind::HybridAStar),
+            PlannerChoice::WaypointGraph => Some(control::planner::PlannerKind::WaypointGraph),
+            PlannerChoice::None => None,
         }
     }
 }
@@ -562,6 +592,16 @@ impl Config {
                 "must name a file when controller.cost = \"critic\"",
             ));
         }
+        if self.controller.planner == PlannerChoice::WaypointGraph
+            && (self.controller.cost != CostKind::Critic
+                || self.weights.actor.as_os_str().is_empty())
+        {
+            return Err(invalid(
+                "controller.planner",
+                "\"waypoint-graph\" needs the critic and the actor (controller.cost = \"critic\" \
+                 and weights.actor set)",
+            ));
+        }
         if self.can.backend == CanBackend::Socketcan && self.can.interface.trim().is_empty() {
             return Err(invalid("can.interface", "must not be empty"));
         }
@@ -653,6 +693,19 @@ impl Config {
             reach_speed: self.control.reach_speed,
             progress: self.control.progress(),
         }
+    }
+
+    /// The global layer's settings (`None` for `controller.planner = "none"`): the
+    /// measured defaults, the configured planner, and the loop's progress window (one
+    /// window for the navigator's abort and the goal lifecycle's).
+    pub fn navigator_settings(&self) -> Option<control::planner::NavigatorSettings> {
+        let planner = self.controller.planner.kind()?;
+        Some(control::planner::NavigatorSettings {
+            planner,
+            progress: self.control.progress(),
+            reached_tolerance: self.control.reach_tolerance,
+            ..Default::default()
+        })
     }
 
     /// The configuration as TOML (for `--print-config`).

@@ -32,7 +32,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 use control::model::{ix, pose_error};
-use control::{MachineParams, State};
+use control::{Goal, MachineParams, State};
 use shm_ipc::{
     fault_flags, AbortReason, DaemonEndpoint, GoalOutcome, MachineState as IpcState, Mode, Pose2,
     Telemetry,
@@ -43,7 +43,7 @@ use crate::can::{DriveMode, MachineStatus};
 use crate::can_io::{CanShared, CanSnapshot, OutCommand, RejectKind};
 use crate::clock::DaemonClock;
 use crate::config::Config;
-use crate::controller::{Controller, PlanStatus};
+use crate::controller::{Controller, PlanStatus, Step};
 use crate::goal_lifecycle::{Abort, AcceptedGoal, TickInput, TickPlan};
 use crate::ipc::{fault_names, SharedGoals};
 use crate::log_limit::{LogDecision, LogLimiter};
@@ -99,6 +99,10 @@ pub struct ControlLoop {
     /// Rejected pose samples are logged at a limited rate.
     pose_log: LogLimiter,
     fallback_count: u32,
+    /// The subgoal of the global route driven to on the last tracking tick (None: the
+    /// goal itself, or no global layer); the goal lifecycle's progress window runs
+    /// towards it.
+    subgoal: Option<Goal>,
     fallback_plan: Vec<State>,
     fallback_age: usize,
     prev_counters: crate::can::RxCounters,
@@ -138,6 +142,7 @@ impl ControlLoop {
             pose_gate,
             pose_log: LogLimiter::new(5, 10.0),
             fallback_count: 0,
+            subgoal: None,
             fallback_plan: Vec::with_capacity(horizon + 1),
             fallback_age: 0,
             prev_counters: Default::default(),
@@ -205,6 +210,18 @@ impl ControlLoop {
     fn disengage(&mut self) {
         self.engaged_generation = None;
         self.fallback_count = 0;
+        self.subgoal = None;
+    }
+
+    /// Coming to rest without a goal: the ramp, `Stopping` until the command is zero,
+    /// then `Idle`.
+    fn come_to_rest(&self) -> (Mode, [f64; 2], DriveMode) {
+        let cmd = self.ramp_down();
+        if cmd == [0.0, 0.0] {
+            (Mode::Idle, cmd, DriveMode::Hold)
+        } else {
+            (Mode::Stopping, cmd, DriveMode::Stop)
+        }
     }
 
     /// The controlled-stop command: the last command ramped towards zero at the
@@ -393,6 +410,7 @@ impl ControlLoop {
                 state: x.as_ref(),
                 abort,
                 blocking_faults: stop_faults | self.latched,
+                subgoal: self.subgoal,
             });
             (plan, goals.operator_stop())
         };
@@ -433,14 +451,7 @@ impl ControlLoop {
                 TickPlan::NoGoal => {
                     // No goal (none sent, or it ended) or the machine not in automatic
                     // mode: come to rest.
-                    cmd = self.ramp_down();
-                    if cmd == [0.0, 0.0] {
-                        mode = Mode::Idle;
-                        drive_mode = DriveMode::Hold;
-                    } else {
-                        mode = Mode::Stopping;
-                        drive_mode = DriveMode::Stop;
-                    }
+                    (mode, cmd, drive_mode) = self.come_to_rest();
                 }
                 TickPlan::Hold(_) => {
                     mode = Mode::Reached;
@@ -454,10 +465,16 @@ impl ControlLoop {
                 TickPlan::Track(g) => {
                     // Fresh data and no fault: x is Some here.
                     let x = x.unwrap_or_else(State::zeros);
-                    let (c, f, st) = self.track(&x, &g, &mut t);
+                    let tracked = self.track(&x, &g, start, &mut t);
+                    let (c, f, st) = tracked.unwrap_or(([0.0; 2], 0, None));
                     flags |= f;
                     solve_time = st;
-                    if self.fallback_count > cfg.fallback_ticks {
+                    if tracked.is_none() {
+                        // The global layer ended the goal (no route, no progress).
+                        self.disengage();
+                        shown = None;
+                        (mode, cmd, drive_mode) = self.come_to_rest();
+                    } else if self.fallback_count > cfg.fallback_ticks {
                         tracing::error!(
                             "solver failed {} ticks in a row: controlled stop",
                             self.fallback_count
@@ -584,13 +601,15 @@ impl ControlLoop {
         t.set_outcome(o.request_id, o.outcome, o.abort_reason, o.seq, &o.text);
     }
 
-    /// One tracking tick: the MPC step, with the fallback on the shifted plan.
+    /// One tracking tick: the controller's step, with the fallback on the shifted plan.
+    /// `None` when the global layer ended the goal (reported to the goal lifecycle).
     fn track(
         &mut self,
         x: &State,
         g: &AcceptedGoal,
+        now: f64,
         t: &mut Telemetry,
-    ) -> ([f64; 2], u32, Option<f64>) {
+    ) -> Option<([f64; 2], u32, Option<f64>)> {
         let mut flags = 0;
         if self.engaged_generation != Some(g.generation) {
             tracing::info!(
@@ -604,20 +623,45 @@ impl ControlLoop {
             self.controller.reset();
             self.latched = 0;
             self.fallback_count = 0;
-            if let Err(e) = self.controller.set_goal(g.goal, g.obstacles()) {
+            if let Err(e) = self.controller.set_goal(x, g.goal, g.obstacles()) {
                 // Validated goals cannot fail here; treat it as a solver failure.
                 tracing::error!("controller refused the goal: {e}");
                 self.fallback_count = u32::MAX / 2;
-                return (self.ramp_down(), fault_flags::SOLVE_FAILED, None);
+                return Some((self.ramp_down(), fault_flags::SOLVE_FAILED, None));
             }
             self.engaged_generation = Some(g.generation);
             self.fallback_plan.clear();
             self.fallback_age = 0;
         }
-        let result = self.controller.step(x);
+        let result = self.controller.step(x, now);
         let mut solve_time = None;
         let good = match result {
-            Ok(plan) => {
+            Ok(Step::Abort(reason)) => {
+                let (wire, what) = match reason {
+                    control::planner::AbortReason::NoRoute => (
+                        AbortReason::NoRoute,
+                        "the global layer found no collision-free route",
+                    ),
+                    control::planner::AbortReason::NoProgress => (
+                        AbortReason::NoProgress,
+                        "no approach to the route's target after replanning",
+                    ),
+                };
+                self.ctx.goals.lock().abort_active(Abort::new(wire, what));
+                return None;
+            }
+            Ok(Step::Drive(plan)) => {
+                self.subgoal = plan.subgoal;
+                if let Some(s) = plan.subgoal {
+                    t.subgoal_active = 1;
+                    t.subgoal = Pose2::new(s.x, s.y, s.theta);
+                }
+                let mut route = [Pose2::new(0.0, 0.0, 0.0); shm_ipc::MAX_ROUTE];
+                let n = plan.route.len().min(shm_ipc::MAX_ROUTE);
+                for (dst, g) in route.iter_mut().zip(plan.route) {
+                    *dst = Pose2::new(g.x, g.y, g.theta);
+                }
+                t.set_route(&route[..n]);
                 solve_time = Some(plan.solve_time.as_secs_f64());
                 t.solve_time_us = plan.solve_time.as_secs_f64() * 1e6;
                 t.cost = plan.cost;
@@ -667,7 +711,7 @@ impl ControlLoop {
                 }
             }
         };
-        (cmd, flags, solve_time)
+        Some((cmd, flags, solve_time))
     }
 }
 

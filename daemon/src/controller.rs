@@ -1,9 +1,12 @@
 //! What the control loop needs from a controller, and the MPC behind it.
 //!
 //! The loop talks to a [`Controller`]: set a goal, step from the measured state,
-//! reset. [`MpcController`] wraps `control::mpc::Mpc` (critic or quadratic cost);
-//! tests plug in their own controllers (one that fails on demand, one that stalls)
-//! without touching the loop.
+//! reset. [`MpcController`] wraps `control::mpc::Mpc` (critic or quadratic cost)
+//! and, when configured, the global layer above it (`control::planner::Navigator`,
+//! DESIGN §10): the navigator picks the target each tick (a subgoal of its route or
+//! the goal), the MPC drives to it, and a goal without a route or without progress
+//! ends as [`Step::Abort`]. Tests plug in their own controllers (one that fails on
+//! demand, one that stalls) without touching the loop.
 //!
 //! Loading ([`load_controller`]) reads and validates the weight files before the
 //! loop starts: corrupt or incompatible weights stop start-up with an error that
@@ -13,6 +16,7 @@ use std::path::Path;
 use std::time::Duration;
 
 use control::mpc::{Mpc, MpcSettings, Obstacle, QuadraticCost, StageCost, StepStatus};
+use control::planner::{self, NavStep, Navigator, NavigatorSettings};
 use control::weights::{self, NetworkRole, NetworkWeights};
 use control::{Actor, Critic, Goal, MachineParams, State};
 use thiserror::Error;
@@ -46,6 +50,21 @@ pub struct Plan<'a> {
     pub sqp_iterations: u32,
     /// Wall time of the step.
     pub solve_time: Duration,
+    /// The subgoal driven to, when it is not the goal itself (global layer).
+    pub subgoal: Option<Goal>,
+    /// The global route not yet passed, ending with the goal (empty without a global
+    /// layer).
+    pub route: &'a [Goal],
+}
+
+/// What one controller step decided.
+#[derive(Debug, Clone, Copy)]
+pub enum Step<'a> {
+    /// Drive: send the plan's command.
+    Drive(Plan<'a>),
+    /// The global layer ended the goal (no route, or no progress towards its
+    /// target); the loop ends it as aborted and brings the machine to rest.
+    Abort(planner::AbortReason),
 }
 
 /// A failed step (no usable plan at all).
@@ -56,48 +75,103 @@ pub struct ControllerError(pub String);
 /// The controller as the daemon's loop uses it. Implementations are built on the
 /// control thread (they need not be `Send`).
 pub trait Controller {
-    /// Sets the goal and obstacles; the next `step` plans towards it.
-    fn set_goal(&mut self, goal: Goal, obstacles: &[Obstacle]) -> Result<(), ControllerError>;
+    /// Sets the goal and obstacles, seen from the measured state `start` (the global
+    /// layer plans its route here); the next `step` drives towards it.
+    fn set_goal(
+        &mut self,
+        start: &State,
+        goal: Goal,
+        obstacles: &[Obstacle],
+    ) -> Result<(), ControllerError>;
     /// Forgets goal, plan and command history (after a stop, before a new start).
     fn reset(&mut self);
-    /// One control period from the measured state (called once per tick while
-    /// tracking, its command sent).
-    fn step(&mut self, state: &State) -> Result<Plan<'_>, ControllerError>;
+    /// One control period from the measured state at time `now` [s, any monotonic
+    /// origin] (called once per tick while tracking, its command sent).
+    fn step(&mut self, state: &State, now: f64) -> Result<Step<'_>, ControllerError>;
 }
 
 /// Builds the controller on the control thread.
 pub type ControllerFactory =
     Box<dyn FnOnce() -> Result<Box<dyn Controller>, ControllerError> + Send>;
 
-/// The actor-critic MPC (or the MPC with a quadratic cost).
+/// The actor-critic MPC (or the MPC with a quadratic cost), with the global layer
+/// above it when one is configured.
 pub struct MpcController<C: StageCost> {
     mpc: Mpc<C>,
+    navigator: Option<Navigator>,
 }
 
 impl<C: StageCost> MpcController<C> {
-    /// Wraps a built MPC.
+    /// Wraps a built MPC, without a global layer.
     pub fn new(mpc: Mpc<C>) -> Self {
-        Self { mpc }
+        Self {
+            mpc,
+            navigator: None,
+        }
+    }
+
+    /// Wraps a built MPC under a navigator (allocated here, once: set_goal and
+    /// step allocate nothing).
+    pub fn with_navigator(mpc: Mpc<C>, navigator: Navigator) -> Self {
+        Self {
+            mpc,
+            navigator: Some(navigator),
+        }
     }
 }
 
+fn err(e: impl std::fmt::Display) -> ControllerError {
+    ControllerError(e.to_string())
+}
+
 impl<C: StageCost> Controller for MpcController<C> {
-    fn set_goal(&mut self, goal: Goal, obstacles: &[Obstacle]) -> Result<(), ControllerError> {
-        self.mpc
-            .set_goal(goal, obstacles)
-            .map_err(|e| ControllerError(e.to_string()))
+    fn set_goal(
+        &mut self,
+        start: &State,
+        goal: Goal,
+        obstacles: &[Obstacle],
+    ) -> Result<(), ControllerError> {
+        // The first target starts from an actor roll-out (`set_goal`); later ones
+        // (subgoal switches, replans) keep the collision-free plan (`retarget`).
+        let first = match &mut self.navigator {
+            Some(nav) => {
+                nav.set_goal(start, goal, obstacles).map_err(err)?;
+                nav.route().first().copied().unwrap_or(goal)
+            }
+            None => goal,
+        };
+        self.mpc.set_goal(first, obstacles).map_err(err)
     }
 
     fn reset(&mut self) {
         self.mpc.reset();
+        if let Some(nav) = &mut self.navigator {
+            nav.clear();
+        }
     }
 
-    fn step(&mut self, state: &State) -> Result<Plan<'_>, ControllerError> {
-        let s = self
-            .mpc
-            .step(state)
-            .map_err(|e| ControllerError(e.to_string()))?;
-        Ok(Plan {
+    fn step(&mut self, state: &State, now: f64) -> Result<Step<'_>, ControllerError> {
+        let mut subgoal = None;
+        if let Some(nav) = &mut self.navigator {
+            match nav.update(state, now) {
+                NavStep::Drive {
+                    target,
+                    final_target,
+                } => {
+                    if self.mpc.goal() != Some(target) {
+                        self.mpc.retarget(target).map_err(err)?;
+                    }
+                    subgoal = (!final_target).then_some(target);
+                }
+                NavStep::Abort(reason) => return Ok(Step::Abort(reason)),
+            }
+        }
+        let route = self
+            .navigator
+            .as_ref()
+            .map_or(&[][..], |nav| nav.remaining_route());
+        let s = self.mpc.step(state).map_err(err)?;
+        Ok(Step::Drive(Plan {
             command: [s.command.beta_dot, s.command.v],
             status: match s.status {
                 StepStatus::Solved => PlanStatus::Solved,
@@ -108,7 +182,9 @@ impl<C: StageCost> Controller for MpcController<C> {
             qp_iterations: s.qp_iterations,
             sqp_iterations: s.sqp_iterations,
             solve_time: s.solve_time,
-        })
+            subgoal,
+            route,
+        }))
     }
 }
 
@@ -129,6 +205,9 @@ pub enum LoadError {
     /// The MPC could not be built.
     #[error("MPC: {0}")]
     Mpc(String),
+    /// The global layer could not be built.
+    #[error("controller.planner: {0}")]
+    Navigator(String),
 }
 
 /// Reads and validates one network file: format, shapes, finiteness, role, and
@@ -190,6 +269,7 @@ pub fn load_controller(config: &Config) -> Result<ControllerFactory, LoadError> 
         )?;
         Some(Actor::from_weights(w)?)
     };
+    let nav_settings = config.navigator_settings();
     match config.controller.cost {
         CostKind::Critic => {
             let w = load_network(
@@ -199,38 +279,74 @@ pub fn load_controller(config: &Config) -> Result<ControllerFactory, LoadError> 
                 settings.dt,
             )?;
             let critic = Critic::from_weights(w)?;
+            let networks = actor.clone().map(|a| (a, critic.clone()));
             // Built here too, so a bad setting fails start-up, then rebuilt on the
             // control thread (the MPC need not be `Send`).
             Mpc::new(machine, critic.clone(), actor.clone(), settings)
                 .map_err(|e| LoadError::Mpc(e.to_string()))?;
+            if let Some(s) = &nav_settings {
+                build_navigator(machine, s, networks.clone())?;
+            }
             Ok(Box::new(move || {
-                let mpc = Mpc::new(machine, critic, actor, settings)
-                    .map_err(|e| ControllerError(e.to_string()))?;
-                Ok(Box::new(MpcController::new(mpc)) as Box<dyn Controller>)
+                let mpc = Mpc::new(machine, critic, actor, settings).map_err(err)?;
+                controller(mpc, machine, nav_settings, networks)
             }))
         }
-        CostKind::Quadratic => Ok(Box::new(move || {
-            let mpc = Mpc::new(machine, quadratic_cost(), actor, settings)
-                .map_err(|e| ControllerError(e.to_string()))?;
-            Ok(Box::new(MpcController::new(mpc)) as Box<dyn Controller>)
-        })),
+        CostKind::Quadratic => {
+            if let Some(s) = &nav_settings {
+                build_navigator(machine, s, None)?;
+            }
+            Ok(Box::new(move || {
+                let mpc = Mpc::new(machine, quadratic_cost(), actor, settings).map_err(err)?;
+                controller(mpc, machine, nav_settings, None)
+            }))
+        }
     }
+}
+
+fn build_navigator(
+    machine: MachineParams,
+    settings: &NavigatorSettings,
+    networks: Option<(Actor, Critic)>,
+) -> Result<Navigator, LoadError> {
+    Navigator::new(machine, settings.clone(), networks)
+        .map_err(|e| LoadError::Navigator(e.to_string()))
+}
+
+/// The MPC, under the navigator when one is configured.
+fn controller<C: StageCost + 'static>(
+    mpc: Mpc<C>,
+    machine: MachineParams,
+    nav_settings: Option<NavigatorSettings>,
+    networks: Option<(Actor, Critic)>,
+) -> Result<Box<dyn Controller>, ControllerError> {
+    Ok(match nav_settings {
+        Some(s) => {
+            let nav = build_navigator(machine, &s, networks).map_err(err)?;
+            Box::new(MpcController::with_navigator(mpc, nav))
+        }
+        None => Box::new(MpcController::new(mpc)),
+    })
 }
 
 /// The start-up self-test: a first solve from rest towards a goal 3 m ahead must
 /// succeed with a finite command before the daemon reports READY=1.
 pub fn first_solve(c: &mut dyn Controller) -> Result<Duration, ControllerError> {
     c.reset();
-    c.set_goal(Goal::new(3.0, 0.0, 0.0), &[])?;
-    let result = match c.step(&State::zeros()) {
-        Ok(plan)
+    c.set_goal(&State::zeros(), Goal::new(3.0, 0.0, 0.0), &[])?;
+    let result = match c.step(&State::zeros(), 0.0) {
+        Ok(Step::Drive(plan))
             if plan.status == PlanStatus::Solved && plan.command.iter().all(|v| v.is_finite()) =>
         {
             Ok(plan.solve_time)
         }
-        Ok(plan) => Err(ControllerError(format!(
+        Ok(Step::Drive(plan)) => Err(ControllerError(format!(
             "first solve did not succeed (status {:?}, command {:?})",
             plan.status, plan.command
+        ))),
+        Ok(Step::Abort(reason)) => Err(ControllerError(format!(
+            "first solve: the global layer aborted an open-ground goal ({})",
+            reason.name()
         ))),
         Err(e) => Err(e),
     };

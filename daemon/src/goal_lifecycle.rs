@@ -126,6 +126,10 @@ pub struct TickInput<'a> {
     pub abort: Option<Abort>,
     /// Faults that make new goals wait ([`fault_flags`] bits; 0 = goals welcome).
     pub blocking_faults: u32,
+    /// The subgoal the machine drives to on the global route, if not the goal itself:
+    /// the progress window runs towards it (a route around a wall may lead away from
+    /// the goal for longer than the window).
+    pub subgoal: Option<Goal>,
 }
 
 /// What the loop does this tick.
@@ -309,11 +313,19 @@ impl GoalLifecycle {
             self.goal = Some((goal, Phase::Reached));
             return TickPlan::Hold(goal);
         }
-        if self.progress.update(x, &goal.goal, input.now) {
+        let target = input.subgoal.unwrap_or(goal.goal);
+        if self.progress.update(x, &target, input.now) {
             let p = self.progress.settings();
             let text = format!(
-                "no approach to the goal by {} for {:.1} s (error {distance:.2})",
-                p.min_approach, p.timeout
+                "no approach to the {} by {} for {:.1} s (error {:.2})",
+                if input.subgoal.is_some() {
+                    "subgoal"
+                } else {
+                    "goal"
+                },
+                p.min_approach,
+                p.timeout,
+                goal_distance(x, &target)
             );
             self.end_driven(GoalOutcome::Aborted, AbortReason::NoProgress, text);
             self.goal = None;
@@ -389,6 +401,7 @@ mod tests {
             state,
             abort: None,
             blocking_faults: 0,
+            subgoal: None,
         }
     }
 
@@ -517,6 +530,38 @@ mod tests {
             (4, GoalOutcome::Aborted, AbortReason::NoProgress)
         );
         assert!(o.text.contains("no approach"), "{}", o.text);
+    }
+
+    #[test]
+    fn the_progress_window_runs_towards_the_subgoal_on_a_route() {
+        // The route leads away from the goal at x = 5 (back to a subgoal at x = −6):
+        // approaching the subgoal is progress, and stalling short of it is not.
+        let mut l = GoalLifecycle::new(settings(2.0));
+        l.on_tick(tick(0.0, Some(&at(0.0))));
+        l.on_request(&set_goal(7, 5.0, 0.0, &[]), false).unwrap();
+        let subgoal = Goal::new(-6.0, 0.0, 0.0);
+        let mut ended_at = None;
+        for k in 1..80 {
+            let t = 0.2 * k as f64;
+            let x = at((-0.3 * t).max(-3.0));
+            let mut input = tick(t, Some(&x));
+            input.subgoal = Some(subgoal);
+            match l.on_tick(input) {
+                TickPlan::Track(_) => {}
+                TickPlan::NoGoal => {
+                    ended_at = Some(t);
+                    break;
+                }
+                other => panic!("{other:?}"),
+            }
+        }
+        // Moving away from the goal for 10 s did not end it; the stall at x = −3
+        // (from t = 10 s) did, 2 s later.
+        let t = ended_at.expect("aborted");
+        assert!((11.7..=12.3).contains(&t), "aborted at {t}");
+        let o = l.next_outcome().unwrap();
+        assert_eq!(o.abort_reason, AbortReason::NoProgress);
+        assert!(o.text.contains("subgoal"), "{}", o.text);
     }
 
     #[test]

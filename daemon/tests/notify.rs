@@ -16,7 +16,7 @@ use control::mpc::{Mpc, Obstacle, QuadraticCost};
 use control::{Goal, State};
 use shm_ipc::Mode;
 use wlnavd::controller::{
-    quadratic_cost, Controller, ControllerError, ControllerFactory, MpcController, Plan,
+    quadratic_cost, Controller, ControllerError, ControllerFactory, MpcController, Step,
 };
 
 /// Stalls (sleeps in `step`) once when asked, recording when.
@@ -29,19 +29,24 @@ struct Stalling {
 const STALL: Duration = Duration::from_millis(1500);
 
 impl Controller for Stalling {
-    fn set_goal(&mut self, goal: Goal, obstacles: &[Obstacle]) -> Result<(), ControllerError> {
-        self.inner.set_goal(goal, obstacles)
+    fn set_goal(
+        &mut self,
+        start: &State,
+        goal: Goal,
+        obstacles: &[Obstacle],
+    ) -> Result<(), ControllerError> {
+        self.inner.set_goal(start, goal, obstacles)
     }
     fn reset(&mut self) {
         self.inner.reset()
     }
-    fn step(&mut self, state: &State) -> Result<Plan<'_>, ControllerError> {
+    fn step(&mut self, state: &State, now: f64) -> Result<Step<'_>, ControllerError> {
         if self.stall.swap(false, Ordering::SeqCst) {
             let start = Instant::now();
             std::thread::sleep(STALL);
             *self.window.lock().unwrap() = Some((start, Instant::now()));
         }
-        self.inner.step(state)
+        self.inner.step(state, now)
     }
 }
 

@@ -170,8 +170,10 @@ enum Command {
         #[arg(long, default_value = "docs")]
         out: PathBuf,
     },
-    /// Writes the paper's 128 scenarios to OUT/paper128.csv and a seeded selection set of 64
-    /// (for choosing among trained checkpoints without the paper set) to OUT/selection64.csv.
+    /// Writes the paper's 128 scenarios to OUT/paper128.csv, a seeded selection set of 64
+    /// (for choosing among trained checkpoints without the paper set) to OUT/selection64.csv,
+    /// the work-site set OUT/obstacles200.csv and its tuning twin (another seed)
+    /// OUT/obstacles-tuning100.csv.
     Scenarios {
         #[arg(long, default_value = "sim/scenarios")]
         out: PathBuf,
@@ -180,6 +182,9 @@ enum Command {
 
 /// Seed of `sim/scenarios/obstacles200.csv` (issue 14).
 const OBSTACLES_SEED: u64 = 14;
+/// Seed of `sim/scenarios/obstacles-tuning100.csv`: the set the navigator's settings are
+/// tuned on, so that obstacles200 stays an acceptance set.
+const OBSTACLES_TUNING_SEED: u64 = 114;
 
 fn load_scenarios(path: &Path) -> Result<Vec<scenario::Scenario>> {
     let text =
@@ -335,6 +340,14 @@ fn main() -> Result<()> {
                 (
                     "obstacles200.csv",
                     scenario::obstacle_scenarios(50, OBSTACLES_SEED, &MachineParams::default()),
+                ),
+                (
+                    "obstacles-tuning100.csv",
+                    scenario::obstacle_scenarios(
+                        25,
+                        OBSTACLES_TUNING_SEED,
+                        &MachineParams::default(),
+                    ),
                 ),
             ] {
                 let path = out.join(name);

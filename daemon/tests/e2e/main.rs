@@ -17,7 +17,7 @@ use control::{Goal, State};
 use shm_ipc::{fault_flags, Mode, Telemetry};
 use wlnavd::can::DriveMode;
 use wlnavd::controller::{
-    quadratic_cost, Controller, ControllerError, ControllerFactory, MpcController, Plan,
+    quadratic_cost, Controller, ControllerError, ControllerFactory, MpcController, Plan, Step,
 };
 
 fn mode(t: &Telemetry) -> Mode {
@@ -222,19 +222,24 @@ struct Failing {
 }
 
 impl Controller for Failing {
-    fn set_goal(&mut self, goal: Goal, obstacles: &[Obstacle]) -> Result<(), ControllerError> {
-        self.inner.set_goal(goal, obstacles)
+    fn set_goal(
+        &mut self,
+        start: &State,
+        goal: Goal,
+        obstacles: &[Obstacle],
+    ) -> Result<(), ControllerError> {
+        self.inner.set_goal(start, goal, obstacles)
     }
     fn reset(&mut self) {
         self.inner.reset()
     }
-    fn step(&mut self, state: &State) -> Result<Plan<'_>, ControllerError> {
+    fn step(&mut self, state: &State, now: f64) -> Result<Step<'_>, ControllerError> {
         if self.fail.load(Ordering::SeqCst) {
             self.calls += 1;
             if self.calls % 2 == 1 {
                 return Err(ControllerError("injected solver failure".into()));
             }
-            return Ok(Plan {
+            return Ok(Step::Drive(Plan {
                 command: [f64::NAN, f64::NAN],
                 status: wlnavd::controller::PlanStatus::Solved,
                 states: &self.nan_states,
@@ -242,9 +247,11 @@ impl Controller for Failing {
                 qp_iterations: 0,
                 sqp_iterations: 0,
                 solve_time: Duration::ZERO,
-            });
+                subgoal: None,
+                route: &[],
+            }));
         }
-        self.inner.step(state)
+        self.inner.step(state, now)
     }
 }
 

@@ -157,7 +157,10 @@ fn a_reached_goal_succeeds_exactly_once() {
 
 #[test]
 fn an_unreachable_goal_aborts_without_progress_and_the_machine_comes_to_rest() {
+    // Without the global layer the MPC drives into the ring's local minimum: the goal
+    // lifecycle's progress window ends it.
     let mut config = sim_config("no-progress");
+    config.controller.planner = wlnavd::config::PlannerChoice::None;
     config.control.progress_timeout = 3.0;
     let d = start(config, None);
     let mut log = Vec::new();
@@ -195,6 +198,93 @@ fn an_unreachable_goal_aborts_without_progress_and_the_machine_comes_to_rest() {
     let report = d.stop();
     let x = report.sim.as_ref().unwrap().true_state;
     assert!(x[5].abs() < 0.02 && x[4].abs() < 0.02, "not at rest: {x:?}");
+}
+
+#[test]
+fn an_enclosed_goal_ends_aborted_no_route_with_the_machine_at_rest() {
+    // Daemon defaults: the global layer plans at once, finds no way into the ring and
+    // the goal ends on its first tick.
+    let d = start(sim_config("no-route"), None);
+    let mut log = Vec::new();
+    let goal = Pose2::new(4.2, 0.0, 0.0);
+    let a = accepted(&d, goal, &ring(goal.x, goal.y, 2.3, 0.9));
+    let ended = d.record_until(&mut log, T, "aborted", |t| t.outcome_request_id == a);
+    d.record_until(&mut log, T, "idle at rest", |t| {
+        mode(t) == Mode::Idle && at_rest(t)
+    });
+    let o = assert_each_ends_once(&log, &[a])[0];
+    assert_eq!(o.outcome(), Ok(GoalOutcome::Aborted));
+    assert_eq!(
+        o.abort_reason(),
+        Ok(AbortReason::NoRoute),
+        "{}",
+        o.outcome_text()
+    );
+    assert!(o.outcome_text().contains("route"), "{}", o.outcome_text());
+    let driven = log
+        .iter()
+        .filter(|t| t.goal_request_id == a && t.tick <= ended.tick)
+        .count();
+    assert!(driven <= 2, "the goal was driven for {driven} ticks");
+    assert!(
+        log.iter().all(|t| t.state.v_f.abs() < 0.05),
+        "the machine moved"
+    );
+    d.stop();
+}
+
+#[test]
+fn a_goal_behind_a_wall_is_reached_around_it_along_the_global_route() {
+    // The trained critic (daemon defaults: critic cost, Hybrid A*) against a wall of
+    // overlapping circles across the straight path; the MPC alone stops behind it.
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let mut config = sim_config("wall");
+    config.controller.cost = wlnavd::config::CostKind::Critic;
+    config.weights.critic = root.join("critic-weights/critic.safetensors");
+    config.weights.actor = root.join("critic-weights/actor.safetensors");
+    let params = config.machine;
+    let d = start(config, None);
+    let wall: Vec<Obstacle> = (0..6)
+        .map(|k| Obstacle::new(4.0, -1.75 + 0.7 * k as f64, 0.5))
+        .collect();
+    let circles: Vec<control::obstacle::Obstacle> = wall
+        .iter()
+        .map(|o| control::obstacle::Obstacle::new(o.x, o.y, o.r))
+        .collect();
+    let mut log = Vec::new();
+    let a = accepted(&d, Pose2::new(8.0, 0.0, 0.0), &wall);
+    d.record_until(&mut log, Duration::from_secs(60), "reached", |t| {
+        t.outcome_request_id == a
+    });
+    let o = assert_each_ends_once(&log, &[a])[0];
+    assert_eq!(
+        o.outcome(),
+        Ok(GoalOutcome::Succeeded),
+        "{}",
+        o.outcome_text()
+    );
+    let routed: Vec<&Telemetry> = log
+        .iter()
+        .filter(|t| t.active_subgoal().is_some())
+        .collect();
+    assert!(!routed.is_empty(), "no tick drove to a subgoal");
+    assert!(
+        routed.iter().all(|t| t.route().len() >= 2
+            && t.route().last() == Some(&Pose2::new(8.0, 0.0, 0.0))
+            && t.route().first() == t.active_subgoal().as_ref()),
+        "the route is the subgoals ending with the goal"
+    );
+    let worst = log
+        .iter()
+        .filter(|t| t.state.x_f.is_finite())
+        .map(|t| {
+            let s = &t.state;
+            let x = control::State::new(s.x_f, s.y_f, s.theta_f, s.beta, s.beta_dot, s.v_f);
+            control::obstacle::footprint_clearance(&params, &x, &circles)
+        })
+        .fold(f64::INFINITY, f64::min);
+    assert!(worst > -0.005, "cut {:.3} m into the wall", -worst);
+    d.stop();
 }
 
 #[test]
