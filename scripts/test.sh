@@ -26,3 +26,6 @@ if [ -f critic-weights/critic.safetensors ]; then
     "$venv/bin/pip" install -q safetensors numpy
   "$venv/bin/python" scripts/check_weights_python.py critic-weights
 fi
+
+# The programs of examples/ against a running daemon (issue 17).
+bash scripts/examples.sh

@@ -1,0 +1,36 @@
+#!/usr/bin/env bash
+# Runs each program of examples/ against its own `wlnavd --sim` (its own prefix) and fails,
+# with the daemon's log, if one does not exit 0. Called by scripts/test.sh (CI).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+# The test profile's build (shared with `cargo test`): fast enough for a 5 Hz loop.
+cargo build --locked -p daemon -p wlnav-examples
+bin=target/debug
+venv=target/python-examples
+[ -x "$venv/bin/python" ] || python3 -m venv "$venv"
+"$venv/bin/pip" install -q -r examples/requirements.txt
+
+run() {
+  local name=$1 config=$2
+  shift 2
+  local prefix="wlnav-example-$name-$$" log="target/example-$name.log"
+  local args=(--sim --prefix "$prefix")
+  [ -n "$config" ] && args+=(--config "$config")
+  "$bin/wlnavd" "${args[@]}" >"$log" 2>&1 &
+  local daemon=$!
+  echo "example $name: $* --prefix $prefix"
+  if ! timeout 180 "$@" --prefix "$prefix"; then
+    echo "example $name FAILED; wlnavd log:" >&2
+    tail -n 40 "$log" >&2
+    kill "$daemon" 2>/dev/null || true
+    exit 1
+  fi
+  kill -TERM "$daemon"
+  wait "$daemon" || { echo "example $name: wlnavd did not exit cleanly" >&2; tail -n 20 "$log" >&2; exit 1; }
+}
+
+run goal-client "" "$bin/goal-client"
+run pose-publisher examples/external-pose.toml "$bin/pose-publisher"
+run python-client "" "$venv/bin/python" examples/python_client.py
+echo "examples: all three exit 0"
