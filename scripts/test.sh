@@ -26,3 +26,11 @@ if [ -f critic-weights/critic.safetensors ]; then
     "$venv/bin/pip" install -q safetensors numpy
   "$venv/bin/python" scripts/check_weights_python.py critic-weights
 fi
+
+# The Debian package builds, installs, verifies and removes cleanly (issue 18); it
+# packages the binaries `cargo test --workspace` just built, so only on a full run.
+if [ $# -eq 0 ]; then
+  bash scripts/package-check.sh
+else
+  echo "test.sh: package check skipped (cargo test was given arguments: $*)"
+fi
