@@ -321,9 +321,10 @@ mod imp {
                 }
             }
         }
-        let param = libc::sched_param {
-            sched_priority: config.priority,
-        };
+        // Zeroed, then the one field: some libcs (musl) have more fields.
+        // SAFETY: sched_param is plain data.
+        let mut param: libc::sched_param = unsafe { std::mem::zeroed() };
+        param.sched_priority = config.priority;
         // SAFETY: pthread_self() is this live thread; param outlives the call.
         let rc = unsafe { libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_FIFO, &param) };
         // pthread functions return the error number instead of setting errno.
