@@ -179,7 +179,10 @@ pub fn plan_mlock(config: &RealtimeConfig, p: Privileges) -> MlockPlan {
 pub fn refusal_advice(step: Step, errno: i32, config: &RealtimeConfig) -> String {
     let err = std::io::Error::from_raw_os_error(errno);
     let what = match step {
-        Step::Fifo => format!("SCHED_FIFO priority {} for the tick thread", config.priority),
+        Step::Fifo => format!(
+            "SCHED_FIFO priority {} for the tick thread",
+            config.priority
+        ),
         Step::LockMemory => "mlockall(MCL_CURRENT | MCL_FUTURE)".to_owned(),
         Step::Pin => format!("pinning the tick thread to CPU {}", config.cpu.unwrap_or(0)),
     };
@@ -326,7 +329,8 @@ mod imp {
         let mut param: libc::sched_param = unsafe { std::mem::zeroed() };
         param.sched_priority = config.priority;
         // SAFETY: pthread_self() is this live thread; param outlives the call.
-        let rc = unsafe { libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_FIFO, &param) };
+        let rc =
+            unsafe { libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_FIFO, &param) };
         // pthread functions return the error number instead of setting errno.
         if rc == 0 {
             report.fifo = true;
@@ -363,13 +367,21 @@ mod tests {
     #[test]
     fn priority_range_is_checked() {
         for p in [0, 100, -1] {
-            let c = RealtimeConfig { priority: p, ..on() };
+            let c = RealtimeConfig {
+                priority: p,
+                ..on()
+            };
             let (key, msg) = c.validate().unwrap_err();
             assert_eq!(key, "priority");
             assert!(msg.contains("1 to 99"), "{msg}");
         }
         for p in [1, 50, 99] {
-            RealtimeConfig { priority: p, ..on() }.validate().unwrap();
+            RealtimeConfig {
+                priority: p,
+                ..on()
+            }
+            .validate()
+            .unwrap();
         }
     }
 
@@ -379,12 +391,23 @@ mod tests {
         if allowed.is_empty() {
             return;
         }
-        RealtimeConfig { cpu: Some(allowed[0]), ..on() }.validate().unwrap();
-        let (key, msg) = RealtimeConfig { cpu: Some(100_000), ..on() }
-            .validate()
-            .unwrap_err();
+        RealtimeConfig {
+            cpu: Some(allowed[0]),
+            ..on()
+        }
+        .validate()
+        .unwrap();
+        let (key, msg) = RealtimeConfig {
+            cpu: Some(100_000),
+            ..on()
+        }
+        .validate()
+        .unwrap_err();
         assert_eq!(key, "cpu");
-        assert!(msg.contains("CPU 100000") && msg.contains("available"), "{msg}");
+        assert!(
+            msg.contains("CPU 100000") && msg.contains("available"),
+            "{msg}"
+        );
     }
 
     #[test]
@@ -418,7 +441,10 @@ mod tests {
             ..on()
         };
         assert_eq!(plan_mlock(&off, unlimited), MlockPlan::Off);
-        assert_eq!(plan_mlock(&RealtimeConfig::default(), unlimited), MlockPlan::Off);
+        assert_eq!(
+            plan_mlock(&RealtimeConfig::default(), unlimited),
+            MlockPlan::Off
+        );
     }
 
     #[test]
@@ -430,7 +456,10 @@ mod tests {
         };
         let w = refusal_advice(Step::Fifo, libc::EPERM, &c);
         assert!(w.contains("SCHED_FIFO priority 80"), "{w}");
-        assert!(w.contains("LimitRTPRIO=80") && w.contains("RestrictRealtime=no"), "{w}");
+        assert!(
+            w.contains("LimitRTPRIO=80") && w.contains("RestrictRealtime=no"),
+            "{w}"
+        );
         assert!(w.contains("normal scheduler"), "{w}");
         let w = refusal_advice(Step::LockMemory, libc::ENOMEM, &c);
         assert!(w.contains("CAP_IPC_LOCK"), "{w}");

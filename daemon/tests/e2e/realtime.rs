@@ -26,16 +26,28 @@ fn repo_root() -> PathBuf {
 fn refused_real_time_scheduling_is_a_warning_and_the_daemon_ticks() {
     let dir = tempfile::tempdir().unwrap();
     let config = dir.path().join("rt.toml");
-    let cpu = wlnavd::realtime::allowed_cpus().first().copied().unwrap_or(0);
+    let cpu = wlnavd::realtime::allowed_cpus()
+        .first()
+        .copied()
+        .unwrap_or(0);
     std::fs::write(
         &config,
-        format!("[loop.realtime]\nenabled = true\npriority = 40\nlock_memory = true\ncpu = {cpu}\n"),
+        format!(
+            "[loop.realtime]\nenabled = true\npriority = 40\nlock_memory = true\ncpu = {cpu}\n"
+        ),
     )
     .unwrap();
     let prefix = unique_prefix("rt-refused");
     let mut cmd = Command::new(BIN);
     cmd.args(["--sim", "--cost", "quadratic", "--time-scale", "5"])
-        .args(["--max-ticks", "25", "--log", "terminal", "--prefix", &prefix])
+        .args([
+            "--max-ticks",
+            "25",
+            "--log",
+            "terminal",
+            "--prefix",
+            &prefix,
+        ])
         .arg("--config")
         .arg(&config)
         .stdout(Stdio::piped())
@@ -106,7 +118,10 @@ fn the_real_time_drop_in_is_valid_and_relaxes_the_unit() {
     let unit = std::fs::read_to_string(root.join("systemd/wlnavd.service")).unwrap();
     let drop_in =
         std::fs::read_to_string(root.join("systemd/wlnavd.service.d/realtime.conf")).unwrap();
-    assert!(unit.contains("\nRestrictRealtime=yes\n"), "the base unit forbids real-time");
+    assert!(
+        unit.contains("\nRestrictRealtime=yes\n"),
+        "the base unit forbids real-time"
+    );
     for key in [
         "\nRestrictRealtime=no\n",
         "\nLimitRTPRIO=40\n",
@@ -128,12 +143,19 @@ fn the_real_time_drop_in_is_valid_and_relaxes_the_unit() {
     std::fs::write(&copy, unit.replace("/usr/bin/wlnavd", BIN)).unwrap();
     std::fs::create_dir(dir.path().join("wlnavd.service.d")).unwrap();
     std::fs::write(dir.path().join("wlnavd.service.d/realtime.conf"), &drop_in).unwrap();
-    let out = Command::new(tool).arg("verify").arg(&copy).output().unwrap();
+    let out = Command::new(tool)
+        .arg("verify")
+        .arg(&copy)
+        .output()
+        .unwrap();
     let text = format!(
         "{}{}",
         String::from_utf8_lossy(&out.stdout),
         String::from_utf8_lossy(&out.stderr)
     );
-    assert!(out.status.success(), "systemd-analyze verify failed:\n{text}");
+    assert!(
+        out.status.success(),
+        "systemd-analyze verify failed:\n{text}"
+    );
     assert!(!text.contains("wlnavd.service:"), "warnings:\n{text}");
 }
