@@ -29,3 +29,11 @@ fi
 
 # The programs of examples/ against a running daemon (issue 17).
 bash scripts/examples.sh
+
+# The Debian package builds, installs, verifies and removes cleanly (issue 18); it
+# packages the binaries `cargo test --workspace` just built, so only on a full run.
+if [ $# -eq 0 ]; then
+  bash scripts/package-check.sh
+else
+  echo "test.sh: package check skipped (cargo test was given arguments: $*)"
+fi

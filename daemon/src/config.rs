@@ -20,6 +20,11 @@
 //! pose_timeout = 0.5   # s: older pose -> controlled stop
 //! progress_timeout = 10.0  # s without approach -> goal aborted (no-progress)
 //! ...
+//! [loop.realtime]      # tick thread: SCHED_FIFO, mlockall, CPU pinning (crate::realtime)
+//! enabled = false
+//! priority = 40        # SCHED_FIFO 1..=99
+//! lock_memory = true
+//! cpu = 1              # absent = no pinning
 //! [can]
 //! backend = "sim"      # or "socketcan"
 //! interface = "can0"
@@ -233,6 +238,9 @@ pub struct LoopConfig {
     /// Consecutive rejected pose samples that make a pose fault → controlled stop; as many
     /// consistent samples clear it. Default 5.
     pub pose_reject_stop: u32,
+    /// `[loop.realtime]`: SCHED_FIFO, mlockall and CPU pinning for the tick thread
+    /// (off by default; refusals are logged, never fatal). See [`crate::realtime`].
+    pub realtime: crate::realtime::RealtimeConfig,
 }
 
 impl Default for LoopConfig {
@@ -257,6 +265,7 @@ impl Default for LoopConfig {
             pose_heading_tolerance: 0.3,
             pose_workspace_margin: 10.0,
             pose_reject_stop: 5,
+            realtime: Default::default(),
         }
     }
 }
@@ -577,6 +586,9 @@ impl Config {
         if l.pose_reject_stop == 0 {
             return Err(invalid("loop.pose_reject_stop", "must be >= 1"));
         }
+        l.realtime
+            .validate()
+            .map_err(|(key, m)| invalid(format!("loop.realtime.{key}"), m))?;
         if l.can_bad_frames_stop == 0 {
             return Err(invalid("loop.can_bad_frames_stop", "must be >= 1"));
         }
@@ -764,6 +776,11 @@ mod tests {
         assert!(wrong_type.contains("rate_hz"), "{wrong_type}");
         assert!(err("[loop]\npose_reject_stop = 0\n").contains("`loop.pose_reject_stop`"));
         assert!(err("[loop]\npose_max_future = -1\n").contains("`loop.pose_max_future`"));
+        assert!(err("[loop.realtime]\nenabled = true\npriority = 0\n")
+            .contains("`loop.realtime.priority`"));
+        assert!(err("[loop.realtime]\npriority = 100\n").contains("`loop.realtime.priority`"));
+        assert!(err("[loop.realtime]\ncpu = 100000\n").contains("`loop.realtime.cpu`"));
+        assert!(err("[loop.realtime]\nprio = 10\n").contains("prio"));
     }
 
     #[test]

@@ -260,6 +260,7 @@ async fn run_async(
             let mut notifier = Notifier::new();
             notifier.ready("idle: ready for goals");
             let _ = ready_tx.send(Ok(()));
+            crate::realtime::setup_tick_thread(&ctx.config.control.realtime);
             Some(ControlLoop::new(ctx, controller, notifier).run())
         })
         .map_err(|e| DaemonError::Io(format!("control thread: {e}")))?;

@@ -5,7 +5,7 @@
 //! Modules, in data-flow order: [`config`] → [`controller`] (weights, MPC) →
 //! [`can`] (codec, buses) / [`sim`] (simulated machine) → [`can_io`] (CAN task) →
 //! [`ipc`] (goal server) → [`goal_lifecycle`] (accept, reject, outcomes) →
-//! [`control_loop`] (the tick) → [`notify`] (systemd) →
+//! [`control_loop`] (the tick; [`realtime`] scheduling of its thread) → [`notify`] (systemd) →
 //! [`daemon`] (wiring). See `daemon/README.md` for the command line and the
 //! configuration keys.
 
@@ -22,6 +22,7 @@ pub mod log_limit;
 pub mod logging;
 pub mod notify;
 pub mod pose_gate;
+pub mod realtime;
 pub mod sim;
 pub mod stats;
 

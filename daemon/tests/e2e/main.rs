@@ -6,6 +6,7 @@ mod common;
 mod faults;
 mod outcomes;
 mod process;
+mod realtime;
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
