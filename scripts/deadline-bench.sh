@@ -9,7 +9,7 @@
 #
 # Defaults: 3000 ticks (10 minutes), realtime off, no hogs. The hogs are `yes > /dev/null`
 # at normal priority, started before and killed after the run. Needs the release build:
-#   cargo build --release -p daemon -p shm-ipc
+#   cargo build --release -p daemon -p wlnav-cli
 # SCHED_FIFO needs root or RLIMIT_RTPRIO >= the priority (see README, Field installation).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -34,7 +34,7 @@ case "$realtime" in on|off) ;; *) echo "deadline-bench: --realtime on|off" >&2; 
 wlnavd=${WLNAVD:-target/release/wlnavd}
 wlnav=${WLNAV:-target/release/wlnav}
 for b in "$wlnavd" "$wlnav"; do
-  [ -x "$b" ] || { echo "deadline-bench: $b missing (cargo build --release -p daemon -p shm-ipc)" >&2; exit 2; }
+  [ -x "$b" ] || { echo "deadline-bench: $b missing (cargo build --release -p daemon -p wlnav-cli)" >&2; exit 2; }
 done
 
 mkdir -p "$out"

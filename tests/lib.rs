@@ -3,7 +3,7 @@
 //! The tests run the real binaries: `wlnavd --sim` (the daemon with its simulated machine)
 //! and `wlnav` (the client CLI), talking over iceoryx2 shared memory. Cargo does not expose
 //! another package's binaries to a test (`CARGO_BIN_EXE_*` is per package), so
-//! [`binaries`] runs `cargo build -p daemon -p shm-ipc --bins` once per test process, with
+//! [`binaries`] runs `cargo build -p daemon -p wlnav-cli --bins` once per test process, with
 //! the test's own profile and target directory, and returns the paths (a no-op build when
 //! they are fresh). Set `WLNAV_E2E_BIN_DIR` to use prebuilt binaries instead.
 //!
@@ -16,8 +16,8 @@ use std::process::Command;
 use std::sync::OnceLock;
 use std::time::Duration;
 
-use shm_ipc::cli::daemon_process::DaemonProcess;
 use shm_ipc::{Client, IpcConfig, Telemetry, TelemetrySubscriber};
+use wlnav_cli::daemon_process::DaemonProcess;
 
 /// Paths of the two binaries under test.
 #[derive(Debug, Clone)]
@@ -66,7 +66,7 @@ pub fn binaries() -> &'static Binaries {
             wlnavd: profile_dir.join("wlnavd"),
             wlnav: profile_dir.join("wlnav"),
         };
-        // `cargo test --workspace` has already built both (daemon and shm-ipc have
+        // `cargo test --workspace` has already built both (daemon and wlnav-cli have
         // integration tests); a nested build with a different package selection could
         // unify features differently and rebuild half the dependency tree for nothing.
         if fresh(&bins.wlnavd) && fresh(&bins.wlnav) {
@@ -75,7 +75,7 @@ pub fn binaries() -> &'static Binaries {
         let cargo = std::env::var_os("CARGO").unwrap_or_else(|| OsString::from("cargo"));
         let mut cmd = Command::new(cargo);
         cmd.current_dir(repo_root())
-            .args(["build", "-p", "daemon", "-p", "shm-ipc", "--bins"])
+            .args(["build", "-p", "daemon", "-p", "wlnav-cli", "--bins"])
             .env("CARGO_TARGET_DIR", &target_dir);
         match profile.as_str() {
             "debug" => {}
@@ -94,7 +94,7 @@ pub fn binaries() -> &'static Binaries {
 }
 
 /// True if `binary` exists and is newer than every source it is built from (the sources of
-/// `daemon`, `shm-ipc` and `control`, their manifests and the lock file).
+/// `daemon`, `shm-ipc`, `cli` and `control`, their manifests and the lock file).
 fn fresh(binary: &Path) -> bool {
     let Ok(built) = std::fs::metadata(binary).and_then(|m| m.modified()) else {
         return false;
@@ -107,6 +107,8 @@ fn fresh(binary: &Path) -> bool {
         "daemon/Cargo.toml",
         "shm-ipc/src",
         "shm-ipc/Cargo.toml",
+        "cli/src",
+        "cli/Cargo.toml",
         "control/src",
         "control/Cargo.toml",
         "Cargo.toml",

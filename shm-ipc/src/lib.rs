@@ -16,10 +16,8 @@
 //!   obstacles with positive radius; rejections carry a [`RejectReason`]; accepted headings
 //!   are normalised to (−π, π]. (The footprint checks against the obstacles need the
 //!   machine and are the daemon's.)
-//! * `cli` (default feature `cli`; the daemon uses `default-features = false`): the `wlnav`
-//!   command-line client (goal, cancel, stop, resume, watch, record to MCAP, demo) as a
-//!   library,
-//!   so tests reach it; `src/bin/wlnav.rs` only parses arguments.
+//!
+//! The `wlnav` command-line client is its own crate (`wlnav-cli`), built on this one.
 //!
 //! ```no_run
 //! use shm_ipc::{Client, IpcConfig, Pose2};
@@ -253,8 +251,6 @@
 
 #![warn(missing_docs)]
 
-#[cfg(feature = "cli")]
-pub mod cli;
 mod config;
 mod endpoint;
 mod error;

@@ -394,3 +394,50 @@ pub fn sim_config_with_prefix(prefix: &str) -> Config {
     c.ipc.prefix = prefix.to_owned();
     c
 }
+
+/// `systemd-analyze verify` of `unit` (the repository's unit text) with its `drop_ins`
+/// (file name, text) in `wlnavd.service.d/`, `/usr/bin/wlnavd` pointed at the binary under
+/// test (verify checks that it exists). Asserts success and no warning about the unit.
+/// Returns false (skipped) when systemd-analyze is missing, which CI does not allow.
+pub fn assert_systemd_verifies(unit: &str, drop_ins: &[(&str, &str)]) -> bool {
+    let tool = ["/usr/bin/systemd-analyze", "/bin/systemd-analyze"]
+        .into_iter()
+        .find(|p| std::path::Path::new(p).exists());
+    let Some(tool) = tool else {
+        let ci = std::env::var("CI")
+            .map(|v| v == "true" || v == "1")
+            .unwrap_or(false);
+        assert!(
+            !ci,
+            "systemd-analyze missing under CI: add `systemd` to scripts/apt-packages.txt"
+        );
+        eprintln!("SKIPPED: systemd-analyze not installed (apt-get install systemd)");
+        return false;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let copy = dir.path().join("wlnavd.service");
+    let bin = env!("CARGO_BIN_EXE_wlnavd");
+    std::fs::write(&copy, unit.replace("/usr/bin/wlnavd", bin)).unwrap();
+    if !drop_ins.is_empty() {
+        std::fs::create_dir(dir.path().join("wlnavd.service.d")).unwrap();
+        for (name, text) in drop_ins {
+            std::fs::write(dir.path().join("wlnavd.service.d").join(name), text).unwrap();
+        }
+    }
+    let out = std::process::Command::new(tool)
+        .arg("verify")
+        .arg(&copy)
+        .output()
+        .unwrap();
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        out.status.success(),
+        "systemd-analyze verify failed:\n{text}"
+    );
+    assert!(!text.contains("wlnavd.service:"), "warnings:\n{text}");
+    true
+}

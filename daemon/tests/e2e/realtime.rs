@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use crate::common::unique_prefix;
+use crate::common::{assert_systemd_verifies, unique_prefix};
 
 const BIN: &str = env!("CARGO_BIN_EXE_wlnavd");
 
@@ -144,31 +144,5 @@ fn the_real_time_drop_in_is_valid_and_relaxes_the_unit() {
     }
     // The drop-in's priority is the default one.
     assert_eq!(wlnavd::realtime::RealtimeConfig::default().priority, 40);
-    let Some(tool) = ["/usr/bin/systemd-analyze", "/bin/systemd-analyze"]
-        .into_iter()
-        .find(|p| Path::new(p).exists())
-    else {
-        eprintln!("SKIPPED: systemd-analyze not installed (apt-get install systemd)");
-        return;
-    };
-    let dir = tempfile::tempdir().unwrap();
-    let copy = dir.path().join("wlnavd.service");
-    std::fs::write(&copy, unit.replace("/usr/bin/wlnavd", BIN)).unwrap();
-    std::fs::create_dir(dir.path().join("wlnavd.service.d")).unwrap();
-    std::fs::write(dir.path().join("wlnavd.service.d/realtime.conf"), &drop_in).unwrap();
-    let out = Command::new(tool)
-        .arg("verify")
-        .arg(&copy)
-        .output()
-        .unwrap();
-    let text = format!(
-        "{}{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    assert!(
-        out.status.success(),
-        "systemd-analyze verify failed:\n{text}"
-    );
-    assert!(!text.contains("wlnavd.service:"), "warnings:\n{text}");
+    assert_systemd_verifies(&unit, &[("realtime.conf", &drop_in)]);
 }

@@ -1,15 +1,14 @@
 //! The `wlnav` CLI's library parts without a daemon: argument parsing and its errors, the
 //! goal tracker's decisions, the telemetry views, and the MCAP writer (read back with the
 //! `mcap` crate). The CLI against a real daemon is tested in `tests/` (package `e2e`).
-#![cfg(feature = "cli")]
 
 use clap::Parser;
-use shm_ipc::cli::follow::{GoalStatus, GoalTracker};
-use shm_ipc::cli::record::TelemetryWriter;
-use shm_ipc::cli::{exit, view, Cli, Command};
 use shm_ipc::{
     fault_flags, AbortReason, GoalOutcome, MachineState, Mode, Obstacle, Pose2, Telemetry,
 };
+use wlnav_cli::follow::{GoalStatus, GoalTracker};
+use wlnav_cli::record::TelemetryWriter;
+use wlnav_cli::{exit, view, Cli, Command};
 
 fn parse(args: &[&str]) -> Result<Cli, String> {
     Cli::try_parse_from(std::iter::once("wlnav").chain(args.iter().copied()))

@@ -16,9 +16,9 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 use anyhow::Context;
 use serde_json::{json, Value};
 
-use crate::config::IpcConfig;
-use crate::endpoint::Client;
-use crate::msg::{MachineState, Pose2, Telemetry};
+use shm_ipc::Client;
+use shm_ipc::IpcConfig;
+use shm_ipc::{MachineState, Pose2, Telemetry};
 
 use super::view::{fault_names, mode_name};
 use super::{exit, signal, Cli, RecordArgs};
@@ -159,9 +159,9 @@ impl TelemetryWriter {
             writer.add_schema(SCHEMA_NAME, "jsonschema", TELEMETRY_JSON_SCHEMA.as_bytes())?;
         let mut meta = BTreeMap::new();
         meta.insert("prefix".to_owned(), prefix.to_owned());
-        meta.insert("wire_format".to_owned(), crate::API_VERSION.to_owned());
+        meta.insert("wire_format".to_owned(), shm_ipc::API_VERSION.to_owned());
         let channel = writer.add_channel(schema, TOPIC, "json", &meta)?;
-        let wall_offset_ns = wall_now_ns() as i128 - crate::monotonic_now_ns() as i128;
+        let wall_offset_ns = wall_now_ns() as i128 - shm_ipc::monotonic_now_ns() as i128;
         Ok(Self {
             writer,
             channel,
@@ -228,7 +228,7 @@ pub fn record(
     // The client never creates services: wait for the daemon (or a stop) to appear.
     let client = loop {
         match Client::new(config) {
-            Err(crate::error::IpcError::NotServed { .. })
+            Err(shm_ipc::IpcError::NotServed { .. })
                 if !(stop.load(Ordering::SeqCst) || signal::requested())
                     && limits
                         .duration
@@ -256,7 +256,7 @@ pub fn record(
             }
             let sample = match sub.recv_timeout(Duration::from_millis(100)) {
                 // A signal woke the wait: the check at the top of the loop decides.
-                Err(crate::error::IpcError::Interrupted) => continue,
+                Err(shm_ipc::IpcError::Interrupted) => continue,
                 other => other?,
             };
             let Some(t) = sample else {

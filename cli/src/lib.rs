@@ -1,6 +1,6 @@
 //! The `wlnav` command-line client: talk to `wlnavd` over shared memory.
 //!
-//! The binary (`src/bin/wlnav.rs`) only parses arguments and calls [`run`]; everything else
+//! The binary (`src/main.rs`) only parses arguments and calls [`run`]; everything else
 //! lives here so tests reach it. Subcommands:
 //!
 //! | command | what it does | exit code |
@@ -28,13 +28,13 @@ use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand};
 
-use crate::config::{IpcConfig, DEFAULT_PREFIX};
-use crate::msg::Obstacle;
+use shm_ipc::Obstacle;
+use shm_ipc::{IpcConfig, DEFAULT_PREFIX};
 
 /// Process exit codes of `wlnav` (documented in `--help` and the README).
 pub mod exit {
     use super::follow::GoalStatus;
-    use crate::msg::GoalOutcome;
+    use shm_ipc::GoalOutcome;
 
     /// Success: accepted, succeeded, finished.
     pub const OK: u8 = 0;
@@ -232,7 +232,7 @@ pub struct RecordArgs {
 /// Runs a parsed command line; returns the process exit code.
 pub fn run(cli: Cli) -> u8 {
     // iceoryx2 warns on stderr when it has no config file; a CLI user cannot act on that.
-    crate::iceoryx2::prelude::set_log_level(crate::iceoryx2::prelude::LogLevel::Error);
+    shm_ipc::iceoryx2::prelude::set_log_level(shm_ipc::iceoryx2::prelude::LogLevel::Error);
     signal::install();
     let result = match &cli.command {
         Command::Goal(a) => commands::goal(&cli, a),

@@ -11,8 +11,8 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context};
 
-use crate::endpoint::TelemetrySubscriber;
-use crate::msg::{Mode, Telemetry};
+use shm_ipc::TelemetrySubscriber;
+use shm_ipc::{Mode, Telemetry};
 
 /// Name of the daemon binary.
 pub const WLNAVD: &str = "wlnavd";
@@ -58,7 +58,7 @@ pub fn unique_prefix(base: &str) -> String {
     format!(
         "{base}-{}-{}",
         std::process::id(),
-        crate::monotonic_now_ns() % 1_000_000_000_000
+        shm_ipc::monotonic_now_ns() % 1_000_000_000_000
     )
 }
 
@@ -161,15 +161,15 @@ impl DaemonProcess {
     /// them), or fails if the daemon exits, Ctrl-C arrives or `timeout` passes.
     pub fn connect(
         &mut self,
-        config: &crate::config::IpcConfig,
+        config: &shm_ipc::IpcConfig,
         timeout: Duration,
-    ) -> anyhow::Result<crate::endpoint::Client> {
+    ) -> anyhow::Result<shm_ipc::Client> {
         let start = Instant::now();
         let mut config = config.clone();
         loop {
-            match crate::endpoint::Client::new(&config) {
+            match shm_ipc::Client::new(&config) {
                 Ok(c) => return Ok(c),
-                Err(crate::error::IpcError::NotServed { service }) => {
+                Err(shm_ipc::IpcError::NotServed { service }) => {
                     if let Some(status) = self.try_wait()? {
                         bail!(
                             "{} exited during start-up ({status}){}",

@@ -1,7 +1,7 @@
 //! Human-readable renderings of [`Telemetry`]: the one-line-per-tick view and the table view
 //! of `wlnav watch`, mode and fault names (shared with `record` and `demo`).
 
-use crate::msg::{fault_flags, AbortReason, GoalOutcome, Mode, Telemetry};
+use shm_ipc::{fault_flags, AbortReason, GoalOutcome, Mode, Telemetry};
 
 /// Fault bits and their names, in bit order.
 pub const FAULT_NAMES: [(u32, &str); 10] = [

@@ -6,9 +6,9 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context;
 
-use crate::endpoint::{Client, StopClient, TelemetrySubscriber};
-use crate::error::{ClientError, IpcError};
-use crate::msg::{GoalReply, GoalRequest, Pose2, RejectCode, Telemetry};
+use shm_ipc::{Client, StopClient, TelemetrySubscriber};
+use shm_ipc::{ClientError, IpcError};
+use shm_ipc::{GoalReply, GoalRequest, Pose2, RejectCode, Telemetry};
 
 use super::follow::{GoalStatus, GoalTracker};
 use super::view::{self, mode_name};
@@ -116,11 +116,11 @@ pub fn goal(cli: &Cli, a: &GoalArgs) -> anyhow::Result<u8> {
         a.heading
     };
     let goal = Pose2::new(a.x, a.y, heading);
-    if a.obstacles.len() > crate::MAX_OBSTACLES {
+    if a.obstacles.len() > shm_ipc::MAX_OBSTACLES {
         eprintln!(
             "wlnav: {} obstacles given, at most {} fit in a request",
             a.obstacles.len(),
-            crate::MAX_OBSTACLES
+            shm_ipc::MAX_OBSTACLES
         );
         return Ok(exit::USAGE);
     }

@@ -6,7 +6,7 @@ use std::path::Path;
 use anyhow::anyhow;
 use plotters::prelude::*;
 
-use crate::msg::Pose2;
+use shm_ipc::Pose2;
 
 /// Leg colours: dark enough on white for thin horizon lines.
 const LEG_COLORS: [RGBColor; 6] = [

@@ -3,7 +3,7 @@
 //! Along the way: when the daemon took the goal up and when it converged (DESIGN §7 test).
 //! Used by `wlnav goal --wait`, `wlnav demo` and the end-to-end tests.
 
-use crate::msg::{fault_flags, AbortReason, GoalOutcome, Pose2, Telemetry};
+use shm_ipc::{fault_flags, AbortReason, GoalOutcome, Pose2, Telemetry};
 
 use super::view::goal_distance;
 

@@ -14,10 +14,10 @@ use std::time::{Duration, Instant};
 use anyhow::Context;
 use clap::Args;
 
-use crate::config::IpcConfig;
-use crate::endpoint::Client;
-use crate::error::ClientError;
-use crate::msg::{GoalReply, Pose2};
+use shm_ipc::Client;
+use shm_ipc::ClientError;
+use shm_ipc::IpcConfig;
+use shm_ipc::{GoalReply, Pose2};
 
 use super::commands::{
     describe_reply, emit, follow, outcome_line, ticks_per_second, FollowEnd, FollowOptions,
@@ -115,7 +115,7 @@ fn send_goal(client: &Client, goal: Pose2) -> Result<(u64, GoalReply), ClientErr
     let mut tries = 0;
     loop {
         let id = client.next_request_id();
-        let req = crate::msg::GoalRequest::set_goal(id, goal, &[]).expect("no obstacles");
+        let req = shm_ipc::GoalRequest::set_goal(id, goal, &[]).expect("no obstacles");
         match client.request(&req, Duration::from_secs(2)) {
             Err(ClientError::NoDaemon { .. }) if tries < 20 => {
                 tries += 1;

@@ -2,7 +2,7 @@
 //! Errors name the argument and say what was wrong, so `wlnav goal 1 nan 0` answers
 //! "Y must be a finite number, got `nan`" instead of sending garbage to the daemon.
 
-use crate::msg::Obstacle;
+use shm_ipc::Obstacle;
 
 /// Parses a finite `f64`; `what` names the argument in the error.
 pub fn finite_f64(what: &str, text: &str) -> Result<f64, String> {
@@ -70,6 +70,6 @@ pub fn parse_seconds(text: &str) -> Result<f64, String> {
 
 /// clap value parser for `--prefix`.
 pub fn parse_prefix(text: &str) -> Result<String, String> {
-    crate::config::validate_prefix(text).map_err(|e| e.to_string())?;
+    shm_ipc::validate_prefix(text).map_err(|e| e.to_string())?;
     Ok(text.to_owned())
 }
