@@ -24,4 +24,4 @@ pub use critic::{Critic, CriticWorkspace, Derivatives, HessianMode, TerminalDeri
 pub use encoder::Encoder;
 pub use model::{Control, Goal, MachineParams, State};
 pub use obstacle::Obstacle;
-pub use plant::{Plant, PlantConfig, VelocityCommand};
+pub use plant::{Plant, PlantConfig, PlantPerturbation, VelocityCommand};
