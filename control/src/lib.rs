@@ -7,6 +7,7 @@ pub mod cost;
 pub mod critic;
 pub mod delay;
 pub mod encoder;
+pub mod gain;
 pub mod goal_check;
 pub mod mlp;
 pub mod model;

@@ -171,6 +171,9 @@ enum Command {
         /// Simulated duration [s].
         #[arg(long, default_value_t = 30.0)]
         duration: f64,
+        /// Turn the MPC's online actuator-gain estimate off (default: the daemon's).
+        #[arg(long)]
+        no_gain_estimation: bool,
         /// Skip the per-scenario trajectory plots.
         #[arg(long)]
         no_scenario_plots: bool,
@@ -295,6 +298,7 @@ fn main() -> Result<()> {
             delay,
             lag,
             duration,
+            no_gain_estimation,
             no_scenario_plots,
             planner,
             subgoal_radius,
@@ -330,6 +334,7 @@ fn main() -> Result<()> {
                 step_length: step_length.unwrap_or(d.step_length),
                 obstacle_margin: obstacle_margin.unwrap_or(d.obstacle_margin),
                 obstacle_slack_weight: obstacle_slack_weight.unwrap_or(d.obstacle_slack_weight),
+                gain_estimation: d.gain_estimation && !no_gain_estimation,
                 ..cfg.mpc
             };
             cfg.mpc.validate()?;
@@ -363,7 +368,7 @@ fn main() -> Result<()> {
             cfg.perturbation = perturbations.options().perturbation()?;
             let ev = eval::evaluate(&cfg, &nets, &set)?;
             let header = format!(
-                "# eval: {}\n\nmethods {methods}, planner {planner}, N = {}, Hessian {:?}, obstacles {:?} with margin {} m, SQP iterations {} × step {}, delay {delay} s, lag {lag} s, plant perturbation: {}, tolerance {}, networks: {}\n",
+                "# eval: {}\n\nmethods {methods}, planner {planner}, N = {}, Hessian {:?}, obstacles {:?} with margin {} m, SQP iterations {} × step {}, gain estimation {}, delay {delay} s, lag {lag} s, plant perturbation: {}, tolerance {}, networks: {}\n",
                 scenarios.display(),
                 cfg.mpc.horizon,
                 cfg.mpc.hessian,
@@ -371,6 +376,7 @@ fn main() -> Result<()> {
                 cfg.mpc.obstacle_margin,
                 cfg.mpc.sqp_iterations,
                 cfg.mpc.step_length,
+                cfg.mpc.gain_estimation,
                 robustness::describe(&cfg.perturbation),
                 common.tolerance,
                 nets.source
@@ -445,7 +451,8 @@ fn main() -> Result<()> {
                 .map_or("unknown".into(), |o| {
                     String::from_utf8_lossy(&o.stdout).trim().to_string()
                 });
-            let mut command = String::from("cargo run --release -p sim --bin wlnav-sim -- robustness");
+            let mut command =
+                String::from("cargo run --release -p sim --bin wlnav-sim -- robustness");
             for a in std::env::args().skip(2) {
                 command.push(' ');
                 command.push_str(&a);

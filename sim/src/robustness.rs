@@ -279,22 +279,28 @@ pub fn standard_sweeps() -> Vec<Sweep> {
         title: "Pose noise (x, y and θ)",
         x_desc: "σ_xy [m] (σ_θ in the table)",
         nominal: 0.0,
-        levels: [(0.0, 0.0), (0.01, 0.005), (0.03, 0.02), (0.06, 0.04), (0.1, 0.06)]
-            .iter()
-            .map(|&(sxy, sth)| Level {
-                x: sxy,
-                label: format!("{sxy} m / {sth} rad"),
-                case: case(
-                    PlantPerturbation {
-                        pose_noise_xy: sxy,
-                        pose_noise_theta: sth,
-                        ..d()
-                    },
-                    0.0,
-                ),
-                acceptance: sxy == 0.03,
-            })
-            .collect(),
+        levels: [
+            (0.0, 0.0),
+            (0.01, 0.005),
+            (0.03, 0.02),
+            (0.06, 0.04),
+            (0.1, 0.06),
+        ]
+        .iter()
+        .map(|&(sxy, sth)| Level {
+            x: sxy,
+            label: format!("{sxy} m / {sth} rad"),
+            case: case(
+                PlantPerturbation {
+                    pose_noise_xy: sxy,
+                    pose_noise_theta: sth,
+                    ..d()
+                },
+                0.0,
+            ),
+            acceptance: sxy == 0.03,
+        })
+        .collect(),
     });
     sweeps.push(Sweep {
         flag: "--pose-latency",
@@ -502,9 +508,8 @@ pub fn robustness(inp: &Inputs, sweeps: &[Sweep], out: &Path) -> Result<()> {
     let mut summary_csv = String::from(
         "sweep,level,perturbation,compensated_delay,set,scenarios,reached,t_mean,t_ratio_mean,t_ratio_max,worst_clearance,penetrations\n",
     );
-    let mut runs_csv = String::from(
-        "sweep,level,set,name,success,t_converge,min_clearance,solve_ms_max\n",
-    );
+    let mut runs_csv =
+        String::from("sweep,level,set,name,success,t_converge,min_clearance,solve_ms_max\n");
     let mut labelled: Vec<(&str, String, Case)> = Vec::new();
     for s in sweeps {
         for l in &s.levels {
@@ -618,18 +623,30 @@ pub fn robustness(inp: &Inputs, sweeps: &[Sweep], out: &Path) -> Result<()> {
             opt(fo.t_ratio, 3),
             opt(fo.worst_clearance, 3),
             fo.penetrations,
-            if accepted(&fp, &fo, min) { "yes" } else { "**no**" }
+            if accepted(&fp, &fo, min) {
+                "yes"
+            } else {
+                "**no**"
+            }
         );
     };
     row(&mut md, "nominal (none)", &nominal, 0.98);
     for s in sweeps {
         for l in s.levels.iter().filter(|l| l.acceptance) {
-            row(&mut md, &format!("`{} ` {}", s.flag, l.label), &l.case, 0.98);
+            row(
+                &mut md,
+                &format!("`{} ` {}", s.flag, l.label),
+                &l.case,
+                0.98,
+            );
         }
     }
     row(
         &mut md,
-        &format!("all moderate: {}, 0.2 s compensated", describe(&moderate.perturbation)),
+        &format!(
+            "all moderate: {}, 0.2 s compensated",
+            describe(&moderate.perturbation)
+        ),
         &moderate,
         0.95,
     );
@@ -677,7 +694,11 @@ pub fn robustness(inp: &Inputs, sweeps: &[Sweep], out: &Path) -> Result<()> {
     );
     let path = out.join("robustness.md");
     std::fs::write(&path, md).with_context(|| format!("writing {}", path.display()))?;
-    eprintln!("robustness: {} cases in {wall:.0} s; wrote {}", cases.len(), path.display());
+    eprintln!(
+        "robustness: {} cases in {wall:.0} s; wrote {}",
+        cases.len(),
+        path.display()
+    );
     Ok(())
 }
 
@@ -722,18 +743,17 @@ fn breaks(s: &Sweep, figures: &dyn Fn(&Case) -> (Figures, Figures)) -> String {
                 l.label,
                 held.map_or(String::new(), |h| format!("; holds at {}", h.label))
             ),
-            (Some(h), None) => format!("{side} nominal it holds at every level tried (to {})", h.label),
+            (Some(h), None) => format!(
+                "{side} nominal it holds at every level tried (to {})",
+                h.label
+            ),
             (None, None) => String::new(),
         });
     }
     format!("Where it breaks: {}.", out.join("; "))
 }
 
-fn sweep_plot(
-    s: &Sweep,
-    figures: &dyn Fn(&Case) -> (Figures, Figures),
-    path: &Path,
-) -> Result<()> {
+fn sweep_plot(s: &Sweep, figures: &dyn Fn(&Case) -> (Figures, Figures), path: &Path) -> Result<()> {
     let paper_c = RGBColor(31, 119, 180);
     let obst_c = RGBColor(255, 127, 14);
     let f: Vec<(f64, Figures, Figures)> = s

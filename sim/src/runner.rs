@@ -63,9 +63,7 @@ impl RestCounter {
     fn new(cfg: &EvalConfig, dt: f64) -> Self {
         Self {
             ticks: 0,
-            needed: cfg
-                .end_at_rest
-                .then(|| (AT_REST_FOR / dt).round() as usize),
+            needed: cfg.end_at_rest.then(|| (AT_REST_FOR / dt).round() as usize),
         }
     }
 

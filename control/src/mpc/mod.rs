@@ -43,6 +43,7 @@ pub use solution::{FallbackReason, Solution, StepStatus};
 
 use crate::actor::{Actor, ActorWorkspace};
 use crate::delay::DelayCompensator;
+use crate::gain::GainEstimator;
 use crate::model::{Control, Goal, MachineParams, State};
 
 /// The MPC: built once, then `set_goal` and `step` every tick.
@@ -57,6 +58,9 @@ pub struct Mpc<C: StageCost, D: Dynamics = Rk4Model, B: QpBackend = ClarabelBack
     backend: B,
     data: QpData,
     delay: DelayCompensator,
+    /// Online actuator-gain estimate ([`crate::gain`]), used when
+    /// `settings.gain_estimation`.
+    gain: GainEstimator,
     goal: Option<Goal>,
     obstacles: [Obstacle; MAX_OBSTACLES],
     n_obstacles: usize,
@@ -132,6 +136,7 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
             backend,
             data,
             delay,
+            gain: GainEstimator::new(params, settings.delay, settings.dt),
             goal: None,
             obstacles: [Obstacle::default(); MAX_OBSTACLES],
             n_obstacles: 0,
@@ -187,6 +192,12 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
         self.has_plan = false;
         self.tick = 0;
         self.delay.reset();
+        self.gain.reset();
+    }
+
+    /// The actuator-gain estimates (β̇, v_f) (1 until estimated, or when off).
+    pub fn actuator_gains(&self) -> [f64; 2] {
+        self.gain.gains()
     }
 
     /// Sets the goal and the obstacles (at most `max_obstacles`, radii already

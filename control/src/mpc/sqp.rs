@@ -51,6 +51,9 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
         let start = Instant::now();
         let goal = self.goal.ok_or(MpcError::NoGoal)?;
         let now = self.tick as f64 * self.settings.dt;
+        if self.settings.gain_estimation {
+            self.gain.observe(measured);
+        }
         let x_hat = if finite(measured) {
             self.delay.propagate(now, measured)
         } else {
@@ -107,10 +110,17 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
         }
         command.beta_dot = command.beta_dot.clamp(-p.beta_dot_max, p.beta_dot_max);
         command.v = command.v.clamp(-p.v_max, p.v_max);
+        // With the gain estimate: send the command that achieves the plan's
+        // velocities, and propagate the delay with what it should achieve.
+        let (command, achieved) = if self.settings.gain_estimation {
+            self.gain.command(command)
+        } else {
+            (command, command)
+        };
         self.solution.command = command;
         self.solution.states.copy_from_slice(&self.xs);
         self.solution.controls.copy_from_slice(&self.us);
-        self.delay.record(now, command);
+        self.delay.record(now, achieved);
         self.tick += 1;
         self.solution.solve_time = start.elapsed();
         Ok(&self.solution)
