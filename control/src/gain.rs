@@ -83,11 +83,12 @@ impl GainEstimator {
     /// For a machine with `params`, a compensated delay `delay` ≥ 0 and the
     /// command period `dt` > 0.
     pub fn new(params: MachineParams, delay: f64, dt: f64) -> Self {
-        let lag = ((delay + dt) / dt - 1e-9).ceil().max(1.0) as usize;
+        let lag = Self::lag_of(delay, dt);
+        let most = Self::lag_of(crate::delay_estimate::MAX_DELAY.max(delay), dt);
         Self {
             params,
             lag,
-            sent: VecDeque::with_capacity(lag + 3),
+            sent: VecDeque::with_capacity(most + 3),
             last: None,
             channels: [
                 // β̇: commands of 0.05 rad/s and more, steady within 0.03 rad/s.
@@ -96,6 +97,15 @@ impl GainEstimator {
                 Channel::new(1.0, 0.1, 0.05),
             ],
         }
+    }
+
+    fn lag_of(delay: f64, dt: f64) -> usize {
+        ((delay + dt) / dt - 1e-9).ceil().max(1.0) as usize
+    }
+
+    /// A new compensated delay (e.g. the online estimate).
+    pub fn set_delay(&mut self, delay: f64, dt: f64) {
+        self.lag = Self::lag_of(delay, dt);
     }
 
     /// The current estimates (β̇, v_f).

@@ -6,6 +6,7 @@ pub mod actor;
 pub mod cost;
 pub mod critic;
 pub mod delay;
+pub mod delay_estimate;
 pub mod encoder;
 pub mod gain;
 pub mod goal_check;

@@ -174,6 +174,9 @@ enum Command {
         /// Turn the MPC's online actuator-gain estimate off (default: the daemon's).
         #[arg(long)]
         no_gain_estimation: bool,
+        /// Turn the MPC's online delay estimate off (default: the daemon's).
+        #[arg(long)]
+        no_delay_estimation: bool,
         /// Skip the per-scenario trajectory plots.
         #[arg(long)]
         no_scenario_plots: bool,
@@ -220,6 +223,12 @@ enum Command {
         /// Results file whose min-time rows give T* of the paper set.
         #[arg(long, default_value = "docs/results/paper128.csv")]
         t_star: PathBuf,
+        /// Run the MPC without its online gain and delay estimates (for comparison).
+        #[arg(long)]
+        no_estimation: bool,
+        /// Base name of the page (NAME.md) and its asset directory.
+        #[arg(long, default_value = "robustness")]
+        name: String,
         #[command(flatten)]
         common: Common,
         #[arg(long, default_value = "docs")]
@@ -299,6 +308,7 @@ fn main() -> Result<()> {
             lag,
             duration,
             no_gain_estimation,
+            no_delay_estimation,
             no_scenario_plots,
             planner,
             subgoal_radius,
@@ -335,6 +345,7 @@ fn main() -> Result<()> {
                 obstacle_margin: obstacle_margin.unwrap_or(d.obstacle_margin),
                 obstacle_slack_weight: obstacle_slack_weight.unwrap_or(d.obstacle_slack_weight),
                 gain_estimation: d.gain_estimation && !no_gain_estimation,
+                delay_estimation: d.delay_estimation && !no_delay_estimation,
                 ..cfg.mpc
             };
             cfg.mpc.validate()?;
@@ -368,7 +379,7 @@ fn main() -> Result<()> {
             cfg.perturbation = perturbations.options().perturbation()?;
             let ev = eval::evaluate(&cfg, &nets, &set)?;
             let header = format!(
-                "# eval: {}\n\nmethods {methods}, planner {planner}, N = {}, Hessian {:?}, obstacles {:?} with margin {} m, SQP iterations {} × step {}, gain estimation {}, delay {delay} s, lag {lag} s, plant perturbation: {}, tolerance {}, networks: {}\n",
+                "# eval: {}\n\nmethods {methods}, planner {planner}, N = {}, Hessian {:?}, obstacles {:?} with margin {} m, SQP iterations {} × step {}, gain estimation {}, delay estimation {}, delay {delay} s, lag {lag} s, plant perturbation: {}, tolerance {}, networks: {}\n",
                 scenarios.display(),
                 cfg.mpc.horizon,
                 cfg.mpc.hessian,
@@ -377,6 +388,7 @@ fn main() -> Result<()> {
                 cfg.mpc.sqp_iterations,
                 cfg.mpc.step_length,
                 cfg.mpc.gain_estimation,
+                cfg.mpc.delay_estimation,
                 robustness::describe(&cfg.perturbation),
                 common.tolerance,
                 nets.source
@@ -411,6 +423,8 @@ fn main() -> Result<()> {
             obstacles_per_kind,
             subset_seed,
             t_star,
+            no_estimation,
+            name,
             common,
             out,
         } => {
@@ -457,8 +471,12 @@ fn main() -> Result<()> {
                 command.push(' ');
                 command.push_str(&a);
             }
+            let mut base = base_config(&common);
+            base.mpc.gain_estimation &= !no_estimation;
+            base.mpc.delay_estimation &= !no_estimation;
             let inputs = robustness::Inputs {
-                base: base_config(&common),
+                base,
+                name,
                 nets: &nets,
                 paper: &paper,
                 paper_name: format!("`{}`", scenarios.display()),

@@ -51,6 +51,14 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
         let start = Instant::now();
         let goal = self.goal.ok_or(MpcError::NoGoal)?;
         let now = self.tick as f64 * self.settings.dt;
+        if self.settings.delay_estimation && finite(measured) {
+            self.delay_estimate.observe(measured);
+            let d = self.delay_estimate.delay();
+            if d != self.delay.delay() {
+                self.delay.set_delay(d);
+                self.gain.set_delay(d, self.settings.dt);
+            }
+        }
         if self.settings.gain_estimation {
             self.gain.observe(measured);
         }
@@ -121,6 +129,9 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
         self.solution.states.copy_from_slice(&self.xs);
         self.solution.controls.copy_from_slice(&self.us);
         self.delay.record(now, achieved);
+        if self.settings.delay_estimation {
+            self.delay_estimate.record(now, measured, achieved);
+        }
         self.tick += 1;
         self.solution.solve_time = start.elapsed();
         Ok(&self.solution)
