@@ -19,9 +19,10 @@
 //! K̂, saturated at the machine's bounds; the delay compensator is told the
 //! velocity that should then be achieved, K̂ × the command sent.
 //!
-//! On a machine without gain error every informative sample has m = c exactly
-//! (the ideal plant lands on its command), so K̂ stays exactly 1 and the
-//! commands are bit-identical to those without the estimate.
+//! An estimate within [`DEADBAND`] of 1 is not applied, so on a machine
+//! without gain error (velocity lag and delays off the tick grid included)
+//! the commands are bit-identical to those without the estimate; on the ideal
+//! plant every informative sample has m = c exactly and K̂ stays exactly 1.
 
 use std::collections::VecDeque;
 
@@ -33,6 +34,10 @@ pub const MIN_GAIN: f64 = 0.5;
 pub const MAX_GAIN: f64 = 2.0;
 /// Forgetting factor per informative sample (≈ 20 samples of memory).
 pub const FORGETTING: f64 = 0.95;
+/// Estimates within this of 1 are not applied (the commands stay exactly the
+/// MPC's): a machine without gain error but with a velocity lag, or a delay
+/// that is not a multiple of the command period, gives estimates a hair off 1.
+pub const DEADBAND: f64 = 0.03;
 
 /// One velocity channel's estimate.
 #[derive(Debug, Clone, Copy)]
@@ -113,6 +118,12 @@ impl GainEstimator {
         [self.channels[0].gain, self.channels[1].gain]
     }
 
+    /// The gains the commands are divided by: the estimates, or 1 within [`DEADBAND`].
+    pub fn applied_gains(&self) -> [f64; 2] {
+        self.gains()
+            .map(|g| if (g - 1.0).abs() > DEADBAND { g } else { 1.0 })
+    }
+
     /// Forgets the commands (not the estimate: the gain is the machine's).
     pub fn reset(&mut self) {
         self.sent.clear();
@@ -155,7 +166,7 @@ impl GainEstimator {
     /// achieved velocities = gain × sent).
     pub fn command(&mut self, intended: VelocityCommand) -> (VelocityCommand, VelocityCommand) {
         let p = &self.params;
-        let [gb, gv] = self.gains();
+        let [gb, gv] = self.applied_gains();
         let sent = VelocityCommand {
             beta_dot: (intended.beta_dot / gb).clamp(-p.beta_dot_max, p.beta_dot_max),
             v: (intended.v / gv).clamp(-p.v_max, p.v_max),
@@ -234,6 +245,27 @@ mod tests {
             ..PlantConfig::ideal()
         };
         assert_eq!(estimate(1.0, d, 0.2), [1.0, 1.0]);
+    }
+
+    #[test]
+    fn small_estimates_are_not_applied() {
+        let p = MachineParams::default();
+        let mut est = GainEstimator::new(p, 0.0, 0.2);
+        est.channels[1].gain = 1.0 + 0.5 * DEADBAND;
+        let cmd = VelocityCommand {
+            beta_dot: 0.1,
+            v: 0.4,
+        };
+        assert_eq!(est.command(cmd), (cmd, cmd));
+        // A lagging machine without gain error: the estimate stays in the deadband.
+        let lag = PlantConfig {
+            delay: 0.3,
+            tau_beta_dot: 0.1,
+            tau_v: 0.2,
+            ..PlantConfig::default()
+        };
+        let g = estimate(1.0, lag, 0.3);
+        assert!(g.iter().all(|g| (g - 1.0).abs() < DEADBAND), "{g:?}");
     }
 
     #[test]

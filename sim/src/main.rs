@@ -132,6 +132,8 @@ impl Perturbations {
     }
 }
 
+// Parsed once; the size of the `eval` variant does not matter.
+#[allow(clippy::large_enum_variant)]
 #[derive(Subcommand)]
 enum Command {
     /// Evaluate methods on a scenario file; writes DIR/results.csv, summary.md and SVGs.

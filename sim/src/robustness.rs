@@ -237,7 +237,7 @@ pub fn standard_sweeps() -> Vec<Sweep> {
         title: "True plant delay, 0.2 s compensated",
         x_desc: "plant delay [s] (MPC compensates 0.2 s)",
         nominal: 0.2,
-        levels: [0.0, 0.1, 0.2, 0.35, 0.5]
+        levels: [0.0, 0.1, 0.2, 0.35, 0.5, 0.8]
             .iter()
             .map(|&s| Level {
                 x: s,
@@ -307,7 +307,7 @@ pub fn standard_sweeps() -> Vec<Sweep> {
         title: "Pose latency",
         x_desc: "age of the pose [s]",
         nominal: 0.0,
-        levels: [0.0, 0.1, 0.2, 0.4]
+        levels: [0.0, 0.05, 0.1, 0.2]
             .iter()
             .map(|&s| Level {
                 x: s,
@@ -872,7 +872,7 @@ mod tests {
                     .map(move |l| format!("{} {}", s.flag, describe(&l.case.perturbation)))
             })
             .collect();
-        assert_eq!(acc.len(), 9, "{acc:?}");
+        assert_eq!(acc.len(), 10, "{acc:?}");
         let m = all_moderate();
         assert_eq!(m.compensated, 0.2);
         assert_eq!(m.perturbation.delay, Some(0.25));
