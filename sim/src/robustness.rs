@@ -621,8 +621,14 @@ pub fn robustness(inp: &Inputs, sweeps: &[Sweep], out: &Path) -> Result<()> {
         "| perturbation | paper reached | t/T* mean (max) | obstacles reached | obstacles t/t₀ | worst clearance [m] | runs below −{} m | accepted |\n|---|---|---|---|---|---|---|---|",
         PENETRATION_TOLERANCE
     );
-    let row = |md: &mut String, name: &str, c: &Case, min: f64| {
+    // `penetration`: whether the obstacle criterion applies (each level alone).
+    let row = |md: &mut String, name: &str, c: &Case, min: f64, penetration: bool| {
         let (fp, fo) = figures(c);
+        let ok = if penetration {
+            accepted(&fp, &fo, min)
+        } else {
+            fp.success_rate() >= min - 1e-12
+        };
         let _ = writeln!(
             md,
             "| {name} | {}/{} ({:.1} %) | {} ({}) | {}/{} | {} | {} | {} | {} |",
@@ -636,21 +642,18 @@ pub fn robustness(inp: &Inputs, sweeps: &[Sweep], out: &Path) -> Result<()> {
             opt(fo.t_ratio, 3),
             opt(fo.worst_clearance, 3),
             fo.penetrations,
-            if accepted(&fp, &fo, min) {
-                "yes"
-            } else {
-                "**no**"
-            }
+            if ok { "yes" } else { "**no**" }
         );
     };
-    row(&mut md, "nominal (none)", &nominal, 0.98);
+    row(&mut md, "nominal (none)", &nominal, 0.98, true);
     for s in sweeps {
         for l in s.levels.iter().filter(|l| l.acceptance) {
             row(
                 &mut md,
-                &format!("`{} ` {}", s.flag, l.label),
+                &format!("`{}` {}", s.flag, l.label),
                 &l.case,
                 0.98,
+                true,
             );
         }
     }
@@ -662,12 +665,15 @@ pub fn robustness(inp: &Inputs, sweeps: &[Sweep], out: &Path) -> Result<()> {
         ),
         &moderate,
         0.95,
+        false,
     );
     md.push('\n');
     let _ = writeln!(
         md,
-        "t₀: the unperturbed MPC's time on the same obstacle scenario (no T* for this set here).\n"
+        "t₀: the unperturbed MPC's time on the same obstacle scenario (no T* for this set here). The all-moderate case is \
+         accepted on its success rate alone (issue 16: ≥ 95 %); its clearance is shown.\n"
     );
+    md.push_str(NOTES);
 
     let _ = writeln!(md, "## Sweeps\n");
     for s in sweeps {
@@ -715,6 +721,32 @@ pub fn robustness(inp: &Inputs, sweeps: &[Sweep], out: &Path) -> Result<()> {
     );
     Ok(())
 }
+
+/// What the controller does about the perturbations, and what the numbers
+/// mean (fixed text; the numbers are in the tables above it).
+const NOTES: &str = "\
+## What the controller does about them
+
+- **Actuator gain** (`control::gain`, `MpcSettings::gain_estimation`, default on). The MPC commands the velocities of \
+its planned x₁, i.e. the measured velocity plus one tick of bounded acceleration; a machine that achieves K × the \
+command closes that loop with a pole at K: velocities grow by K a tick at K > 1 and stall at K·a_max·Δt / (1 − K) at \
+K < 1. The MPC estimates K per channel online (least squares with forgetting on steady velocity samples), divides its \
+commands by it, tells the delay compensator the velocities they should achieve, and plans within K × the β̇ and v \
+bounds when K < 1. Estimates within 3 % of 1 are not applied, so the nominal machine gets bit-identical commands.
+- **True delay ≠ compensated delay** (`control::delay_estimate`, `MpcSettings::delay_estimation`, default on). A bank \
+of delay compensators on a 0.05 s grid up to 0.6 s (and the configured delay) predicts each tick's velocities one \
+tick ahead; the MPC compensates the best-scoring delay once it clearly beats the current one. Its estimate stays on \
+the configured delay when that is right. Beyond the grid (0.8 s) it breaks.
+- **Geometry.** Not estimated. The obstacle rows keep the *planned* axle points `obstacle_margin` = 0.05 m from \
+every circle; with L_r × 1.1 the true rear axle is up to 0.06 m (0.1 × 0.6 m) from where the model puts it, more \
+than the margin, hence the −5 mm runs at × 1.1 and beyond. A margin of 0.06 m covers ±10 % on one axle \
+(paper 128 has no obstacles, so its t/T* would not change); it is left at 0.05 m here.
+- **Pose noise and latency.** No filter: the MPC plans from the measured pose. Noise up to 0.03 m / 0.02 rad and \
+latency up to 0.1 s hold; beyond, the clearance goes first (a 0.2 s old pose at 1 m/s is 0.2 m behind).
+- The same sweeps with both estimates off: `wlnav-sim robustness --no-estimation --name robustness-no-estimation` \
+([robustness-no-estimation.md](robustness-no-estimation.md)).
+
+";
 
 fn opt(v: Option<f64>, d: usize) -> String {
     v.map_or("–".into(), |v| format!("{v:.d$}"))

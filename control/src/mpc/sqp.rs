@@ -339,7 +339,21 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
             }
         }
         // Bounds and obstacles.
-        fill_bounds(l, &self.params, &self.xs, &self.us, &mut d.b);
+        // A machine that achieves less than commanded cannot reach the
+        // nominal β̇ and v bounds: plan within gain × bound (exactly the
+        // nominal bounds while the applied gain is 1).
+        let p = self.params;
+        let [gb, gv] = if self.settings.gain_estimation {
+            self.gain.applied_gains()
+        } else {
+            [1.0, 1.0]
+        };
+        let bounds = crate::model::MachineParams {
+            beta_dot_max: p.beta_dot_max * gb.min(1.0),
+            v_max: p.v_max * gv.min(1.0),
+            ..p
+        };
+        fill_bounds(l, &bounds, &self.xs, &self.us, &mut d.b);
         let obstacles = &self.obstacles[..self.n_obstacles];
         fill_obstacles(
             l,
