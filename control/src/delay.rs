@@ -148,6 +148,21 @@ impl DelayCompensator {
         self.delay
     }
 
+    /// Changes the compensated delay (e.g. to an online estimate,
+    /// [`crate::delay_estimate`]); ≥ 0 and finite, else ignored.
+    pub fn set_delay(&mut self, delay: f64) {
+        if delay.is_finite() && delay >= 0.0 {
+            self.delay = delay;
+        }
+    }
+
+    /// Makes room for the command history of delays up to `max_delay`, so that
+    /// a later [`Self::set_delay`] does not allocate in a tick.
+    pub fn reserve_for(&mut self, max_delay: f64) {
+        let n = (max_delay.max(self.delay) / self.ramp).ceil() as usize + 4;
+        self.history.reserve(n.saturating_sub(self.history.len()));
+    }
+
     /// Forgets every command.
     pub fn reset(&mut self) {
         self.history.clear();
@@ -175,8 +190,16 @@ impl DelayCompensator {
     /// The state at `time + delay`, from the state measured at `time`.
     /// Returns the measurement itself when the delay is zero.
     pub fn propagate(&self, time: f64, measured: &State) -> State {
+        self.propagate_over(time, measured, self.delay)
+    }
+
+    /// The state at `time + duration` from the state measured at `time`, with
+    /// the commands recorded; commands not yet recorded are taken not to act
+    /// in the window (true for duration ≤ the delay, and for duration ≤ delay
+    /// + command period once the command sent at `time` is recorded).
+    pub fn propagate_over(&self, time: f64, measured: &State, duration: f64) -> State {
         let mut x = *measured;
-        if self.delay == 0.0 {
+        if duration <= 0.0 {
             return x;
         }
         let p = self.params;
@@ -197,7 +220,7 @@ impl DelayCompensator {
             }
         }
         let mut t = time;
-        let end = time + self.delay;
+        let end = time + duration;
         while end - t > 1e-12 {
             while next < self.history.len() && act(next) <= t + 1e-12 {
                 let cmd = self.history[next].1;

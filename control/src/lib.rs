@@ -6,7 +6,9 @@ pub mod actor;
 pub mod cost;
 pub mod critic;
 pub mod delay;
+pub mod delay_estimate;
 pub mod encoder;
+pub mod gain;
 pub mod goal_check;
 pub mod mlp;
 pub mod model;
@@ -24,4 +26,4 @@ pub use critic::{Critic, CriticWorkspace, Derivatives, HessianMode, TerminalDeri
 pub use encoder::Encoder;
 pub use model::{Control, Goal, MachineParams, State};
 pub use obstacle::Obstacle;
-pub use plant::{Plant, PlantConfig, VelocityCommand};
+pub use plant::{Plant, PlantConfig, PlantPerturbation, VelocityCommand};

@@ -6,6 +6,11 @@
 //! an input delay, tracks it with a first-order velocity response limited by the
 //! acceleration bounds, integrates the kinematic model (paper eq. 5) at a fine
 //! step and reports the state, optionally with seeded Gaussian measurement noise.
+//!
+//! [`PlantPerturbation`] makes it a machine that is not the MPC's model
+//! (DESIGN §12): other axle distances, a true delay other than the compensated
+//! one, an actuator gain, pose noise and pose latency. Its default is none,
+//! and then the plant computes exactly what it computed without it.
 
 use std::collections::VecDeque;
 
@@ -23,6 +28,12 @@ pub enum PlantError {
     Negative { name: &'static str, value: f64 },
     #[error("plant setting `substep` must be in (0, 0.02] s (got {0})")]
     BadSubstep(f64),
+    #[error("plant perturbation `{name}` {requirement} (got {value})")]
+    Perturbation {
+        name: &'static str,
+        requirement: &'static str,
+        value: f64,
+    },
     #[error("plant command is not finite: beta_dot {beta_dot}, v {v}")]
     NonFiniteCommand { beta_dot: f64, v: f64 },
 }
@@ -120,6 +131,123 @@ impl PlantConfig {
     }
 }
 
+/// How the real machine differs from the MPC's model (DESIGN §12). The default
+/// is no difference; each field is off at its default.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PlantPerturbation {
+    /// The plant's L_f is the nominal L_f × this (the MPC keeps the nominal).
+    pub scale_lf: f64,
+    /// The plant's L_r is the nominal L_r × this.
+    pub scale_lr: f64,
+    /// The plant's true input delay [s]; `None`: [`PlantConfig::delay`], the
+    /// delay the MPC compensates.
+    pub delay: Option<f64>,
+    /// Achieved β̇ and v are this × the (saturated) command. The plant's own
+    /// bounds on β̇ and v grow with a gain above 1, so the achieved rate is
+    /// exactly K × command; the acceleration limits stay.
+    pub actuator_gain: f64,
+    /// Standard deviation of Gaussian noise on the measured x_f and y_f [m].
+    pub pose_noise_xy: f64,
+    /// Standard deviation of Gaussian noise on the measured θ_f [rad].
+    pub pose_noise_theta: f64,
+    /// Age of the pose (x_f, y_f, θ_f) when [`Plant::measure`] reads it [s];
+    /// β, β̇ and v (the machine's own sensors) stay current.
+    pub pose_latency: f64,
+    /// Seed of the pose noise.
+    pub seed: u64,
+}
+
+impl Default for PlantPerturbation {
+    fn default() -> Self {
+        Self {
+            scale_lf: 1.0,
+            scale_lr: 1.0,
+            delay: None,
+            actuator_gain: 1.0,
+            pose_noise_xy: 0.0,
+            pose_noise_theta: 0.0,
+            pose_latency: 0.0,
+            seed: 0,
+        }
+    }
+}
+
+impl PlantPerturbation {
+    /// No perturbation (the seed aside).
+    pub fn is_nominal(&self) -> bool {
+        Self {
+            seed: self.seed,
+            ..Self::default()
+        } == *self
+    }
+
+    pub fn validate(&self) -> Result<(), PlantError> {
+        let err = |name, requirement, value| {
+            Err(PlantError::Perturbation {
+                name,
+                requirement,
+                value,
+            })
+        };
+        for (name, value) in [
+            ("scale_lf", self.scale_lf),
+            ("scale_lr", self.scale_lr),
+            ("actuator_gain", self.actuator_gain),
+        ] {
+            if !(value.is_finite() && value > 0.0 && value <= 10.0) {
+                return err(name, "must be in (0, 10]", value);
+            }
+        }
+        for (name, value) in [
+            ("delay", self.delay.unwrap_or(0.0)),
+            ("pose_noise_xy", self.pose_noise_xy),
+            ("pose_noise_theta", self.pose_noise_theta),
+            ("pose_latency", self.pose_latency),
+        ] {
+            if !(value.is_finite() && value >= 0.0) {
+                return err(name, "must be finite and >= 0", value);
+            }
+        }
+        for (name, value) in [
+            ("delay", self.delay.unwrap_or(0.0)),
+            ("pose_latency", self.pose_latency),
+        ] {
+            if value > 10.0 {
+                return err(name, "must be at most 10 s", value);
+            }
+        }
+        Ok(())
+    }
+
+    /// The plant's true machine: `nominal` with the axle distances scaled and,
+    /// with a gain above 1, the β̇ and v bounds grown by it.
+    pub fn true_params(&self, nominal: &MachineParams) -> MachineParams {
+        let g = self.actuator_gain.max(1.0);
+        MachineParams {
+            l_f: nominal.l_f * self.scale_lf,
+            l_r: nominal.l_r * self.scale_lr,
+            beta_dot_max: nominal.beta_dot_max * g,
+            v_max: nominal.v_max * g,
+            ..*nominal
+        }
+    }
+
+    /// The same perturbation with its seed mixed with `name` (FNV-1a), so
+    /// each scenario gets its own noise, reproducibly.
+    pub fn seeded_for(&self, name: &str) -> Self {
+        let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+        for b in name.bytes() {
+            h ^= u64::from(b);
+            h = h.wrapping_mul(0x0100_0000_01b3);
+        }
+        Self {
+            seed: self.seed ^ h,
+            ..*self
+        }
+    }
+}
+
 /// A velocity command as the low-level controller takes it.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct VelocityCommand {
@@ -132,8 +260,13 @@ pub struct VelocityCommand {
 /// The simulated machine. Deterministic for a given configuration and seed.
 #[derive(Debug, Clone)]
 pub struct Plant {
+    /// The true machine ([`PlantPerturbation::true_params`]).
     params: MachineParams,
+    /// The nominal machine: the command saturation of the low-level controller.
+    nominal: MachineParams,
+    /// The settings, `delay` the true one.
     config: PlantConfig,
+    perturbation: PlantPerturbation,
     state: State,
     time: f64,
     /// Commands waiting for their delay to pass, as (time they take effect, command).
@@ -142,6 +275,12 @@ pub struct Plant {
     /// Linear ramps of (β̇, v_f) used when the time constant is zero.
     ramps: [Ramp; 2],
     rng: ChaCha8Rng,
+    /// Noise of the perturbation's pose noise (its own stream, so that
+    /// `PlantConfig::noise` draws what it drew without it).
+    pose_rng: ChaCha8Rng,
+    /// True states after each integration step, as (time, state), kept for
+    /// the pose latency only (empty without it).
+    history: VecDeque<(f64, State)>,
 }
 
 #[derive(Debug, Clone, Copy, Default)]
@@ -158,12 +297,35 @@ impl Plant {
         config: PlantConfig,
         initial: State,
     ) -> Result<Self, PlantError> {
+        Self::perturbed(params, config, PlantPerturbation::default(), initial)
+    }
+
+    /// A plant that differs from `params` (the MPC's model) by `perturbation`.
+    pub fn perturbed(
+        params: MachineParams,
+        config: PlantConfig,
+        perturbation: PlantPerturbation,
+        initial: State,
+    ) -> Result<Self, PlantError> {
         config.validate()?;
+        perturbation.validate()?;
+        let nominal = params;
+        let params = perturbation.true_params(&nominal);
+        let config = PlantConfig {
+            delay: perturbation.delay.unwrap_or(config.delay),
+            ..config
+        };
         let mut state = initial;
         clamp_state(&params, &mut state);
+        let mut history = VecDeque::new();
+        if perturbation.pose_latency > 0.0 {
+            history.push_back((0.0, state));
+        }
         Ok(Self {
             params,
+            nominal,
             config,
+            perturbation,
             state,
             time: 0.0,
             pending: VecDeque::new(),
@@ -173,7 +335,18 @@ impl Plant {
             },
             ramps: [Ramp::default(); 2],
             rng: ChaCha8Rng::seed_from_u64(config.seed),
+            pose_rng: ChaCha8Rng::seed_from_u64(perturbation.seed),
+            history,
         })
+    }
+
+    /// The true machine (the nominal one changed by the perturbation).
+    pub fn params(&self) -> &MachineParams {
+        &self.params
+    }
+
+    pub fn perturbation(&self) -> &PlantPerturbation {
+        &self.perturbation
     }
 
     pub fn time(&self) -> f64 {
@@ -195,7 +368,8 @@ impl Plant {
     }
 
     /// Sends a command now; it takes effect after the configured delay. Values
-    /// are saturated at the machine's bounds, as the low-level controller does.
+    /// are saturated at the machine's bounds, as the low-level controller does,
+    /// and the actuators achieve the actuator gain × that.
     pub fn command(&mut self, cmd: VelocityCommand) -> Result<(), PlantError> {
         if !(cmd.beta_dot.is_finite() && cmd.v.is_finite()) {
             return Err(PlantError::NonFiniteCommand {
@@ -203,10 +377,11 @@ impl Plant {
                 v: cmd.v,
             });
         }
-        let p = &self.params;
+        let p = &self.nominal;
+        let k = self.perturbation.actuator_gain;
         let cmd = VelocityCommand {
-            beta_dot: cmd.beta_dot.clamp(-p.beta_dot_max, p.beta_dot_max),
-            v: cmd.v.clamp(-p.v_max, p.v_max),
+            beta_dot: k * cmd.beta_dot.clamp(-p.beta_dot_max, p.beta_dot_max),
+            v: k * cmd.v.clamp(-p.v_max, p.v_max),
         };
         self.pending.push_back((self.time + self.config.delay, cmd));
         Ok(())
@@ -318,12 +493,58 @@ impl Plant {
         clamp_state(&p, &mut next);
         self.state = next;
         self.time += h;
+        if self.perturbation.pose_latency > 0.0 {
+            self.history.push_back((self.time, next));
+            // Keep one entry at or before the oldest instant still read.
+            let oldest = self.time - self.perturbation.pose_latency;
+            while self.history.len() > 2 && self.history[1].0 <= oldest - 1e-9 {
+                self.history.pop_front();
+            }
+        }
     }
 
-    /// The state as a sensor reports it: the true state plus seeded Gaussian noise.
+    /// The true pose (x_f, y_f, θ_f) `age` seconds ago, linear between the
+    /// stored integration steps (θ along the shorter arc); before the start,
+    /// the initial pose.
+    fn pose_at_age(&self, age: f64) -> [f64; 3] {
+        let pose = |x: &State| [x[ix::X], x[ix::Y], x[ix::THETA]];
+        let t = self.time - age;
+        let Some(&(t0, x0)) = self.history.front() else {
+            return pose(&self.state);
+        };
+        if t <= t0 + 1e-9 {
+            return pose(&x0);
+        }
+        for w in self.history.iter().zip(self.history.iter().skip(1)) {
+            let (&(ta, xa), &(tb, xb)) = w;
+            if (t - tb).abs() <= 1e-9 {
+                return pose(&xb);
+            }
+            if t < tb {
+                let s = (t - ta) / (tb - ta);
+                let dth = crate::model::wrap_angle(xb[ix::THETA] - xa[ix::THETA]);
+                return [
+                    xa[ix::X] + s * (xb[ix::X] - xa[ix::X]),
+                    xa[ix::Y] + s * (xb[ix::Y] - xa[ix::Y]),
+                    xa[ix::THETA] + s * dth,
+                ];
+            }
+        }
+        pose(&self.state)
+    }
+
+    /// The state as a sensor reports it: the true state plus seeded Gaussian
+    /// noise; with the perturbation, the pose `pose_latency` old and with its
+    /// own noise on top.
     pub fn measure(&mut self) -> State {
         let n = self.config.noise;
         let mut x = self.state;
+        if self.perturbation.pose_latency > 0.0 {
+            let [px, py, pth] = self.pose_at_age(self.perturbation.pose_latency);
+            x[ix::X] = px;
+            x[ix::Y] = py;
+            x[ix::THETA] = pth;
+        }
         for (i, sd) in [
             (ix::X, n.position),
             (ix::Y, n.position),
@@ -336,6 +557,18 @@ impl Plant {
                 // sd > 0 and finite was validated, so Normal::new cannot fail.
                 if let Ok(dist) = Normal::new(0.0, sd) {
                     x[i] += dist.sample(&mut self.rng);
+                }
+            }
+        }
+        let pn = self.perturbation;
+        for (i, sd) in [
+            (ix::X, pn.pose_noise_xy),
+            (ix::Y, pn.pose_noise_xy),
+            (ix::THETA, pn.pose_noise_theta),
+        ] {
+            if sd > 0.0 {
+                if let Ok(dist) = Normal::new(0.0, sd) {
+                    x[i] += dist.sample(&mut self.pose_rng);
                 }
             }
         }
@@ -484,5 +717,370 @@ mod tests {
             .unwrap_err()
             .to_string()
             .contains("delay"));
+    }
+
+    /// A scripted run: commands that change every tick; every true and
+    /// measured state hashed bit by bit (FNV-1a).
+    fn scripted_hash(config: PlantConfig, perturbation: Option<PlantPerturbation>) -> u64 {
+        let p = MachineParams::default();
+        let x0 = State::new(0.5, -0.3, 0.4, 0.1, 0.0, 0.2);
+        let mut plant = match perturbation {
+            None => Plant::new(p, config, x0).unwrap(),
+            Some(d) => Plant::perturbed(p, config, d, x0).unwrap(),
+        };
+        let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+        let mut eat = |v: f64| {
+            for b in v.to_bits().to_le_bytes() {
+                h ^= u64::from(b);
+                h = h.wrapping_mul(0x0100_0000_01b3);
+            }
+        };
+        for k in 0..120 {
+            let t = k as f64 * 0.2;
+            plant
+                .command(VelocityCommand {
+                    beta_dot: 0.5 * (0.7 * t).sin(),
+                    v: 1.2 * (0.3 * t).cos(),
+                })
+                .unwrap();
+            plant.advance(0.2);
+            for v in plant.state().iter().chain(plant.measure().iter()) {
+                eat(*v);
+            }
+        }
+        h
+    }
+
+    #[test]
+    fn no_perturbation_is_bit_identical_to_the_plant_before_it() {
+        // Hashes recorded with the plant of a335e36 (before PlantPerturbation).
+        let noisy = PlantConfig {
+            noise: MeasurementNoise {
+                position: 0.02,
+                heading: 0.01,
+                beta: 0.01,
+                beta_dot: 0.01,
+                speed: 0.01,
+            },
+            seed: 3,
+            ..Default::default()
+        };
+        let golden = [
+            (PlantConfig::ideal(), 0x8236976177032575_u64),
+            (PlantConfig::default(), 0xe7faa3e575100341),
+            (noisy, 0x207cd72974a99589),
+        ];
+        let none = PlantPerturbation {
+            seed: 99, // the seed alone changes nothing
+            ..Default::default()
+        };
+        assert!(none.is_nominal());
+        for (c, h) in golden {
+            assert_eq!(scripted_hash(c, None), h);
+            assert_eq!(scripted_hash(c, Some(none)), h);
+            assert_eq!(scripted_hash(c, Some(none.seeded_for("r4.5_b0_h0"))), h);
+        }
+        // And a perturbation does change it.
+        let gain = PlantPerturbation {
+            actuator_gain: 0.9,
+            ..Default::default()
+        };
+        assert_ne!(scripted_hash(PlantConfig::ideal(), Some(gain)), golden[0].1);
+    }
+
+    /// Drives `plant` with a constant command for `t` seconds (ticks of 0.2 s).
+    fn hold(plant: &mut Plant, cmd: VelocityCommand, t: f64) {
+        let ticks = (t / 0.2).round() as usize;
+        for _ in 0..ticks {
+            plant.command(cmd).unwrap();
+            plant.advance(0.2);
+        }
+    }
+
+    #[test]
+    fn actuator_gain_scales_achieved_rates_and_distance() {
+        let p = MachineParams::default();
+        for k in [0.8, 1.2] {
+            let pert = PlantPerturbation {
+                actuator_gain: k,
+                ..Default::default()
+            };
+            // Straight: the same command and time, k × the distance (the ramp
+            // accelerations stay under the limits, so the whole profile scales).
+            let cmd = VelocityCommand {
+                beta_dot: 0.0,
+                v: 0.15,
+            };
+            let mut nominal = Plant::new(p, PlantConfig::ideal(), State::zeros()).unwrap();
+            let mut real = Plant::perturbed(p, PlantConfig::ideal(), pert, State::zeros()).unwrap();
+            hold(&mut nominal, cmd, 5.0);
+            hold(&mut real, cmd, 5.0);
+            let (d0, d) = (nominal.state()[ix::X], real.state()[ix::X]);
+            assert!((d / d0 - k).abs() < 1e-12, "gain {k}: {d} vs {d0}");
+            assert!((real.state()[ix::V] - k * 0.15).abs() < 1e-12);
+            // Articulation at rest: k × the angle.
+            let cmd = VelocityCommand {
+                beta_dot: 0.08,
+                v: 0.0,
+            };
+            let mut nominal = Plant::new(p, PlantConfig::ideal(), State::zeros()).unwrap();
+            let mut real = Plant::perturbed(p, PlantConfig::ideal(), pert, State::zeros()).unwrap();
+            hold(&mut nominal, cmd, 1.0);
+            hold(&mut real, cmd, 1.0);
+            let (b0, b) = (nominal.state()[ix::BETA], real.state()[ix::BETA]);
+            assert!((b / b0 - k).abs() < 1e-12, "gain {k}: beta {b} vs {b0}");
+        }
+        // A saturated command: k × the bound (above 1 the machine exceeds the model's bound).
+        let pert = PlantPerturbation {
+            actuator_gain: 1.2,
+            ..Default::default()
+        };
+        let mut real = Plant::perturbed(p, PlantConfig::ideal(), pert, State::zeros()).unwrap();
+        hold(
+            &mut real,
+            VelocityCommand {
+                beta_dot: 0.0,
+                v: 5.0,
+            },
+            3.0,
+        );
+        assert!((real.state()[ix::V] - 1.2 * p.v_max).abs() < 1e-12);
+    }
+
+    #[test]
+    fn scaled_geometry_turns_on_the_kinematic_radius() {
+        // Constant β and v: the front axle runs on a circle of radius
+        // R = (L_f cos β + L_r) / sin β (paper eq. 5 with β̇ = 0).
+        let p = MachineParams::default();
+        let (beta, v) = (0.3, 0.5);
+        for (slf, slr) in [(1.0, 1.0), (0.9, 1.0), (1.2, 1.0), (1.0, 0.9), (1.0, 1.1)] {
+            let pert = PlantPerturbation {
+                scale_lf: slf,
+                scale_lr: slr,
+                ..Default::default()
+            };
+            let x0 = State::new(0.0, 0.0, 0.0, beta, 0.0, v);
+            let mut plant = Plant::perturbed(p, PlantConfig::ideal(), pert, x0).unwrap();
+            hold(&mut plant, VelocityCommand { beta_dot: 0.0, v }, 4.0);
+            let x = plant.state();
+            let (lf, lr) = (p.l_f * slf, p.l_r * slr);
+            let r = (lf * beta.cos() + lr) / beta.sin();
+            // Heading gained: v t / R; the axle on the circle about (0, R).
+            assert!((x[ix::THETA] - v * 4.0 / r).abs() < 1e-9, "{slf},{slr}");
+            assert!(((x[ix::X]).hypot(x[ix::Y] - r) - r).abs() < 1e-9);
+            assert_eq!(plant.params().l_f, lf);
+            assert_eq!(plant.params().l_r, lr);
+        }
+    }
+
+    #[test]
+    fn plant_delay_shifts_the_response_by_its_difference() {
+        let p = MachineParams::default();
+        let config = PlantConfig {
+            delay: 0.2,
+            ..Default::default()
+        };
+        let cmd = VelocityCommand {
+            beta_dot: 0.3,
+            v: 0.6,
+        };
+        for s in [0.1, 0.35] {
+            let pert = PlantPerturbation {
+                delay: Some(s),
+                ..Default::default()
+            };
+            let mut nominal = Plant::new(p, config, State::zeros()).unwrap();
+            let mut real = Plant::perturbed(p, config, pert, State::zeros()).unwrap();
+            assert_eq!(real.config().delay, s);
+            nominal.command(cmd).unwrap();
+            real.command(cmd).unwrap();
+            // Sample both every 0.05 s; the real one at t equals the nominal at t − (s − 0.2).
+            let step = 0.05;
+            let shift = ((s - 0.2) / step).round() as i64;
+            let (mut a, mut b) = (Vec::new(), Vec::new());
+            for _ in 0..60 {
+                nominal.advance(step);
+                real.advance(step);
+                a.push(nominal.state());
+                b.push(real.state());
+            }
+            for (k, x) in b.iter().enumerate() {
+                let j = k as i64 - shift;
+                let expected = if j < 0 {
+                    State::zeros()
+                } else if (j as usize) < a.len() {
+                    a[j as usize]
+                } else {
+                    continue;
+                };
+                assert!(
+                    (x - expected).norm() < 1e-9,
+                    "delay {s}, sample {k}: {x:?} vs {expected:?}"
+                );
+            }
+            assert!(b[5][ix::V] != a[5][ix::V]);
+        }
+    }
+
+    #[test]
+    fn pose_latency_reads_an_old_pose_and_current_machine_state() {
+        let p = MachineParams::default();
+        let pert = PlantPerturbation {
+            pose_latency: 0.2,
+            ..Default::default()
+        };
+        let x0 = State::new(1.0, 2.0, 0.5, 0.0, 0.0, 0.0);
+        let mut plant = Plant::perturbed(p, PlantConfig::default(), pert, x0).unwrap();
+        let mut reference = Plant::new(p, PlantConfig::default(), x0).unwrap();
+        let mut previous = plant.state();
+        for k in 0..40 {
+            let t = k as f64 * 0.2;
+            let cmd = VelocityCommand {
+                beta_dot: 0.4 * (0.9 * t).sin(),
+                v: 0.8 * (0.4 * t).cos(),
+            };
+            plant.command(cmd).unwrap();
+            reference.command(cmd).unwrap();
+            plant.advance(0.2);
+            reference.advance(0.2);
+            // The latency changes what is read, never the machine.
+            assert_eq!(plant.state(), reference.state());
+            let m = plant.measure();
+            let x = plant.state();
+            for i in [ix::X, ix::Y, ix::THETA] {
+                assert_eq!(m[i], previous[i], "tick {k}: the pose of one tick before");
+            }
+            for i in [ix::BETA, ix::BETA_DOT, ix::V] {
+                assert_eq!(m[i], x[i]);
+            }
+            assert!(k < 3 || m[ix::X] != x[ix::X]);
+            previous = x;
+        }
+        // Before the start: the initial pose.
+        let mut fresh = Plant::perturbed(p, PlantConfig::default(), pert, x0).unwrap();
+        assert_eq!(fresh.measure(), x0);
+        // Half a tick: between the true poses (linear within a 10 ms sub-step).
+        let half = PlantPerturbation {
+            pose_latency: 0.1,
+            ..Default::default()
+        };
+        let mut a = Plant::perturbed(p, PlantConfig::ideal(), half, x0).unwrap();
+        let cmd = VelocityCommand {
+            beta_dot: 0.2,
+            v: 0.8,
+        };
+        a.command(cmd).unwrap();
+        a.advance(0.9);
+        let mut b = Plant::new(p, PlantConfig::ideal(), x0).unwrap();
+        b.command(cmd).unwrap();
+        b.advance(0.8);
+        let (ma, xb) = (a.measure(), b.state());
+        assert!(
+            (ma[ix::X] - xb[ix::X]).abs() < 1e-12 && (ma[ix::THETA] - xb[ix::THETA]).abs() < 1e-12
+        );
+    }
+
+    #[test]
+    fn pose_noise_has_the_requested_spread_and_is_seeded() {
+        let p = MachineParams::default();
+        let pert = PlantPerturbation {
+            pose_noise_xy: 0.03,
+            pose_noise_theta: 0.02,
+            seed: 5,
+            ..Default::default()
+        };
+        let x0 = State::new(1.0, -1.0, 0.3, 0.1, 0.0, 0.0);
+        let samples = |pert: PlantPerturbation| {
+            let mut plant = Plant::perturbed(p, PlantConfig::ideal(), pert, x0).unwrap();
+            (0..20_000).map(|_| plant.measure()).collect::<Vec<_>>()
+        };
+        let a = samples(pert);
+        for (i, sd) in [(ix::X, 0.03), (ix::Y, 0.03), (ix::THETA, 0.02)] {
+            let n = a.len() as f64;
+            let mean = a.iter().map(|m| m[i] - x0[i]).sum::<f64>() / n;
+            let var = a.iter().map(|m| (m[i] - x0[i] - mean).powi(2)).sum::<f64>() / (n - 1.0);
+            // Standard error of the std over 20 000 samples ≈ 0.5 %.
+            assert!(
+                (var.sqrt() / sd - 1.0).abs() < 0.03,
+                "index {i}: std {}",
+                var.sqrt()
+            );
+            assert!(mean.abs() < 4.0 * sd / n.sqrt(), "index {i}: mean {mean}");
+        }
+        for m in &a {
+            assert_eq!(m[ix::BETA], x0[ix::BETA]);
+            assert_eq!(m[ix::V], x0[ix::V]);
+        }
+        assert_eq!(samples(pert), a, "same seed, same noise");
+        assert_ne!(samples(PlantPerturbation { seed: 6, ..pert }), a);
+        let (s1, s2) = (
+            pert.seeded_for("r4.5_b0_h0"),
+            pert.seeded_for("r4.5_b0_h45"),
+        );
+        assert_ne!(s1.seed, s2.seed);
+        assert_eq!(s1, pert.seeded_for("r4.5_b0_h0"));
+    }
+
+    #[test]
+    fn bad_perturbations_are_rejected_naming_the_field() {
+        let p = MachineParams::default();
+        let cases = [
+            (
+                "scale_lf",
+                PlantPerturbation {
+                    scale_lf: 0.0,
+                    ..Default::default()
+                },
+            ),
+            (
+                "scale_lr",
+                PlantPerturbation {
+                    scale_lr: f64::NAN,
+                    ..Default::default()
+                },
+            ),
+            (
+                "delay",
+                PlantPerturbation {
+                    delay: Some(-0.1),
+                    ..Default::default()
+                },
+            ),
+            (
+                "actuator_gain",
+                PlantPerturbation {
+                    actuator_gain: -1.0,
+                    ..Default::default()
+                },
+            ),
+            (
+                "pose_noise_xy",
+                PlantPerturbation {
+                    pose_noise_xy: -0.01,
+                    ..Default::default()
+                },
+            ),
+            (
+                "pose_noise_theta",
+                PlantPerturbation {
+                    pose_noise_theta: f64::INFINITY,
+                    ..Default::default()
+                },
+            ),
+            (
+                "pose_latency",
+                PlantPerturbation {
+                    pose_latency: -0.2,
+                    ..Default::default()
+                },
+            ),
+        ];
+        for (name, pert) in cases {
+            let e = Plant::perturbed(p, PlantConfig::ideal(), pert, State::zeros()).unwrap_err();
+            assert!(
+                matches!(&e, PlantError::Perturbation { name: n, .. } if *n == name),
+                "{name}: {e}"
+            );
+        }
     }
 }

@@ -6,7 +6,8 @@
 //! - [`runner`]: closed-loop runs of the MPC and the actor on the simulated
 //!   plant, the baseline's replay, min-time; scenarios in parallel.
 //! - [`results`]: the results CSV and summary statistics; [`plots`]: SVGs;
-//!   [`eval`]: the `eval` command's outputs; [`report`]: the `paper` command.
+//!   [`eval`]: the `eval` command's outputs; [`report`]: the `paper` command;
+//!   [`robustness`]: the `robustness` command (DESIGN §12).
 //!
 //! Scenario files are parsed by [`control::scenario`]; the committed ones are
 //! in `sim/scenarios/`.
@@ -20,5 +21,6 @@ pub mod ocp;
 pub mod plots;
 pub mod report;
 pub mod results;
+pub mod robustness;
 pub mod routes;
 pub mod runner;

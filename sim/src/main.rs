@@ -4,10 +4,14 @@
 //! wlnav-sim eval --scenarios sim/scenarios/paper128.csv --methods mpc,actor,baseline,min-time \
 //!     [--horizon N] [--hessian exact|gauss-newton] [--obstacles distance|cbf] \
 //!     [--sqp-iterations K] [--step-length A] [--obstacle-margin M] \
-//!     [--delay 0.2] [--lag 0.1] [--tolerance 0.1] [--weights critic-weights] --out out/eval
+//!     [--delay 0.2] [--lag 0.1] [--tolerance 0.1] [--weights critic-weights] --out out/eval \
+//!     [--plant-scale-lf K] [--plant-scale-lr K] [--plant-delay S] [--actuator-gain K] \
+//!     [--pose-noise SXY,STHETA] [--pose-latency S]
 //! # controller options left out take the daemon's defaults (MpcSettings::default());
-//! # the plant is ideal unless --delay / --lag are given (the paper's test)
+//! # the plant is ideal unless --delay / --lag are given (the paper's test); the
+//! # perturbations make the plant differ from the MPC's model (DESIGN §12)
 //! wlnav-sim paper [--weights critic-weights] [--out docs]
+//! wlnav-sim robustness [--obstacles-per-kind 10] [--out docs]   # docs/robustness.md
 //! wlnav-sim scenarios --out sim/scenarios   # paper128, selection64, obstacles200 (seeded)
 //! ```
 
@@ -22,6 +26,7 @@ use control::plant::PlantConfig;
 use control::scenario;
 use control::MachineParams;
 use sim::eval;
+use sim::robustness::{self, PerturbationOptions};
 use sim::runner::{EvalConfig, Method, Networks};
 
 #[derive(Parser)]
@@ -87,6 +92,48 @@ struct Common {
     tolerance: f64,
 }
 
+/// How the plant differs from the MPC's model (DESIGN §12); all off by default.
+#[derive(clap::Args, Clone)]
+struct Perturbations {
+    /// The plant's L_f is K × the nominal (the MPC keeps the nominal).
+    #[arg(long, value_name = "K", value_parser = robustness::parse_factor)]
+    plant_scale_lf: Option<f64>,
+    /// The plant's L_r is K × the nominal (the MPC keeps the nominal).
+    #[arg(long, value_name = "K", value_parser = robustness::parse_factor)]
+    plant_scale_lr: Option<f64>,
+    /// The plant's true input delay [s]; `--delay` stays the delay the MPC compensates.
+    #[arg(long, value_name = "S", value_parser = robustness::parse_seconds)]
+    plant_delay: Option<f64>,
+    /// Achieved β̇ and v are K × the command.
+    #[arg(long, value_name = "K", value_parser = robustness::parse_factor)]
+    actuator_gain: Option<f64>,
+    /// Gaussian noise on the measured x, y [m] and θ [rad] (seeded per scenario).
+    #[arg(long, value_name = "SXY,STHETA", value_parser = robustness::parse_pose_noise)]
+    pose_noise: Option<(f64, f64)>,
+    /// The pose the tick reads is S seconds old.
+    #[arg(long, value_name = "S", value_parser = robustness::parse_seconds)]
+    pose_latency: Option<f64>,
+    /// Seed of the pose noise (mixed with each scenario's name).
+    #[arg(long, default_value_t = 0)]
+    noise_seed: u64,
+}
+
+impl Perturbations {
+    fn options(&self) -> PerturbationOptions {
+        PerturbationOptions {
+            plant_scale_lf: self.plant_scale_lf,
+            plant_scale_lr: self.plant_scale_lr,
+            plant_delay: self.plant_delay,
+            actuator_gain: self.actuator_gain,
+            pose_noise: self.pose_noise,
+            pose_latency: self.pose_latency,
+            seed: self.noise_seed,
+        }
+    }
+}
+
+// Parsed once; the size of the `eval` variant does not matter.
+#[allow(clippy::large_enum_variant)]
 #[derive(Subcommand)]
 enum Command {
     /// Evaluate methods on a scenario file; writes DIR/results.csv, summary.md and SVGs.
@@ -126,6 +173,12 @@ enum Command {
         /// Simulated duration [s].
         #[arg(long, default_value_t = 30.0)]
         duration: f64,
+        /// Turn the MPC's online actuator-gain estimate off (default: the daemon's).
+        #[arg(long)]
+        no_gain_estimation: bool,
+        /// Turn the MPC's online delay estimate off (default: the daemon's).
+        #[arg(long)]
+        no_delay_estimation: bool,
         /// Skip the per-scenario trajectory plots.
         #[arg(long)]
         no_scenario_plots: bool,
@@ -149,8 +202,38 @@ enum Command {
         #[arg(long)]
         direct_margin: Option<f64>,
         #[command(flatten)]
+        perturbations: Perturbations,
+        #[command(flatten)]
         common: Common,
         #[arg(long)]
+        out: PathBuf,
+    },
+    /// Each plant perturbation alone over a range of levels and all moderate
+    /// ones at once (DESIGN §12); writes OUT/robustness.md and OUT/robustness/*.
+    Robustness {
+        #[arg(long, default_value = "sim/scenarios/paper128.csv")]
+        scenarios: PathBuf,
+        /// The obstacle set; a seeded subset of it is run.
+        #[arg(long, default_value = "sim/scenarios/obstacles200.csv")]
+        obstacles: PathBuf,
+        /// Scenarios of each obstacle kind in the subset (0: the whole set).
+        #[arg(long, default_value_t = 10)]
+        obstacles_per_kind: usize,
+        /// Seed of the obstacle subset.
+        #[arg(long, default_value_t = 16)]
+        subset_seed: u64,
+        /// Results file whose min-time rows give T* of the paper set.
+        #[arg(long, default_value = "docs/results/paper128.csv")]
+        t_star: PathBuf,
+        /// Run the MPC without its online gain and delay estimates (for comparison).
+        #[arg(long)]
+        no_estimation: bool,
+        /// Base name of the page (NAME.md) and its asset directory.
+        #[arg(long, default_value = "robustness")]
+        name: String,
+        #[command(flatten)]
+        common: Common,
+        #[arg(long, default_value = "docs")]
         out: PathBuf,
     },
     /// The whole study: writes OUT/results.md and OUT/results/*.
@@ -231,6 +314,8 @@ fn main() -> Result<()> {
             delay,
             lag,
             duration,
+            no_gain_estimation,
+            no_delay_estimation,
             no_scenario_plots,
             planner,
             subgoal_radius,
@@ -238,6 +323,7 @@ fn main() -> Result<()> {
             route_margin,
             replan_after,
             direct_margin,
+            perturbations,
             common,
             out,
         } => {
@@ -265,6 +351,8 @@ fn main() -> Result<()> {
                 step_length: step_length.unwrap_or(d.step_length),
                 obstacle_margin: obstacle_margin.unwrap_or(d.obstacle_margin),
                 obstacle_slack_weight: obstacle_slack_weight.unwrap_or(d.obstacle_slack_weight),
+                gain_estimation: d.gain_estimation && !no_gain_estimation,
+                delay_estimation: d.delay_estimation && !no_delay_estimation,
                 ..cfg.mpc
             };
             cfg.mpc.validate()?;
@@ -295,9 +383,10 @@ fn main() -> Result<()> {
                 ..PlantConfig::ideal()
             };
             cfg.plant.validate()?;
+            cfg.perturbation = perturbations.options().perturbation()?;
             let ev = eval::evaluate(&cfg, &nets, &set)?;
             let header = format!(
-                "# eval: {}\n\nmethods {methods}, planner {planner}, N = {}, Hessian {:?}, obstacles {:?} with margin {} m, SQP iterations {} × step {}, delay {delay} s, lag {lag} s, tolerance {}, networks: {}\n",
+                "# eval: {}\n\nmethods {methods}, planner {planner}, N = {}, Hessian {:?}, obstacles {:?} with margin {} m, SQP iterations {} × step {}, gain estimation {}, delay estimation {}, delay {delay} s, lag {lag} s, plant perturbation: {}, tolerance {}, networks: {}\n",
                 scenarios.display(),
                 cfg.mpc.horizon,
                 cfg.mpc.hessian,
@@ -305,6 +394,9 @@ fn main() -> Result<()> {
                 cfg.mpc.obstacle_margin,
                 cfg.mpc.sqp_iterations,
                 cfg.mpc.step_length,
+                cfg.mpc.gain_estimation,
+                cfg.mpc.delay_estimation,
+                robustness::describe(&cfg.perturbation),
                 common.tolerance,
                 nets.source
             );
@@ -331,6 +423,78 @@ fn main() -> Result<()> {
             let cfg = base_config(&common);
             let cmd = "cargo run --release -p sim --bin wlnav-sim -- paper";
             sim::report::paper(&cfg, &nets, &set, &hl, &site, &out, cmd)?;
+        }
+        Command::Robustness {
+            scenarios,
+            obstacles,
+            obstacles_per_kind,
+            subset_seed,
+            t_star,
+            no_estimation,
+            name,
+            common,
+            out,
+        } => {
+            let paper = load_scenarios(&scenarios)?;
+            let all_obstacles = load_scenarios(&obstacles)?;
+            let (obst, note) = if obstacles_per_kind == 0 {
+                let n = format!(
+                    "`{}` ({} scenarios)",
+                    obstacles.display(),
+                    all_obstacles.len()
+                );
+                (all_obstacles, n)
+            } else {
+                let sub = robustness::subset(&all_obstacles, obstacles_per_kind, subset_seed);
+                let n = format!(
+                    "a seeded fixed subset of `{}`: {obstacles_per_kind} scenarios of each kind (seed {subset_seed}; {} of {}), \
+                     the whole set being too slow for the 10-minute budget with every level",
+                    obstacles.display(),
+                    sub.len(),
+                    all_obstacles.len()
+                );
+                (sub, n)
+            };
+            let text = std::fs::read_to_string(&t_star)
+                .with_context(|| format!("reading {}", t_star.display()))?;
+            let rows = sim::results::parse(&text, &t_star.display().to_string())?;
+            let t_star_map = rows
+                .iter()
+                .filter(|r| r.method == "min-time" && r.success)
+                .filter_map(|r| Some((r.name.clone(), r.t_converge?)))
+                .collect();
+            let nets = networks(&common)?;
+            let commit = std::process::Command::new("git")
+                .args(["rev-parse", "--short", "HEAD"])
+                .output()
+                .ok()
+                .filter(|o| o.status.success())
+                .map_or("unknown".into(), |o| {
+                    String::from_utf8_lossy(&o.stdout).trim().to_string()
+                });
+            let mut command =
+                String::from("cargo run --release -p sim --bin wlnav-sim -- robustness");
+            for a in std::env::args().skip(2) {
+                command.push(' ');
+                command.push_str(&a);
+            }
+            let mut base = base_config(&common);
+            base.mpc.gain_estimation &= !no_estimation;
+            base.mpc.delay_estimation &= !no_estimation;
+            let inputs = robustness::Inputs {
+                base,
+                name,
+                nets: &nets,
+                paper: &paper,
+                paper_name: format!("`{}`", scenarios.display()),
+                obstacles: &obst,
+                obstacles_note: note,
+                t_star: t_star_map,
+                t_star_source: t_star.display().to_string(),
+                command,
+                commit,
+            };
+            robustness::robustness(&inputs, &robustness::standard_sweeps(), &out)?;
         }
         Command::Scenarios { out } => {
             std::fs::create_dir_all(&out)?;

@@ -308,3 +308,128 @@ pub fn value_histogram_svg(
     root.present().map_err(err)?;
     Ok(())
 }
+
+/// One line of a [`sweep_svg`] panel: (level, value) points, `None` where the
+/// value does not exist (drawn as a gap).
+pub struct SweepSeries {
+    pub label: String,
+    pub color: RGBColor,
+    pub points: Vec<(f64, Option<f64>)>,
+}
+
+/// A panel of [`sweep_svg`]: its y axis, an optional dashed threshold line and
+/// its series.
+pub struct SweepPanel {
+    pub y_desc: String,
+    pub threshold: Option<f64>,
+    pub series: Vec<SweepSeries>,
+}
+
+/// Metrics over the levels of one perturbation (robustness sweep): one panel
+/// per metric stacked vertically, sharing the level axis; the nominal level
+/// as a vertical grey line.
+pub fn sweep_svg(
+    path: &Path,
+    title: &str,
+    x_desc: &str,
+    nominal: f64,
+    panels: &[SweepPanel],
+) -> Result<()> {
+    let xs = || {
+        panels
+            .iter()
+            .flat_map(|p| p.series.iter().flat_map(|s| s.points.iter().map(|q| q.0)))
+            .chain(std::iter::once(nominal))
+    };
+    let x0 = xs().fold(f64::INFINITY, f64::min);
+    let x1 = xs().fold(f64::NEG_INFINITY, f64::max);
+    let pad = ((x1 - x0) * 0.05).max(1e-3);
+    let (x0, x1) = (x0 - pad, x1 + pad);
+    let height = 40 + 250 * panels.len() as u32;
+    let root = SVGBackend::new(path, (720, height)).into_drawing_area();
+    root.fill(&WHITE).map_err(err)?;
+    let root = root.titled(title, ("sans-serif", 18)).map_err(err)?;
+    let areas = root.split_evenly((panels.len().max(1), 1));
+    for (area, panel) in areas.iter().zip(panels) {
+        let ys: Vec<f64> = panel
+            .series
+            .iter()
+            .flat_map(|s| s.points.iter().filter_map(|q| q.1))
+            .chain(panel.threshold)
+            .filter(|v| v.is_finite())
+            .collect();
+        let lo = ys.iter().cloned().fold(f64::INFINITY, f64::min);
+        let hi = ys.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
+        let (lo, hi) = if lo.is_finite() {
+            let m = ((hi - lo) * 0.1).max(1e-3);
+            (lo - m, hi + m)
+        } else {
+            (0.0, 1.0)
+        };
+        let mut chart = ChartBuilder::on(area)
+            .margin(8)
+            .x_label_area_size(35)
+            .y_label_area_size(55)
+            .build_cartesian_2d(x0..x1, lo..hi)
+            .map_err(err)?;
+        chart
+            .configure_mesh()
+            .x_desc(x_desc)
+            .y_desc(panel.y_desc.as_str())
+            .light_line_style(WHITE)
+            .draw()
+            .map_err(err)?;
+        chart
+            .draw_series(std::iter::once(PathElement::new(
+                vec![(nominal, lo), (nominal, hi)],
+                RGBColor(170, 170, 170),
+            )))
+            .map_err(err)?;
+        if let Some(t) = panel.threshold {
+            let dashes = (0..40).map(|k| {
+                let a = x0 + (x1 - x0) * k as f64 / 40.0;
+                let b = a + (x1 - x0) / 80.0;
+                PathElement::new(vec![(a, t), (b, t)], RED)
+            });
+            chart.draw_series(dashes).map_err(err)?;
+        }
+        for s in &panel.series {
+            let color = s.color;
+            // Lines between consecutive existing points; markers on each.
+            let mut segments: Vec<Vec<(f64, f64)>> = vec![Vec::new()];
+            for &(x, y) in &s.points {
+                match y {
+                    Some(y) if y.is_finite() => segments.last_mut().expect("one").push((x, y)),
+                    _ => segments.push(Vec::new()),
+                }
+            }
+            for seg in segments.iter().filter(|s| s.len() > 1) {
+                chart
+                    .draw_series(std::iter::once(PathElement::new(
+                        seg.clone(),
+                        color.stroke_width(2),
+                    )))
+                    .map_err(err)?;
+            }
+            chart
+                .draw_series(
+                    segments
+                        .iter()
+                        .flatten()
+                        .map(|&(x, y)| Circle::new((x, y), 4, color.filled())),
+                )
+                .map_err(err)?
+                .label(s.label.clone())
+                .legend(move |(x, y)| Circle::new((x + 7, y), 4, color.filled()));
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .position(SeriesLabelPosition::LowerLeft)
+            .draw()
+            .map_err(err)?;
+    }
+    root.present().map_err(err)?;
+    Ok(())
+}

@@ -27,7 +27,7 @@ use control::model::{
 };
 use control::mpc::{Mpc, MpcSettings};
 use control::planner::{AbortReason, NavStep, Navigator, NavigatorSettings};
-use control::plant::{Plant, PlantConfig, VelocityCommand};
+use control::plant::{Plant, PlantConfig, PlantPerturbation, VelocityCommand};
 use control::scenario::Scenario;
 use control::weights::{decode, random_network, NetworkMetadata, NetworkRole};
 use control::{Actor, ActorWorkspace, Critic};
@@ -39,6 +39,45 @@ use crate::results::ResultRow;
 
 /// Success-test speed threshold of `t_settle` [m/s] (DESIGN §7).
 pub const SETTLE_SPEED: f64 = 0.05;
+
+/// How long a run with [`EvalConfig::end_at_rest`] must stay converged and at rest [s].
+pub const AT_REST_FOR: f64 = 1.0;
+
+/// The plant of one scenario: `cfg.plant` changed by `cfg.perturbation`.
+fn scenario_plant(cfg: &EvalConfig, sc: &Scenario) -> Result<Plant> {
+    Ok(Plant::perturbed(
+        cfg.params,
+        cfg.plant,
+        cfg.perturbation.seeded_for(&sc.name),
+        sc.start,
+    )?)
+}
+
+/// Counts ticks converged at rest, for [`EvalConfig::end_at_rest`].
+struct RestCounter {
+    ticks: usize,
+    needed: Option<usize>,
+}
+
+impl RestCounter {
+    fn new(cfg: &EvalConfig, dt: f64) -> Self {
+        Self {
+            ticks: 0,
+            needed: cfg.end_at_rest.then(|| (AT_REST_FOR / dt).round() as usize),
+        }
+    }
+
+    /// Takes the true state of a tick; true when the run may end.
+    fn done(&mut self, x: &State, goal: &Goal, tolerance: f64) -> bool {
+        let Some(n) = self.needed else { return false };
+        if converged(x, goal, tolerance) && x[ix::V].abs() < SETTLE_SPEED {
+            self.ticks += 1;
+        } else {
+            self.ticks = 0;
+        }
+        self.ticks > n
+    }
+}
 
 /// An evaluated method.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -140,9 +179,18 @@ impl Networks {
 pub struct EvalConfig {
     pub params: MachineParams,
     pub methods: Vec<Method>,
-    /// MPC settings; `delay` is overwritten with the plant's.
+    /// MPC settings; `delay` is overwritten with `plant.delay`.
     pub mpc: MpcSettings,
+    /// The plant as the MPC knows it: its `delay` is the one compensated.
     pub plant: PlantConfig,
+    /// How the real machine differs (DESIGN §12); its noise seed is mixed with
+    /// each scenario's name. Success, times and clearance are judged on the
+    /// plant's true state and geometry.
+    pub perturbation: PlantPerturbation,
+    /// End a closed-loop run once the true state has stayed inside the success
+    /// test at rest (|v_f| < [`SETTLE_SPEED`]) for [`AT_REST_FOR`] (the
+    /// robustness sweep; `t_settle` is then not reported).
+    pub end_at_rest: bool,
     /// Success-test tolerance (DESIGN §7: 0.1).
     pub tolerance: f64,
     /// Simulated duration of closed-loop runs [s] (DESIGN §7: 30).
@@ -172,6 +220,8 @@ impl Default for EvalConfig {
                 ..Default::default()
             },
             plant: PlantConfig::ideal(),
+            perturbation: PlantPerturbation::default(),
+            end_at_rest: false,
             tolerance: SUCCESS_TOLERANCE,
             duration: 30.0,
             baseline: BaselineSettings::default(),
@@ -324,17 +374,18 @@ pub fn run_mpc(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run> 
     };
     let mut navigation = nav.as_ref().map(|_| Navigation::default());
     let mut plans_seen = 0;
-    let mut plant = Plant::new(cfg.params, cfg.plant, sc.start)?;
+    let mut plant = scenario_plant(cfg, sc)?;
     let steps = (cfg.duration / settings.dt).round() as usize;
     let mut states = Vec::with_capacity(steps + 1);
     let mut solve_ms = Vec::with_capacity(steps);
-    let mut clearance = ClearanceMeter::new(cfg.params, &sc.obstacles);
+    let mut clearance = ClearanceMeter::new(*plant.params(), &sc.obstacles);
     clearance.observe(&plant.state());
+    let mut rest = RestCounter::new(cfg, settings.dt);
     let mut aborted = false;
     for k in 0..=steps {
         let x = plant.measure();
         states.push(plant.state());
-        if k == steps {
+        if k == steps || rest.done(&plant.state(), &sc.goal, cfg.tolerance) {
             break;
         }
         if let (Some(nav), Some(rec)) = (nav.as_mut(), navigation.as_mut()) {
@@ -399,16 +450,17 @@ pub fn run_actor(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run
     let dt = cfg.mpc.dt;
     let mut ws = ActorWorkspace::new(&nets.actor);
     let mut delay = DelayCompensator::new(cfg.params, cfg.plant.delay, dt)?;
-    let mut plant = Plant::new(cfg.params, cfg.plant, sc.start)?;
+    let mut plant = scenario_plant(cfg, sc)?;
     let steps = (cfg.duration / dt).round() as usize;
     let mut states = Vec::with_capacity(steps + 1);
     let mut solve_ms = Vec::with_capacity(steps);
-    let mut clearance = ClearanceMeter::new(cfg.params, &sc.obstacles);
+    let mut clearance = ClearanceMeter::new(*plant.params(), &sc.obstacles);
     clearance.observe(&plant.state());
+    let mut rest = RestCounter::new(cfg, dt);
     for k in 0..=steps {
         let x = plant.measure();
         states.push(plant.state());
-        if k == steps {
+        if k == steps || rest.done(&plant.state(), &sc.goal, cfg.tolerance) {
             break;
         }
         let t0 = Instant::now();

@@ -43,6 +43,8 @@ pub use solution::{FallbackReason, Solution, StepStatus};
 
 use crate::actor::{Actor, ActorWorkspace};
 use crate::delay::DelayCompensator;
+use crate::delay_estimate::DelayEstimator;
+use crate::gain::GainEstimator;
 use crate::model::{Control, Goal, MachineParams, State};
 
 /// The MPC: built once, then `set_goal` and `step` every tick.
@@ -57,6 +59,12 @@ pub struct Mpc<C: StageCost, D: Dynamics = Rk4Model, B: QpBackend = ClarabelBack
     backend: B,
     data: QpData,
     delay: DelayCompensator,
+    /// Online actuator-gain estimate ([`crate::gain`]), used when
+    /// `settings.gain_estimation`.
+    gain: GainEstimator,
+    /// Online delay estimate ([`crate::delay_estimate`]), used when
+    /// `settings.delay_estimation`.
+    delay_estimate: DelayEstimator,
     goal: Option<Goal>,
     obstacles: [Obstacle; MAX_OBSTACLES],
     n_obstacles: usize,
@@ -109,13 +117,16 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
         let layout = QpLayout::new(n, settings.max_obstacles, settings.obstacle_constraint);
         let data = nominal_data(&layout, &params, &settings, &dynamics);
         let backend = make_backend(&layout, &data, &settings)?;
-        let delay = DelayCompensator::new(params, settings.delay, settings.dt).map_err(|_| {
-            MpcError::Setting {
-                name: "delay",
-                requirement: "must be finite and >= 0",
-                value: settings.delay.to_string(),
-            }
-        })?;
+        let mut delay =
+            DelayCompensator::new(params, settings.delay, settings.dt).map_err(|_| {
+                MpcError::Setting {
+                    name: "delay",
+                    requirement: "must be finite and >= 0",
+                    value: settings.delay.to_string(),
+                }
+            })?;
+        let delay_estimate = DelayEstimator::new(params, settings.delay, settings.dt);
+        delay.reserve_for(delay_estimate.max_delay());
         let cost_ws = cost.workspace();
         let actor = actor.map(|a| {
             let ws = ActorWorkspace::new(&a);
@@ -132,6 +143,8 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
             backend,
             data,
             delay,
+            gain: GainEstimator::new(params, settings.delay, settings.dt),
+            delay_estimate,
             goal: None,
             obstacles: [Obstacle::default(); MAX_OBSTACLES],
             n_obstacles: 0,
@@ -187,6 +200,18 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
         self.has_plan = false;
         self.tick = 0;
         self.delay.reset();
+        self.gain.reset();
+        self.delay_estimate.reset();
+    }
+
+    /// The delay compensated now [s]: the configured one, or its online estimate.
+    pub fn compensated_delay(&self) -> f64 {
+        self.delay.delay()
+    }
+
+    /// The actuator-gain estimates (β̇, v_f) (1 until estimated, or when off).
+    pub fn actuator_gains(&self) -> [f64; 2] {
+        self.gain.gains()
     }
 
     /// Sets the goal and the obstacles (at most `max_obstacles`, radii already

@@ -63,7 +63,16 @@ pub struct MpcSettings {
     /// Obstacle slots reserved in the QP (its sparsity pattern is fixed), at
     /// most 8. Default 8.
     pub max_obstacles: usize,
-    /// Actuator delay compensated before each solve [s], any value ≥ 0.
+    /// Estimate the actuator gain online and divide the commands by it
+    /// ([`crate::gain`]; DESIGN §12). Default true. On a machine without gain
+    /// error the commands are bit-identical to those without it.
+    pub gain_estimation: bool,
+    /// Estimate the actuator delay online and compensate the estimate
+    /// ([`crate::delay_estimate`]; DESIGN §12). Default true. When the
+    /// configured delay is the machine's, the estimate stays on it.
+    pub delay_estimation: bool,
+    /// Actuator delay compensated before each solve [s], any value ≥ 0
+    /// (the initial one with `delay_estimation`).
     /// Default 0.2 (the paper's machine).
     pub delay: f64,
     /// Clarabel's absolute and relative gap and feasibility tolerance. Default
@@ -97,6 +106,8 @@ impl Default for MpcSettings {
             cbf_gamma: 0.3,
             obstacle_margin: 0.05,
             max_obstacles: MAX_OBSTACLES,
+            gain_estimation: true,
+            delay_estimation: true,
             delay: 0.2,
             qp_tolerance: 1e-6,
             qp_max_iterations: 100,

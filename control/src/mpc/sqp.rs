@@ -51,6 +51,17 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
         let start = Instant::now();
         let goal = self.goal.ok_or(MpcError::NoGoal)?;
         let now = self.tick as f64 * self.settings.dt;
+        if self.settings.delay_estimation && finite(measured) {
+            self.delay_estimate.observe(measured);
+            let d = self.delay_estimate.delay();
+            if d != self.delay.delay() {
+                self.delay.set_delay(d);
+                self.gain.set_delay(d, self.settings.dt);
+            }
+        }
+        if self.settings.gain_estimation {
+            self.gain.observe(measured);
+        }
         let x_hat = if finite(measured) {
             self.delay.propagate(now, measured)
         } else {
@@ -107,10 +118,20 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
         }
         command.beta_dot = command.beta_dot.clamp(-p.beta_dot_max, p.beta_dot_max);
         command.v = command.v.clamp(-p.v_max, p.v_max);
+        // With the gain estimate: send the command that achieves the plan's
+        // velocities, and propagate the delay with what it should achieve.
+        let (command, achieved) = if self.settings.gain_estimation {
+            self.gain.command(command)
+        } else {
+            (command, command)
+        };
         self.solution.command = command;
         self.solution.states.copy_from_slice(&self.xs);
         self.solution.controls.copy_from_slice(&self.us);
-        self.delay.record(now, command);
+        self.delay.record(now, achieved);
+        if self.settings.delay_estimation {
+            self.delay_estimate.record(now, measured, achieved);
+        }
         self.tick += 1;
         self.solution.solve_time = start.elapsed();
         Ok(&self.solution)
@@ -318,7 +339,21 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
             }
         }
         // Bounds and obstacles.
-        fill_bounds(l, &self.params, &self.xs, &self.us, &mut d.b);
+        // A machine that achieves less than commanded cannot reach the
+        // nominal β̇ and v bounds: plan within gain × bound (exactly the
+        // nominal bounds while the applied gain is 1).
+        let p = self.params;
+        let [gb, gv] = if self.settings.gain_estimation {
+            self.gain.applied_gains()
+        } else {
+            [1.0, 1.0]
+        };
+        let bounds = crate::model::MachineParams {
+            beta_dot_max: p.beta_dot_max * gb.min(1.0),
+            v_max: p.v_max * gv.min(1.0),
+            ..p
+        };
+        fill_bounds(l, &bounds, &self.xs, &self.us, &mut d.b);
         let obstacles = &self.obstacles[..self.n_obstacles];
         fill_obstacles(
             l,
