@@ -286,16 +286,26 @@ fn networks(c: &Common) -> Result<Networks> {
     }
 }
 
-fn base_config(c: &Common) -> EvalConfig {
+/// The evaluation's defaults for the machine the networks were trained for.
+fn base_config(c: &Common, nets: &Networks) -> Result<EvalConfig> {
     let mut cfg = EvalConfig {
         tolerance: c.tolerance,
+        params: nets.machine,
         ..Default::default()
     };
+    if (cfg.mpc.dt - nets.dt).abs() > 1e-9 {
+        bail!(
+            "{}: trained for Δt = {} s, the MPC runs {} s",
+            nets.source,
+            nets.dt,
+            cfg.mpc.dt
+        );
+    }
     cfg.min_time.tolerance = c.tolerance;
     if let Some(j) = c.jobs {
         cfg.jobs = j.max(1);
     }
-    cfg
+    Ok(cfg)
 }
 
 fn main() -> Result<()> {
@@ -332,7 +342,7 @@ fn main() -> Result<()> {
             }
             let set = load_scenarios(&scenarios)?;
             let nets = networks(&common)?;
-            let mut cfg = base_config(&common);
+            let mut cfg = base_config(&common, &nets)?;
             cfg.methods = Method::parse_list(&methods)?;
             cfg.duration = duration;
             // Unset options keep the daemon's defaults (the same `MpcSettings::default()`).
@@ -420,7 +430,7 @@ fn main() -> Result<()> {
                 site.extend(load_scenarios(Path::new(f.trim()))?);
             }
             let nets = networks(&common)?;
-            let cfg = base_config(&common);
+            let cfg = base_config(&common, &nets)?;
             let cmd = "cargo run --release -p sim --bin wlnav-sim -- paper";
             sim::report::paper(&cfg, &nets, &set, &hl, &site, &out, cmd)?;
         }
@@ -478,7 +488,7 @@ fn main() -> Result<()> {
                 command.push(' ');
                 command.push_str(&a);
             }
-            let mut base = base_config(&common);
+            let mut base = base_config(&common, &nets)?;
             base.mpc.gain_estimation &= !no_estimation;
             base.mpc.delay_estimation &= !no_estimation;
             let inputs = robustness::Inputs {

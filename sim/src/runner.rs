@@ -132,6 +132,10 @@ pub struct Networks {
     /// Where they came from (for reports).
     pub source: String,
     pub random: bool,
+    /// The machine and Δt they were trained for (their metadata): the evaluation runs
+    /// that machine.
+    pub machine: MachineParams,
+    pub dt: f64,
 }
 
 impl Networks {
@@ -143,13 +147,20 @@ impl Networks {
                 std::fs::read(&path).with_context(|| format!("reading {}", path.display()))?;
             Ok(decode(&bytes, &path.display().to_string())?)
         };
-        let critic = Critic::from_weights(read("critic.safetensors")?)?;
-        let actor = Actor::from_weights(read("actor.safetensors")?)?;
+        let critic_w = read("critic.safetensors")?;
+        let actor_w = read("actor.safetensors")?;
+        let (machine, dt) = (critic_w.meta.machine, critic_w.meta.dt);
+        actor_w
+            .meta
+            .check_compatible(&machine, dt)
+            .map_err(|p| anyhow::anyhow!("{}: actor and critic disagree: {p}", dir.display()))?;
         Ok(Self {
-            critic,
-            actor,
+            critic: Critic::from_weights(critic_w)?,
+            actor: Actor::from_weights(actor_w)?,
             source: dir.display().to_string(),
             random: false,
+            machine,
+            dt,
         })
     }
 
@@ -170,6 +181,8 @@ impl Networks {
             actor: Actor::from_weights(a).expect("random actor is valid"),
             source: format!("random weights (seed {seed})"),
             random: true,
+            machine: MachineParams::default(),
+            dt: MpcSettings::default().dt,
         }
     }
 }

@@ -328,3 +328,38 @@ fn no_method_beats_the_min_time_bound_among_obstacles() {
     }
     assert!(compared >= 4, "only {compared} runs reached their goals");
 }
+
+#[test]
+fn networks_carry_the_machine_they_were_trained_for() {
+    use control::weights::{encode, random_network, FileDtype, NetworkMetadata, NetworkRole};
+    use control::MachineParams;
+    let dir = std::env::temp_dir().join(format!("wlnav-sim-nets-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let large = MachineParams {
+        l_f: 0.9,
+        l_r: 1.1,
+        ..MachineParams::default()
+    };
+    let write = |role, outputs, name: &str, machine: MachineParams| {
+        let mut meta = NetworkMetadata::new(role, outputs);
+        meta.machine = machine;
+        let w = random_network(meta, &control::mlp::PAPER_HIDDEN, 5);
+        let bytes = encode(&w.meta, &w.mlp, FileDtype::F32).unwrap();
+        std::fs::write(dir.join(name), bytes).unwrap();
+    };
+    write(NetworkRole::Critic, 1, "critic.safetensors", large);
+    write(NetworkRole::Actor, 4, "actor.safetensors", large);
+    let nets = Networks::load(&dir).unwrap();
+    assert_eq!(nets.machine, large);
+    assert_eq!(nets.dt, 0.2);
+    // An actor trained for another machine than the critic is refused.
+    write(
+        NetworkRole::Actor,
+        4,
+        "actor.safetensors",
+        MachineParams::default(),
+    );
+    let e = format!("{:#}", Networks::load(&dir).unwrap_err());
+    assert!(e.contains("disagree") && e.contains("l_f"), "{e}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
