@@ -161,6 +161,9 @@ enum Command {
         /// Margin [m] the planned axle points keep from every circle (default: the daemon's).
         #[arg(long)]
         obstacle_margin: Option<f64>,
+        /// Margin [m] of the rear axle's rows (default: the daemon's).
+        #[arg(long)]
+        obstacle_margin_rear: Option<f64>,
         /// L1 penalty per metre of obstacle penetration (default: the daemon's).
         #[arg(long)]
         obstacle_slack_weight: Option<f64>,
@@ -320,6 +323,7 @@ fn main() -> Result<()> {
             sqp_iterations,
             step_length,
             obstacle_margin,
+            obstacle_margin_rear,
             obstacle_slack_weight,
             delay,
             lag,
@@ -360,6 +364,7 @@ fn main() -> Result<()> {
                 sqp_iterations: sqp_iterations.unwrap_or(d.sqp_iterations),
                 step_length: step_length.unwrap_or(d.step_length),
                 obstacle_margin: obstacle_margin.unwrap_or(d.obstacle_margin),
+                obstacle_margin_rear: obstacle_margin_rear.unwrap_or(d.obstacle_margin_rear),
                 obstacle_slack_weight: obstacle_slack_weight.unwrap_or(d.obstacle_slack_weight),
                 gain_estimation: d.gain_estimation && !no_gain_estimation,
                 delay_estimation: d.delay_estimation && !no_delay_estimation,

@@ -9,7 +9,7 @@ pub use crate::obstacle::Obstacle;
 
 use crate::model::{Control, MachineParams, State};
 
-use super::layout::{QpLayout, OBS_STATES, SOFT_STATES};
+use super::layout::{QpLayout, AXLE_POINTS, OBS_STATES, SOFT_STATES};
 use super::settings::ObstacleConstraint;
 
 /// Most obstacles one goal can carry (DESIGN §6).
@@ -57,7 +57,7 @@ pub fn fill_obstacles(
     params: &MachineParams,
     form: ObstacleConstraint,
     gamma: f64,
-    margin: f64,
+    margins: [f64; AXLE_POINTS],
     obstacles: &[Obstacle],
     xbar: &[State],
     a: &mut [f64],
@@ -78,6 +78,7 @@ pub fn fill_obstacles(
                     b[r] = 1.0;
                     continue;
                 };
+                let margin = margins[ai];
                 let (h1, g1) = o.point_clearance(params, point, &xbar[k + 1]);
                 for c in 0..m {
                     a[e[c]] = -g1[c];
@@ -99,7 +100,6 @@ pub fn fill_obstacles(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::mpc::layout::AXLE_POINTS;
 
     /// The rear-axle row carries the clearance's θ and β derivatives; an
     /// obstacle only the rear axle is near gives the smaller right-hand side.
@@ -116,7 +116,7 @@ mod tests {
             &p,
             ObstacleConstraint::Distance,
             0.0,
-            0.05,
+            [0.05, 0.08],
             &o,
             &xbar,
             &mut a,
@@ -127,7 +127,8 @@ mod tests {
             let (hf, _) = o[0].point_clearance(&p, AxlePoint::Front, &xbar[k + 1]);
             let (hr, gr) = o[0].point_clearance(&p, AxlePoint::Rear, &xbar[k + 1]);
             assert!((b[layout.row_obstacle(k, 0, 0)] - (hf - 0.05)).abs() < 1e-15);
-            assert!((b[layout.row_obstacle(k, 0, 1)] - (hr - 0.05)).abs() < 1e-15);
+            // Each axle point its own margin.
+            assert!((b[layout.row_obstacle(k, 0, 1)] - (hr - 0.08)).abs() < 1e-15);
             assert!(hr < hf);
             let e = layout.a_obs[layout.obstacle_entry(k, 0, 1)];
             for c in 0..4 {

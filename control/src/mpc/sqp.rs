@@ -360,7 +360,8 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
             &self.params,
             s.obstacle_constraint,
             s.cbf_gamma,
-            s.obstacle_margin,
+            // In the order of `AxlePoint::ALL` (front, rear).
+            [s.obstacle_margin, s.obstacle_margin_rear],
             obstacles,
             &self.xs,
             &mut d.a,
