@@ -574,13 +574,14 @@ pub fn robustness(inp: &Inputs, sweeps: &[Sweep], out: &Path) -> Result<()> {
     let _ = writeln!(
         md,
         "- Controller: the MPC with the daemon's defaults (N = {}, {:?} Hessian, {} SQP iteration(s) per tick, {:?} \
-         obstacle rows with a {} m margin, online actuator-gain estimate {}, online delay estimate {}) and the global layer; \
+         obstacle rows with a {} m margin ({} m for the rear axle), online actuator-gain estimate {}, online delay estimate {}) and the global layer; \
          networks: {}. It always uses the nominal model.",
         inp.base.mpc.horizon,
         inp.base.mpc.hessian,
         inp.base.mpc.sqp_iterations,
         inp.base.mpc.obstacle_constraint,
         inp.base.mpc.obstacle_margin,
+        inp.base.mpc.obstacle_margin_rear,
         if inp.base.mpc.gain_estimation { "on" } else { "off" },
         if inp.base.mpc.delay_estimation { "on" } else { "off" },
         inp.nets.source
@@ -737,12 +738,15 @@ bounds when K < 1. Estimates within 3 % of 1 are not applied, so the nominal mac
 of delay compensators on a 0.05 s grid up to 0.6 s (and the configured delay) predicts each tick's velocities one \
 tick ahead; the MPC compensates the best-scoring delay once it clearly beats the current one. Its estimate stays on \
 the configured delay when that is right. Beyond the grid (0.8 s) it breaks.
-- **Geometry.** Not estimated. The obstacle rows keep the *planned* axle points `obstacle_margin` = 0.05 m from \
-every circle; with L_r × 1.1 the true rear axle is up to 0.06 m (0.1 × 0.6 m) from where the model puts it, more \
-than the margin, hence the −5 mm runs at × 1.1 and beyond. A margin of 0.06 m covers ±10 % on one axle \
-(paper 128 has no obstacles, so its t/T* would not change); it is left at 0.05 m here.
-- **Pose noise and latency.** No filter: the MPC plans from the measured pose. Noise up to 0.03 m / 0.02 rad and \
-latency up to 0.1 s hold; beyond, the clearance goes first (a 0.2 s old pose at 1 m/s is 0.2 m behind).
+- **Geometry.** Not estimated. The obstacle rows keep the *planned* axle points out of every circle by a margin; \
+the rear axle's position is computed from the measured front pose through L_f and L_r, so with L_r × 1.1 the true \
+rear axle is up to 0.06 m (0.1 × 0.6 m) from where the model puts it. Its rows therefore keep a larger margin \
+(`obstacle_margin_rear` 0.08 m against the front's 0.05 m): with 0.05 m for both, L_r × 1.1 put one run 5 mm into a \
+circle here and one of all 200 obstacle scenarios 0.028 m (README, robustness).
+- **Pose noise and latency.** No filter: the MPC plans from the measured pose, and a pose S old is S × v behind \
+(0.1 m at 0.1 s and 1 m/s), which the 0.05 m front margin does not cover: the clearance goes first. The next step is \
+to propagate each pose over its age (it is stamped) with the machine-state velocities, as the delay compensator does \
+over the actuator delay.
 - The same sweeps with both estimates off: `wlnav-sim robustness --no-estimation --name robustness-no-estimation` \
 ([robustness-no-estimation.md](robustness-no-estimation.md)).
 
