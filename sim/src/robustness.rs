@@ -740,9 +740,9 @@ tick ahead; the MPC compensates the best-scoring delay once it clearly beats the
 the configured delay when that is right. Beyond the grid (0.8 s) it breaks.
 - **Geometry.** Not estimated. The obstacle rows keep the *planned* axle points out of every circle by a margin; \
 the rear axle's position is computed from the measured front pose through L_f and L_r, so with L_r × 1.1 the true \
-rear axle is up to 0.06 m (0.1 × 0.6 m) from where the model puts it. Its rows therefore keep a larger margin \
-(`obstacle_margin_rear` 0.08 m against the front's 0.05 m): with 0.05 m for both, L_r × 1.1 put one run 5 mm into a \
-circle here and one of all 200 obstacle scenarios 0.028 m (README, robustness).
+rear axle is up to 0.06 m (0.1 × 0.6 m) from where the model puts it, more than the 0.05 m margin. The rear rows \
+have their own margin (`obstacle_margin_rear`); 0.08 m keeps every run out at L_r × 1.1 but costs goals \
+(README, robustness), so the default stays 0.05 m.
 - **Pose noise and latency.** No filter: the MPC plans from the measured pose, and a pose S old is S × v behind \
 (0.1 m at 0.1 s and 1 m/s), which the 0.05 m front margin does not cover: the clearance goes first. The next step is \
 to propagate each pose over its age (it is stamped) with the machine-state velocities, as the delay compensator does \
