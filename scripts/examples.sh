@@ -4,8 +4,10 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-# The test profile's build (shared with `cargo test`): fast enough for a 5 Hz loop.
-cargo build --locked -p daemon -p wlnav-examples
+# The binaries of the test build (`cargo test --workspace` builds wlnavd and the examples,
+# which have integration tests): the same selection, so nothing is rebuilt when the tests
+# just ran; the dev profile is fast enough for a 5 Hz loop.
+cargo test --workspace --locked --no-run -q
 bin=target/debug
 venv=target/python-examples
 [ -x "$venv/bin/python" ] || python3 -m venv "$venv"
