@@ -160,7 +160,7 @@ pub fn goal(cli: &Cli, a: &GoalArgs) -> anyhow::Result<u8> {
     };
     let mut printer = ProgressPrinter::default();
     let end = follow(&sub, &mut tracker, &opts, |t, tr| {
-        if let Some(line) = printer.line(t, tr, cli.tick_s()) {
+        if let Some(line) = printer.line(t, tr) {
             emit(&line);
         }
     })?;
@@ -170,27 +170,19 @@ pub fn goal(cli: &Cli, a: &GoalArgs) -> anyhow::Result<u8> {
             return Ok(exit::INTERRUPTED);
         }
         FollowEnd::DaemonLost => {
-            emit(&outcome_line(&tracker, cli.tick_s()));
+            emit(&outcome_line(&tracker));
             return Ok(exit::ERROR);
         }
         FollowEnd::Final => {}
     }
-    emit(&outcome_line(&tracker, cli.tick_s()));
+    emit(&outcome_line(&tracker));
     Ok(exit::for_status(tracker.status()))
-}
-
-/// Ticks in one second (at least 1).
-pub fn ticks_per_second(tick_s: f64) -> u64 {
-    ((1.0 / tick_s).round() as u64).max(1)
 }
 
 /// `succeeded: converged after 9.8 s, reported after 10.2 s (51 ticks)`,
 /// `aborted (no-progress): no approach to the goal for 10.0 s`, …
-pub fn outcome_line(tracker: &GoalTracker, tick_s: f64) -> String {
-    let secs = |tick: Option<u64>| {
-        tick.and_then(|t| tracker.ticks_since_start(t))
-            .map(|n| n as f64 * tick_s)
-    };
+pub fn outcome_line(tracker: &GoalTracker) -> String {
+    let secs = |tick: Option<u64>| tick.and_then(|t| tracker.seconds_since_start(t));
     let fmt_s = |s: Option<f64>| {
         s.map(|s| format!("{s:.1} s"))
             .unwrap_or_else(|| "? s".into())
@@ -215,8 +207,8 @@ pub fn outcome_line(tracker: &GoalTracker, tick_s: f64) -> String {
 }
 
 /// One progress line: time since the goal started, mode, pose, remaining error, speed.
-pub fn progress_line(t: &Telemetry, tracker: &GoalTracker, tick_s: f64) -> String {
-    let since = tracker.ticks_since_start(t.tick).unwrap_or(0) as f64 * tick_s;
+pub fn progress_line(t: &Telemetry, tracker: &GoalTracker) -> String {
+    let since = tracker.seconds_since_start(t.tick).unwrap_or(0.0);
     let s = &t.state;
     format!(
         "  t {:5.1} s  {:<8} at ({:6.2}, {:6.2}) θ {:6.1}°  to go {:5.2} m {:6.1}°  v {:5.2} m/s  solve {:5.1} ms",
@@ -232,35 +224,35 @@ pub fn progress_line(t: &Telemetry, tracker: &GoalTracker, tick_s: f64) -> Strin
     )
 }
 
-/// Decides which samples get a progress line: one per simulated second while the machine
-/// moves, one every 5 s while it stands still (a stalled goal does not flood the screen),
-/// and the final one.
+/// Decides which samples get a progress line: one per second (of the daemon's clock)
+/// while the machine moves, one every 5 s while it stands still (a stalled goal does
+/// not flood the screen), and the final one.
 #[derive(Debug, Clone, Default)]
 pub struct ProgressPrinter {
+    /// Whole seconds since the start, and the pose, of the last line shown.
     last: Option<(u64, f64, f64, f64)>,
 }
 
 impl ProgressPrinter {
     /// The progress line for `t`, if it should be shown.
-    pub fn line(&mut self, t: &Telemetry, tracker: &GoalTracker, tick_s: f64) -> Option<String> {
-        let n = tracker.ticks_since_start(t.tick)?;
-        let every = ticks_per_second(tick_s);
+    pub fn line(&mut self, t: &Telemetry, tracker: &GoalTracker) -> Option<String> {
+        tracker.ticks_since_start(t.tick)?;
+        let second = tracker.seconds_since_start(t.tick).unwrap_or(0.0).floor() as u64;
         let s = &t.state;
         let show = tracker.status().is_final()
             || match self.last {
                 None => true,
-                Some((last_n, x, y, th)) => {
+                Some((last, x, y, th)) => {
                     let moved =
                         (s.x_f - x).hypot(s.y_f - y) > 0.01 || (s.theta_f - th).abs() > 0.004;
-                    let due = n.saturating_sub(last_n);
-                    n % every == 0 && (moved || due >= 5 * every)
+                    second > last && (moved || second >= last + 5)
                 }
             };
         if !show {
             return None;
         }
-        self.last = Some((n, s.x_f, s.y_f, s.theta_f));
-        Some(progress_line(t, tracker, tick_s))
+        self.last = Some((second, s.x_f, s.y_f, s.theta_f));
+        Some(progress_line(t, tracker))
     }
 }
 
@@ -271,9 +263,9 @@ pub struct FollowOptions {
     pub timeout: Duration,
     /// Fail if no telemetry arrives for this long.
     pub silence: Duration,
-    /// Fail if the goal is not reached within this many ticks of its first tick (the
-    /// paper's 30 s test is 150 ticks at 5 Hz).
-    pub max_ticks: Option<u64>,
+    /// Fail if the goal is not reached within this many seconds (of the daemon's
+    /// clock) of its first tick (the paper's test is 30 s).
+    pub max_seconds: Option<f64>,
     /// Fail if the daemon has not taken the goal up within this many samples.
     pub max_pending_samples: u64,
 }
@@ -283,7 +275,7 @@ impl Default for FollowOptions {
         Self {
             timeout: Duration::from_secs(120),
             silence: Duration::from_secs(3),
-            max_ticks: None,
+            max_seconds: None,
             max_pending_samples: 50,
         }
     }
@@ -333,9 +325,9 @@ pub fn follow(
                     ));
                 }
             }
-            if let (Some(max), Some(n)) = (opts.max_ticks, tracker.ticks_since_start(t.tick)) {
-                if n >= max && !tracker.status().is_final() {
-                    tracker.time_out(format!("not reached within {max} ticks"));
+            if let (Some(max), Some(s)) = (opts.max_seconds, tracker.seconds_since_start(t.tick)) {
+                if s >= max && !tracker.status().is_final() {
+                    tracker.time_out(format!("not reached within {max} s"));
                 }
             }
             on_sample(&t, tracker);

@@ -20,8 +20,7 @@ use shm_ipc::IpcConfig;
 use shm_ipc::{GoalReply, Pose2};
 
 use super::commands::{
-    describe_reply, emit, follow, outcome_line, ticks_per_second, FollowEnd, FollowOptions,
-    ProgressPrinter,
+    describe_reply, emit, follow, outcome_line, FollowEnd, FollowOptions, ProgressPrinter,
 };
 use super::daemon_process::{locate_wlnavd, unique_prefix, DaemonProcess};
 use super::follow::{GoalStatus, GoalTracker};
@@ -136,7 +135,6 @@ fn path_length(path: &[(f64, f64)]) -> f64 {
 
 /// `wlnav demo`.
 pub fn run(cli: &Cli, a: &DemoArgs) -> anyhow::Result<u8> {
-    let tick_s = cli.tick_s();
     let binary = locate_wlnavd(a.wlnavd.as_deref())?;
     let prefix = cli
         .prefix
@@ -227,14 +225,12 @@ pub fn run(cli: &Cli, a: &DemoArgs) -> anyhow::Result<u8> {
     });
 
     let scale = a.time_scale.unwrap_or(1.0);
-    let max_ticks = (a.leg_timeout / tick_s).round() as u64;
     let opts = FollowOptions {
         timeout: Duration::from_secs_f64(a.leg_timeout / scale * 2.0 + 15.0),
         silence: Duration::from_secs(3),
-        max_ticks: Some(max_ticks),
+        max_seconds: Some(a.leg_timeout),
         max_pending_samples: 50,
     };
-    let every = ticks_per_second(tick_s);
     let mut results: Vec<LegResult> = Vec::new();
     let mut interrupted = false;
     for (i, leg) in LOADING_CYCLE.iter().enumerate() {
@@ -279,23 +275,26 @@ pub fn run(cli: &Cli, a: &DemoArgs) -> anyhow::Result<u8> {
             }
         };
         emit(&format!("{head}: {}", describe_reply(&reply)));
-        let mut tracker = GoalTracker::new(id, g);
+        let mut tracker = GoalTracker::new(id, g).with_time_scale(scale);
         if !reply.is_accepted() {
             tracker.time_out(format!("rejected: {}", reply.reason_text()));
         } else {
             let mut printer = ProgressPrinter::default();
+            // The planned horizon is drawn once per second.
+            let mut drawn_second = None;
             let end = follow(&sub, &mut tracker, &opts, |t, tr| {
                 if tr.first_tick.is_none() {
                     return;
                 }
                 trace.path.push((t.state.x_f, t.state.y_f));
-                let n = tr.ticks_since_start(t.tick).unwrap_or(0);
-                if n % every == 0 && !tr.status().is_final() {
+                let second = tr.seconds_since_start(t.tick).unwrap_or(0.0).floor() as u64;
+                if drawn_second != Some(second) && !tr.status().is_final() {
+                    drawn_second = Some(second);
                     trace
                         .horizons
                         .push(t.trajectory().iter().map(|s| (s.x_f, s.y_f)).collect());
                 }
-                if let Some(line) = printer.line(t, tr, tick_s) {
+                if let Some(line) = printer.line(t, tr) {
                     emit(&line);
                 }
             })?;
@@ -304,11 +303,8 @@ pub fn run(cli: &Cli, a: &DemoArgs) -> anyhow::Result<u8> {
                 interrupted = true;
             }
         }
-        emit(&format!("  {}", outcome_line(&tracker, tick_s)));
-        let secs = |tick: Option<u64>| {
-            tick.and_then(|t| tracker.ticks_since_start(t))
-                .map(|n| n as f64 * tick_s)
-        };
+        emit(&format!("  {}", outcome_line(&tracker)));
+        let secs = |tick: Option<u64>| tick.and_then(|t| tracker.seconds_since_start(t));
         trace.reached = tracker.status().is_succeeded();
         results.push(LegResult {
             leg: *leg,

@@ -87,6 +87,12 @@ pub struct GoalTracker {
     pub overruns: u64,
     /// Largest solve time seen while the goal was active [µs].
     pub max_solve_us: f64,
+    /// (tick, timestamp [ns]) of the first and the newest telemetry sample: the
+    /// daemon's tick period is measured, not configured twice (it is `mpc.dt`).
+    stamps: Option<((u64, u64), (u64, u64))>,
+    /// Seconds of the daemon's clock per wall-clock second (a simulated machine may
+    /// run faster than real time).
+    time_scale: f64,
 }
 
 impl GoalTracker {
@@ -102,7 +108,29 @@ impl GoalTracker {
             last_tick: None,
             overruns: 0,
             max_solve_us: 0.0,
+            stamps: None,
+            time_scale: 1.0,
         }
+    }
+
+    /// For a daemon whose clock runs `scale` times faster than the wall clock
+    /// (`wlnavd --sim --time-scale`): times are reported on the daemon's clock.
+    pub fn with_time_scale(mut self, scale: f64) -> Self {
+        self.time_scale = scale;
+        self
+    }
+
+    /// The daemon's tick period [s], measured from the telemetry's timestamps once
+    /// two ticks have been seen (a missed deadline makes it longer, as it is).
+    pub fn tick_period(&self) -> Option<f64> {
+        let ((tick0, ns0), (tick1, ns1)) = self.stamps?;
+        (tick1 > tick0 && ns1 > ns0)
+            .then(|| (ns1 - ns0) as f64 * 1e-9 / (tick1 - tick0) as f64 * self.time_scale)
+    }
+
+    /// Seconds from the goal's first tick to `tick` (with the measured period).
+    pub fn seconds_since_start(&self, tick: u64) -> Option<f64> {
+        Some(self.ticks_since_start(tick)? as f64 * self.tick_period()?)
     }
 
     /// The goal followed.
@@ -133,6 +161,11 @@ impl GoalTracker {
             return &self.status;
         }
         self.last_tick = Some(t.tick);
+        let stamp = (t.tick, t.timestamp_ns);
+        self.stamps = Some(match self.stamps {
+            Some((first, _)) => (first, stamp),
+            None => (stamp, stamp),
+        });
         if t.goal_request_id == self.request_id && t.goal_active != 0 {
             if self.first_tick.is_none() {
                 self.first_tick = Some(t.tick);

@@ -88,10 +88,6 @@ pub struct Cli {
     #[arg(long, global = true, value_parser = args::parse_prefix)]
     pub prefix: Option<String>,
 
-    /// Control tick rate of the daemon, used to turn tick counts into seconds [Hz]
-    #[arg(long, global = true, default_value_t = 5.0, value_parser = parse_rate)]
-    pub tick_hz: f64,
-
     /// What to do
     #[command(subcommand)]
     pub command: Command,
@@ -106,19 +102,6 @@ impl Cli {
                 .unwrap_or_else(|| DEFAULT_PREFIX.to_owned()),
         )
     }
-
-    /// Seconds per control tick.
-    pub fn tick_s(&self) -> f64 {
-        1.0 / self.tick_hz
-    }
-}
-
-fn parse_rate(text: &str) -> Result<f64, String> {
-    let v = args::finite_f64("--tick-hz", text)?;
-    if v <= 0.0 {
-        return Err(format!("--tick-hz must be positive, got {v}"));
-    }
-    Ok(v)
 }
 
 /// The subcommands.

@@ -238,3 +238,26 @@ fn mcap_writer_output_reads_back_with_schema_and_every_message() {
     assert_eq!(summary.stats.unwrap().message_count, 50);
     std::fs::remove_file(&path).unwrap();
 }
+
+/// The daemon's tick period is measured from the telemetry's timestamps (it is
+/// the daemon's `mpc.dt`, configured there only), on the daemon's clock when a
+/// simulated machine runs faster than real time.
+#[test]
+fn tracker_measures_the_tick_period_from_the_telemetry_stamps() {
+    for (scale, wall_period_ns) in [(1.0, 200_000_000u64), (10.0, 20_000_000)] {
+        let mut tr = GoalTracker::new(7, Pose2::new(5.0, 0.0, 0.0)).with_time_scale(scale);
+        let stamped = |tick: u64| Telemetry {
+            timestamp_ns: 5_000_000_000 + tick * wall_period_ns,
+            ..sample(tick, 7, Mode::Tracking, 1.0)
+        };
+        tr.update(&stamped(100));
+        assert_eq!(tr.tick_period(), None, "one sample gives no period");
+        assert_eq!(tr.seconds_since_start(100), None);
+        tr.update(&stamped(101));
+        tr.update(&stamped(150));
+        let period = tr.tick_period().unwrap();
+        assert!((period - 0.2).abs() < 1e-12, "scale {scale}: {period}");
+        let s = tr.seconds_since_start(150).unwrap();
+        assert!((s - 10.0).abs() < 1e-9, "scale {scale}: {s}");
+    }
+}

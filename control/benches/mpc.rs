@@ -96,9 +96,11 @@ impl Loop {
         }
         let x = self.plant.state();
         let start = Instant::now();
-        let sol = self.mpc.step(&x).expect("goal set");
+        let now = self.ticks as f64 * 0.2;
+        let sol = self.mpc.step(&x, now).expect("goal set");
         let elapsed = start.elapsed();
         let cmd = sol.command;
+        self.mpc.sent(now, cmd);
         self.plant.command(cmd).expect("finite command");
         self.plant.advance(0.2);
         self.ticks += 1;

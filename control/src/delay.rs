@@ -31,8 +31,8 @@
 
 use std::collections::VecDeque;
 
+use crate::model::VelocityCommand;
 use crate::model::{clamp_state, f_continuous, ix, Control, MachineParams, State};
-use crate::plant::VelocityCommand;
 
 /// Default integration sub-step [s] (the plant's).
 pub const DEFAULT_SUBSTEP: f64 = 0.01;
@@ -172,14 +172,10 @@ impl DelayCompensator {
     /// the low-level controller does). Times must not decrease; non-finite
     /// commands are ignored (the plant rejects them too).
     pub fn record(&mut self, time: f64, cmd: VelocityCommand) {
-        if !(cmd.beta_dot.is_finite() && cmd.v.is_finite() && time.is_finite()) {
+        if !(cmd.is_finite() && time.is_finite()) {
             return;
         }
-        let p = &self.params;
-        let cmd = VelocityCommand {
-            beta_dot: cmd.beta_dot.clamp(-p.beta_dot_max, p.beta_dot_max),
-            v: cmd.v.clamp(-p.v_max, p.v_max),
-        };
+        let cmd = cmd.limited(&self.params);
         // An entry is obsolete once the next one has taken effect by `time`.
         while self.history.len() >= 2 && self.history[1].0 + self.delay <= time {
             self.history.pop_front();

@@ -21,8 +21,8 @@
 //! leaves it and the MPC computes exactly what it computed without it.
 
 use crate::delay::DelayCompensator;
+use crate::model::VelocityCommand;
 use crate::model::{ix, MachineParams, State};
-use crate::plant::VelocityCommand;
 
 /// Candidate grid step and largest candidate [s].
 pub const GRID: f64 = 0.05;
@@ -129,12 +129,14 @@ impl DelayEstimator {
     }
 
     /// Records the command sent at `time` (the velocities it should achieve)
-    /// and predicts the next tick's velocities from `measured`.
-    pub fn record(&mut self, time: f64, measured: &State, achieved: VelocityCommand) {
-        let ok = measured.iter().all(|v| v.is_finite());
+    /// and predicts the next tick's velocities from the state `measured` at
+    /// `time` (no prediction without one, e.g. a stop ramp sent while the MPC
+    /// was not stepped).
+    pub fn record(&mut self, time: f64, measured: Option<&State>, achieved: VelocityCommand) {
+        let measured = measured.filter(|x| x.iter().all(|v| v.is_finite()));
         for (model, p) in self.models.iter_mut().zip(&mut self.predictions) {
             model.record(time, achieved);
-            *p = ok.then(|| {
+            *p = measured.map(|measured| {
                 let x = model.propagate_over(time, measured, self.dt);
                 [x[ix::BETA_DOT], x[ix::V]]
             });
@@ -169,7 +171,7 @@ mod tests {
                 beta_dot: 0.3 * (0.8 * t).sin(),
                 v: 0.5 * (0.5 * t).cos(),
             };
-            est.record(t, &x, cmd);
+            est.record(t, Some(&x), cmd);
             plant.command(cmd).unwrap();
             plant.advance(0.2);
         }

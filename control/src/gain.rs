@@ -26,8 +26,8 @@
 
 use std::collections::VecDeque;
 
+use crate::model::VelocityCommand;
 use crate::model::{ix, MachineParams, State};
-use crate::plant::VelocityCommand;
 
 /// Smallest and largest gain the estimate may take.
 pub const MIN_GAIN: f64 = 0.5;
@@ -162,26 +162,28 @@ impl GainEstimator {
     }
 
     /// The command to send for the `intended` achieved velocities: divided by
-    /// the gain, saturated at the machine's bounds. Returns (sent, expected
-    /// achieved velocities = gain × sent).
-    pub fn command(&mut self, intended: VelocityCommand) -> (VelocityCommand, VelocityCommand) {
-        let p = &self.params;
+    /// the gain, limited to the machine's bounds.
+    pub fn to_send(&self, intended: VelocityCommand) -> VelocityCommand {
         let [gb, gv] = self.applied_gains();
-        let sent = VelocityCommand {
-            beta_dot: (intended.beta_dot / gb).clamp(-p.beta_dot_max, p.beta_dot_max),
-            v: (intended.v / gv).clamp(-p.v_max, p.v_max),
-        };
+        VelocityCommand {
+            beta_dot: intended.beta_dot / gb,
+            v: intended.v / gv,
+        }
+        .limited(&self.params)
+    }
+
+    /// Records a command sent; returns the velocities it is expected to
+    /// achieve (gain × sent).
+    pub fn record(&mut self, sent: VelocityCommand) -> VelocityCommand {
+        let [gb, gv] = self.applied_gains();
         if self.sent.len() > self.lag + 2 {
             self.sent.pop_front();
         }
         self.sent.push_back(sent);
-        (
-            sent,
-            VelocityCommand {
-                beta_dot: gb * sent.beta_dot,
-                v: gv * sent.v,
-            },
-        )
+        VelocityCommand {
+            beta_dot: gb * sent.beta_dot,
+            v: gv * sent.v,
+        }
     }
 }
 
@@ -189,6 +191,15 @@ impl GainEstimator {
 mod tests {
     use super::*;
     use crate::plant::{Plant, PlantConfig, PlantPerturbation};
+
+    /// Sends through the estimator: (sent, expected achieved).
+    fn send(
+        est: &mut GainEstimator,
+        intended: VelocityCommand,
+    ) -> (VelocityCommand, VelocityCommand) {
+        let sent = est.to_send(intended);
+        (sent, est.record(sent))
+    }
 
     /// Drives a plant with gain `k` through a speed and articulation profile,
     /// commanding through the estimator; returns the final estimates.
@@ -208,7 +219,7 @@ mod tests {
                 beta_dot: 0.2 * (0.15 * t).sin(),
                 v: 0.6 + 0.3 * (0.1 * t).sin(),
             };
-            let (sent, _) = est.command(intended);
+            let (sent, _) = send(&mut est, intended);
             plant.command(sent).unwrap();
             plant.advance(0.2);
         }
@@ -256,7 +267,7 @@ mod tests {
             beta_dot: 0.1,
             v: 0.4,
         };
-        assert_eq!(est.command(cmd), (cmd, cmd));
+        assert_eq!(send(&mut est, cmd), (cmd, cmd));
         // A lagging machine without gain error: the estimate stays in the deadband.
         let lag = PlantConfig {
             delay: 0.3,
@@ -273,16 +284,22 @@ mod tests {
         let p = MachineParams::default();
         let mut est = GainEstimator::new(p, 0.0, 0.2);
         est.channels[1].gain = 0.8;
-        let (sent, achieved) = est.command(VelocityCommand {
-            beta_dot: 0.1,
-            v: 0.4,
-        });
+        let (sent, achieved) = send(
+            &mut est,
+            VelocityCommand {
+                beta_dot: 0.1,
+                v: 0.4,
+            },
+        );
         assert_eq!(sent.beta_dot, 0.1);
         assert!((sent.v - 0.5).abs() < 1e-15 && (achieved.v - 0.4).abs() < 1e-15);
-        let (sent, achieved) = est.command(VelocityCommand {
-            beta_dot: 0.0,
-            v: 1.0,
-        });
+        let (sent, achieved) = send(
+            &mut est,
+            VelocityCommand {
+                beta_dot: 0.0,
+                v: 1.0,
+            },
+        );
         assert_eq!(sent.v, p.v_max);
         assert!((achieved.v - 0.8).abs() < 1e-15);
     }

@@ -24,6 +24,6 @@ pub use actor::{Actor, ActorWorkspace};
 pub use cost::{CostForm, CostWeights};
 pub use critic::{Critic, CriticWorkspace, Derivatives, HessianMode, TerminalDerivatives};
 pub use encoder::Encoder;
-pub use model::{Control, Goal, MachineParams, State};
+pub use model::{Control, Goal, MachineParams, State, VelocityCommand};
 pub use obstacle::Obstacle;
-pub use plant::{Plant, PlantConfig, PlantPerturbation, VelocityCommand};
+pub use plant::{Plant, PlantConfig, PlantPerturbation};

@@ -38,6 +38,16 @@ pub enum ModelError {
     BetaMaxTooLarge(f64),
 }
 
+impl ModelError {
+    /// The parameter that is wrong (its `MachineParams` field name).
+    pub fn setting(&self) -> &'static str {
+        match self {
+            Self::NotPositive { name, .. } => name,
+            Self::BetaMaxTooLarge(_) => "beta_max",
+        }
+    }
+}
+
 /// Machine geometry and motion limits. Defaults are the Avant 635 of the
 /// paper's Table I; every field is configuration.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -112,6 +122,48 @@ impl MachineParams {
             u[0].clamp(-self.beta_ddot_max, self.beta_ddot_max),
             u[1].clamp(-self.a_max, self.a_max),
         )
+    }
+}
+
+/// A velocity command (β̇_cmd, v_cmd) as the machine's low-level controller takes
+/// it: what the MPC outputs (the velocities of its x₁), the daemon sends over CAN
+/// and the simulated machine executes. One type from the MPC to the CAN encoder.
+#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize, serde::Deserialize)]
+pub struct VelocityCommand {
+    /// Articulation rate β̇_cmd [rad/s].
+    pub beta_dot: f64,
+    /// Front speed v_cmd [m/s].
+    pub v: f64,
+}
+
+impl VelocityCommand {
+    /// Standing still.
+    pub const ZERO: Self = Self {
+        beta_dot: 0.0,
+        v: 0.0,
+    };
+
+    /// True if both velocities are finite.
+    pub fn is_finite(&self) -> bool {
+        self.beta_dot.is_finite() && self.v.is_finite()
+    }
+
+    /// The command the machine may be sent: inside the velocity bounds
+    /// (|β̇| ≤ β̇_max, |v| ≤ v_max), and zero if either velocity is not finite.
+    /// The one place commands are limited; see [`Self::is_within`].
+    pub fn limited(self, p: &MachineParams) -> Self {
+        if !self.is_finite() {
+            return Self::ZERO;
+        }
+        Self {
+            beta_dot: self.beta_dot.clamp(-p.beta_dot_max, p.beta_dot_max),
+            v: self.v.clamp(-p.v_max, p.v_max),
+        }
+    }
+
+    /// True if [`Self::limited`] leaves the command unchanged.
+    pub fn is_within(&self, p: &MachineParams) -> bool {
+        self.limited(p) == *self
     }
 }
 
@@ -273,6 +325,10 @@ pub fn goal_distance(x: &State, g: &Goal) -> f64 {
 /// The paper's success tolerance (DESIGN §7): [`goal_distance`] below it counts
 /// as converged in every evaluation, `verify` and the daemon's default.
 pub const SUCCESS_TOLERANCE: f64 = 0.1;
+
+/// |v_f| below which a converged machine counts as at rest at its goal [m/s]:
+/// the evaluations' settling test and the daemon's default "goal reached".
+pub const REACH_SPEED: f64 = 0.05;
 
 /// Convergence test of DESIGN §7: [`goal_distance`] below `tolerance` ([`SUCCESS_TOLERANCE`] in the paper).
 pub fn converged(x: &State, g: &Goal, tolerance: f64) -> bool {

@@ -19,7 +19,7 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
 
-use crate::model::{clamp_state, f_continuous, ix, Control, MachineParams, State};
+use crate::model::{clamp_state, f_continuous, ix, Control, MachineParams, State, VelocityCommand};
 
 /// Errors in plant settings.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -36,6 +36,17 @@ pub enum PlantError {
     },
     #[error("plant command is not finite: beta_dot {beta_dot}, v {v}")]
     NonFiniteCommand { beta_dot: f64, v: f64 },
+}
+
+impl PlantError {
+    /// The setting (`PlantConfig` or `PlantPerturbation` field name) an error is about.
+    pub fn setting(&self) -> Option<&'static str> {
+        match self {
+            Self::Negative { name, .. } | Self::Perturbation { name, .. } => Some(name),
+            Self::BadSubstep(_) => Some("substep"),
+            Self::NonFiniteCommand { .. } => None,
+        }
+    }
 }
 
 /// Standard deviations of the measurement noise added by [`Plant::measure`].
@@ -248,15 +259,6 @@ impl PlantPerturbation {
     }
 }
 
-/// A velocity command as the low-level controller takes it.
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
-pub struct VelocityCommand {
-    /// Articulation rate β̇_cmd [rad/s].
-    pub beta_dot: f64,
-    /// Front speed v_cmd [m/s].
-    pub v: f64,
-}
-
 /// The simulated machine. Deterministic for a given configuration and seed.
 #[derive(Debug, Clone)]
 pub struct Plant {
@@ -371,17 +373,19 @@ impl Plant {
     /// are saturated at the machine's bounds, as the low-level controller does,
     /// and the actuators achieve the actuator gain × that.
     pub fn command(&mut self, cmd: VelocityCommand) -> Result<(), PlantError> {
-        if !(cmd.beta_dot.is_finite() && cmd.v.is_finite()) {
+        if !cmd.is_finite() {
             return Err(PlantError::NonFiniteCommand {
                 beta_dot: cmd.beta_dot,
                 v: cmd.v,
             });
         }
-        let p = &self.nominal;
+        // The low-level controller saturates at the nominal bounds; a gain error
+        // scales what it achieves.
         let k = self.perturbation.actuator_gain;
+        let cmd = cmd.limited(&self.nominal);
         let cmd = VelocityCommand {
-            beta_dot: k * cmd.beta_dot.clamp(-p.beta_dot_max, p.beta_dot_max),
-            v: k * cmd.v.clamp(-p.v_max, p.v_max),
+            beta_dot: k * cmd.beta_dot,
+            v: k * cmd.v,
         };
         self.pending.push_back((self.time + self.config.delay, cmd));
         Ok(())

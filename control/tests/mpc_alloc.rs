@@ -81,14 +81,16 @@ fn tick_allocates_only_inside_clarabel() {
             let ticks = 30;
             let (mut total, mut solves) = (0, 0);
             let backend_before = mpc.backend().allocations;
-            for _ in 0..ticks {
+            for tick in 0..ticks {
                 let x = plant.state();
+                let now = tick as f64 * settings.dt;
                 let before = count();
-                let sol = mpc.step(&x).unwrap();
-                total += count() - before;
+                let sol = mpc.step(&x, now).unwrap();
                 assert_eq!(sol.status, StepStatus::Solved);
                 solves += sol.sqp_iterations as usize;
                 let cmd = sol.command;
+                mpc.sent(now, cmd);
+                total += count() - before;
                 plant.command(cmd).unwrap();
                 plant.advance(settings.dt);
             }

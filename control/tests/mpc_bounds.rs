@@ -60,7 +60,8 @@ fn run<C: StageCost>(mut mpc: Mpc<C>, starts: &[State], goal: Goal, ticks: usize
         // The first tick starts from the raw (unclamped) state.
         let mut measured = *x0;
         for tick in 0..ticks {
-            let sol = mpc.step(&measured).unwrap();
+            let now = tick as f64 * s.dt;
+            let sol = mpc.step(&measured, now).unwrap();
             assert_eq!(
                 sol.status,
                 StepStatus::Solved,
@@ -69,7 +70,9 @@ fn run<C: StageCost>(mut mpc: Mpc<C>, starts: &[State], goal: Goal, ticks: usize
                 sol.qp_status
             );
             violations += check_tick(&p, &s, sol);
-            plant.command(sol.command).unwrap();
+            let cmd = sol.command;
+            plant.command(cmd).unwrap();
+            mpc.sent(now, cmd);
             plant.advance(s.dt);
             measured = plant.state();
         }

@@ -81,13 +81,16 @@ fn mpc_plans_from_the_delay_compensated_state() {
         };
         let mut plant = Plant::new(p, config, State::new(0.0, 0.0, 0.0, 0.0, 0.0, 0.3)).unwrap();
         let mut worst: f64 = 0.0;
-        for _ in 0..40 {
-            let sol = mpc.step(&plant.state()).unwrap();
+        for tick in 0..40 {
+            let now = tick as f64 * settings.dt;
+            let sol = mpc.step(&plant.state(), now).unwrap();
             let mut future = plant.clone();
             future.advance(delay);
             worst = worst.max((sol.initial_state - future.state()).amax());
             assert_eq!(sol.states[0], sol.initial_state);
-            plant.command(sol.command).unwrap();
+            let cmd = sol.command;
+            plant.command(cmd).unwrap();
+            mpc.sent(now, cmd);
             plant.advance(settings.dt);
         }
         assert!(
@@ -95,4 +98,64 @@ fn mpc_plans_from_the_delay_compensated_state() {
             "delay {delay}: x̂ differs from the plant by {worst:e}"
         );
     }
+}
+
+/// The daemon's view: the compensator runs on the real clock and is fed with the
+/// commands actually sent. Ticks are skipped now and then (a late tick: the
+/// command in force lasts two periods), some ticks send a stop ramp instead of
+/// the MPC's command, and a new goal mid-drive keeps the command history (the
+/// commands in the delay window still act). x̂ stays the plant's state one
+/// delay ahead throughout (off the articulation stop, which the compensator
+/// only approximates: see the first test).
+#[test]
+fn mpc_compensates_with_the_commands_sent_on_the_real_clock() {
+    let p = MachineParams::default();
+    let delay = 0.3;
+    let settings = MpcSettings {
+        delay,
+        delay_estimation: false,
+        gain_estimation: false,
+        ..MpcSettings::default()
+    };
+    let mut cost = QuadraticCost::diagonal([0.2, 0.2, 0.5, 0.1, 0.5, 0.5], [0.5, 0.5]);
+    cost.q_pos = 2.0;
+    let mut mpc = Mpc::new(p, cost, None, settings).unwrap();
+    mpc.set_goal(Goal::new(4.0, 2.0, 1.0), &[]).unwrap();
+    let config = PlantConfig {
+        delay,
+        ..PlantConfig::ideal()
+    };
+    let mut plant = Plant::new(p, config, State::new(0.0, 0.0, 0.0, 0.0, 0.0, 0.3)).unwrap();
+    let (mut now, mut worst, mut last) = (3.7, 0.0_f64, VelocityCommand::ZERO);
+    for tick in 0..40 {
+        if tick == 20 {
+            mpc.clear_goal();
+            mpc.set_goal(Goal::new(6.0, 3.0, 0.8), &[]).unwrap();
+        }
+        let sol = mpc.step(&plant.state(), now).unwrap();
+        let mut future = plant.clone();
+        future.advance(delay);
+        worst = worst.max((sol.initial_state - future.state()).amax());
+        assert!(
+            future.state()[3].abs() < p.beta_max - 0.05,
+            "keep off the articulation stop"
+        );
+        // Ticks 8..12: a stop ramp the loop decided, not the MPC's command.
+        let cmd = if (8..12).contains(&tick) {
+            VelocityCommand {
+                beta_dot: last.beta_dot * 0.5,
+                v: last.v * 0.5,
+            }
+        } else {
+            sol.command
+        };
+        plant.command(cmd).unwrap();
+        mpc.sent(now, cmd);
+        last = cmd;
+        // Every fifth tick comes a period late.
+        let period = if tick % 5 == 4 { 2.0 } else { 1.0 } * settings.dt;
+        plant.advance(period);
+        now += period;
+    }
+    assert!(worst < 1e-9, "x̂ differs from the plant by {worst:e}");
 }

@@ -139,9 +139,9 @@ fn assert_shifted(prev: &Solution, sol: &Solution, reason: FallbackReason) {
 fn failures_fall_back_to_the_shifted_plan() {
     let (mut mpc, script, nan) = build();
     let x = State::new(0.0, 0.0, 0.0, 0.0, 0.0, 0.3);
-    assert!(matches!(mpc.step(&x), Err(MpcError::NoGoal)));
+    assert!(matches!(mpc.step(&x, 0.0), Err(MpcError::NoGoal)));
     mpc.set_goal(Goal::new(5.0, 1.0, 0.0), &[]).unwrap();
-    let mut prev = mpc.step(&x).unwrap().clone();
+    let mut prev = mpc.step(&x, 0.0).unwrap().clone();
     assert_eq!(prev.status, StepStatus::Solved);
     let next = |s: &Solution| s.states[1];
 
@@ -149,7 +149,7 @@ fn failures_fall_back_to_the_shifted_plan() {
     script
         .borrow_mut()
         .extend([Some(Next::Fail), Some(Next::Fail)]);
-    let sol = mpc.step(&next(&prev)).unwrap().clone();
+    let sol = mpc.step(&next(&prev), 0.0).unwrap().clone();
     assert_shifted(&prev, &sol, FallbackReason::QpFailed);
     assert_eq!(sol.qp_status, QpStatus::NumericalError);
     assert!(sol.restarted);
@@ -157,7 +157,7 @@ fn failures_fall_back_to_the_shifted_plan() {
 
     // Only the first fails: the restart from a roll-out succeeds.
     script.borrow_mut().extend([Some(Next::Fail), None]);
-    let sol = mpc.step(&next(&prev)).unwrap().clone();
+    let sol = mpc.step(&next(&prev), 0.0).unwrap().clone();
     assert_eq!(sol.status, StepStatus::Solved);
     assert!(sol.restarted);
     prev = sol;
@@ -166,13 +166,13 @@ fn failures_fall_back_to_the_shifted_plan() {
     script
         .borrow_mut()
         .extend([Some(Next::NanPrimal), Some(Next::NanPrimal)]);
-    let sol = mpc.step(&next(&prev)).unwrap().clone();
+    let sol = mpc.step(&next(&prev), 0.0).unwrap().clone();
     assert_shifted(&prev, &sol, FallbackReason::NonFiniteSolution);
     prev = sol;
 
     // Non-finite cost derivatives.
     nan.set(true);
-    let sol = mpc.step(&next(&prev)).unwrap().clone();
+    let sol = mpc.step(&next(&prev), 0.0).unwrap().clone();
     assert_shifted(&prev, &sol, FallbackReason::NonFiniteData);
     assert_eq!(sol.qp_status, QpStatus::NotRun);
     nan.set(false);
@@ -180,20 +180,20 @@ fn failures_fall_back_to_the_shifted_plan() {
 
     // A non-finite measurement.
     let sol = mpc
-        .step(&State::new(f64::NAN, 0.0, 0.0, 0.0, 0.0, 0.0))
+        .step(&State::new(f64::NAN, 0.0, 0.0, 0.0, 0.0, 0.0), 0.0)
         .unwrap()
         .clone();
     assert_shifted(&prev, &sol, FallbackReason::NonFiniteState);
     prev = sol;
 
     // Recovery.
-    let sol = mpc.step(&next(&prev)).unwrap().clone();
+    let sol = mpc.step(&next(&prev), 0.0).unwrap().clone();
     assert_eq!(sol.status, StepStatus::Solved);
 
     // Without any plan, a non-finite measurement gives a stop command.
     mpc.reset();
     mpc.set_goal(Goal::new(5.0, 1.0, 0.0), &[]).unwrap();
-    let sol = mpc.step(&State::from_element(f64::INFINITY)).unwrap();
+    let sol = mpc.step(&State::from_element(f64::INFINITY), 0.0).unwrap();
     assert_eq!(
         sol.status,
         StepStatus::Fallback(FallbackReason::NonFiniteState)

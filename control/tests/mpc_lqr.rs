@@ -91,7 +91,7 @@ fn check(horizon: usize, seed: u64) {
     x0 *= (1.0 / bmax).min(1.0);
     // Two ticks: from the hold roll-out, then from the shifted warm start.
     for tick in 0..2 {
-        let sol = mpc.step(&x0).unwrap().clone();
+        let sol = mpc.step(&x0, tick as f64 * settings.dt).unwrap().clone();
         assert_eq!(
             sol.status,
             StepStatus::Solved,

@@ -29,10 +29,13 @@ fn drive(
     mpc.set_goal(goal, &[obstacle]).unwrap();
     let mut plant = Plant::new(p, plant_config, start).unwrap();
     let mut min_clearance = footprint_clearance(&p, &start, &[obstacle]);
-    for _ in 0..ticks {
-        let sol = mpc.step(&plant.state()).unwrap();
+    for tick in 0..ticks {
+        let now = tick as f64 * settings.dt;
+        let sol = mpc.step(&plant.state(), now).unwrap();
         assert_eq!(sol.status, StepStatus::Solved, "QP {:?}", sol.qp_status);
-        plant.command(sol.command).unwrap();
+        let cmd = sol.command;
+        plant.command(cmd).unwrap();
+        mpc.sent(now, cmd);
         plant.advance_observed(settings.dt, |x| {
             min_clearance = min_clearance.min(footprint_clearance(&p, x, &[obstacle]))
         });

@@ -150,7 +150,7 @@ fn sqp_converges_to_the_independent_optimum() {
         };
         let mut mpc = Mpc::new(params(), cost(), None, settings).unwrap();
         mpc.set_goal(goal(), &[]).unwrap();
-        let sol = mpc.step(&x0()).unwrap().clone();
+        let sol = mpc.step(&x0(), 0.0).unwrap().clone();
         assert_eq!(sol.status, StepStatus::Solved);
         assert!(
             sol.step_norm < 1e-11,

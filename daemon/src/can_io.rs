@@ -10,11 +10,12 @@
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 
-use control::MachineParams;
+use control::{MachineParams, VelocityCommand};
 use tokio::sync::mpsc;
 
 use crate::can::{
-    AliveCounter, CanBus, DriveMode, MachineState, RxCounters, RxError, RxTracker, VelocityCommand,
+    AliveCounter, CanBus, DriveMode, MachineState, RxCounters, RxError, RxTracker,
+    VelocityCommandFrame,
 };
 use crate::clock::DaemonClock;
 
@@ -22,10 +23,8 @@ use crate::clock::DaemonClock;
 /// are added by the I/O task).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct OutCommand {
-    /// β̇_cmd [rad/s].
-    pub beta_dot: f64,
-    /// v_cmd [m/s].
-    pub v: f64,
+    /// (β̇_cmd, v_cmd).
+    pub command: VelocityCommand,
     /// Mode signal.
     pub mode: DriveMode,
 }
@@ -87,38 +86,32 @@ impl CanShared {
 }
 
 /// The last check before a command leaves the daemon: finite, and inside the
-/// configured velocity bounds, whatever happened upstream.
+/// configured velocity bounds, whatever happened upstream. The loop sends limited
+/// commands ([`VelocityCommand::limited`]); a command this guard has to change
+/// is a bug, counted and logged as an error (a non-finite one becomes a fault
+/// stop).
 #[derive(Debug, Clone, Copy)]
 pub struct CommandGuard {
-    beta_dot_max: f64,
-    v_max: f64,
+    params: MachineParams,
 }
 
 impl CommandGuard {
     /// Bounds from the machine parameters.
     pub fn new(p: &MachineParams) -> Self {
-        Self {
-            beta_dot_max: p.beta_dot_max,
-            v_max: p.v_max,
-        }
+        Self { params: *p }
     }
 
     /// The command made safe, and whether it had to be changed.
     pub fn apply(&self, c: OutCommand) -> (OutCommand, bool) {
-        if !(c.beta_dot.is_finite() && c.v.is_finite()) {
-            return (
-                OutCommand {
-                    beta_dot: 0.0,
-                    v: 0.0,
-                    mode: DriveMode::Fault,
-                },
-                true,
-            );
+        if !c.command.is_finite() {
+            let stop = OutCommand {
+                command: VelocityCommand::ZERO,
+                mode: DriveMode::Fault,
+            };
+            return (stop, true);
         }
-        let beta_dot = c.beta_dot.clamp(-self.beta_dot_max, self.beta_dot_max);
-        let v = c.v.clamp(-self.v_max, self.v_max);
-        let changed = beta_dot != c.beta_dot || v != c.v;
-        (OutCommand { beta_dot, v, ..c }, changed)
+        let command = c.command.limited(&self.params);
+        (OutCommand { command, ..c }, command != c.command)
     }
 }
 
@@ -144,13 +137,7 @@ pub async fn run(
                     shared.clamped.fetch_add(1, Ordering::Relaxed);
                     tracing::error!("command guard changed a command: {cmd:?}");
                 }
-                let frame = VelocityCommand {
-                    beta_dot_cmd: cmd.beta_dot,
-                    v_cmd: cmd.v,
-                    mode: cmd.mode,
-                    alive,
-                }
-                .encode();
+                let frame = VelocityCommandFrame::new(cmd.command, cmd.mode, alive).encode();
                 alive = alive.next();
                 match frame {
                     Ok(enc) => match bus.send(&enc.frame).await {
@@ -203,27 +190,28 @@ mod tests {
 
     #[test]
     fn guard_clamps_and_replaces_non_finite() {
-        let g = CommandGuard::new(&MachineParams::default());
         let p = MachineParams::default();
-        let (c, changed) = g.apply(OutCommand {
-            beta_dot: 10.0,
-            v: -5.0,
-            mode: DriveMode::Drive,
-        });
-        assert!(changed);
-        assert_eq!((c.beta_dot, c.v), (p.beta_dot_max, -p.v_max));
-        let (c, changed) = g.apply(OutCommand {
-            beta_dot: f64::NAN,
-            v: 0.1,
-            mode: DriveMode::Drive,
-        });
-        assert!(changed);
-        assert_eq!((c.beta_dot, c.v, c.mode), (0.0, 0.0, DriveMode::Fault));
-        let ok = OutCommand {
-            beta_dot: 0.1,
-            v: 0.5,
+        let g = CommandGuard::new(&p);
+        let out = |beta_dot, v| OutCommand {
+            command: VelocityCommand { beta_dot, v },
             mode: DriveMode::Drive,
         };
+        let (c, changed) = g.apply(out(10.0, -5.0));
+        assert!(changed);
+        assert_eq!(
+            c.command,
+            VelocityCommand {
+                beta_dot: p.beta_dot_max,
+                v: -p.v_max
+            }
+        );
+        let (c, changed) = g.apply(out(f64::NAN, 0.1));
+        assert!(changed);
+        assert_eq!(
+            (c.command, c.mode),
+            (VelocityCommand::ZERO, DriveMode::Fault)
+        );
+        let ok = out(0.1, 0.5);
         assert_eq!(g.apply(ok), (ok, false));
     }
 }

@@ -3,7 +3,7 @@
 //! so `wlnavd --sim` needs no file at all).
 //!
 //! Validation happens once, in [`Config::validate`], and every error names the key
-//! (`loop.rate_hz`, `mpc.horizon`, `sim.plant.delay`, …). Unknown keys are errors
+//! (`loop.pose_timeout`, `mpc.horizon`, `sim.plant.delay`, …). Unknown keys are errors
 //! too (a typo must not silently fall back to a default on a machine).
 //!
 //! ```toml
@@ -15,8 +15,7 @@
 //! [weights]
 //! critic = "critic-weights/critic.safetensors"
 //! actor = "critic-weights/actor.safetensors"   # "" = no actor (zero-control warm start)
-//! [loop]
-//! rate_hz = 5.0
+//! [loop]              # the tick period is mpc.dt (one MPC stage per command)
 //! pose_timeout = 0.5   # s: older pose -> controlled stop
 //! progress_timeout = 10.0  # s without approach -> goal aborted (no-progress)
 //! ...
@@ -72,7 +71,7 @@ pub enum ConfigError {
     /// A value outside its valid range.
     #[error("config key `{key}`: {message}")]
     Invalid {
-        /// Dotted key, e.g. `loop.rate_hz`.
+        /// Dotted key, e.g. `loop.pose_timeout`.
         key: String,
         /// What is wrong.
         message: String,
@@ -189,8 +188,10 @@ impl Default for WeightsConfig {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct LoopConfig {
-    /// Tick rate [Hz]; must equal 1 / `mpc.dt`. Default 5.
-    pub rate_hz: f64,
+    /// Removed: the tick period is `mpc.dt`. Present only to refuse old files
+    /// with that explanation instead of "unknown field".
+    #[serde(skip_serializing)]
+    pub rate_hz: Option<f64>,
     /// A pose older than this is stale → controlled stop. Default 0.5 s.
     pub pose_timeout: f64,
     /// A machine state older than this is stale → controlled stop. Default 0.3 s.
@@ -246,14 +247,14 @@ pub struct LoopConfig {
 impl Default for LoopConfig {
     fn default() -> Self {
         Self {
-            rate_hz: 5.0,
+            rate_hz: None,
             pose_timeout: 0.5,
             state_timeout: 0.3,
             fallback_ticks: 2,
             can_bad_frames_stop: 5,
             can_max_lost: 2,
             reach_tolerance: control::model::SUCCESS_TOLERANCE,
-            reach_speed: 0.05,
+            reach_speed: control::model::REACH_SPEED,
             progress_timeout: ProgressSettings::default().timeout,
             progress_min_approach: ProgressSettings::default().min_approach,
             plausibility_margin: 0.2,
@@ -271,11 +272,6 @@ impl Default for LoopConfig {
 }
 
 impl LoopConfig {
-    /// Tick period [s].
-    pub fn period(&self) -> f64 {
-        1.0 / self.rate_hz
-    }
-
     /// The progress checker's settings.
     pub fn progress(&self) -> ProgressSettings {
         ProgressSettings {
@@ -449,14 +445,23 @@ fn check_non_negative(key: &str, v: f64) -> Result<(), ConfigError> {
     }
 }
 
-/// The `name` in an error message like "… `name` must …".
-fn backticked(message: &str) -> Option<&str> {
-    let start = message.find('`')? + 1;
-    let len = message[start..].find('`')?;
-    Some(&message[start..start + len])
+/// A configuration error for the setting `name` of `section` (the section alone
+/// when the error names none).
+fn invalid_in(section: &str, name: Option<&str>, e: impl std::fmt::Display) -> ConfigError {
+    let key = match name {
+        Some(name) => format!("{section}.{name}"),
+        None => section.to_owned(),
+    };
+    invalid(key, e.to_string())
 }
 
 impl Config {
+    /// The tick period [s]: the MPC's stage Δt (`mpc.dt`), the command period
+    /// the critic was trained with.
+    pub fn period(&self) -> f64 {
+        self.mpc.dt
+    }
+
     /// Parses TOML text (`source` names it in errors) and validates it.
     pub fn from_toml(text: &str, source: &str) -> Result<Self, ConfigError> {
         let config: Config = toml::from_str(text).map_err(|e| ConfigError::Parse {
@@ -536,39 +541,25 @@ impl Config {
 
     /// Checks every value; the error names the first bad key.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        self.machine.validate().map_err(|e| {
-            let m = e.to_string();
-            let key = match backticked(&m) {
-                Some(name) => format!("machine.{name}"),
-                None => "machine".into(),
-            };
-            invalid(key, m)
-        })?;
-        self.mpc.validate().map_err(|e| {
-            let m = e.to_string();
-            let key = match backticked(&m) {
-                Some(name) => format!("mpc.{name}"),
-                None => "mpc".into(),
-            };
-            invalid(key, m)
-        })?;
+        self.machine
+            .validate()
+            .map_err(|e| invalid_in("machine", Some(e.setting()), &e))?;
+        self.mpc
+            .validate()
+            .map_err(|e| invalid_in("mpc", e.setting(), &e))?;
         let l = &self.control;
-        check_positive("loop.rate_hz", l.rate_hz)?;
-        if l.rate_hz > 1000.0 {
-            return Err(invalid("loop.rate_hz", "must be at most 1000 Hz"));
-        }
-        let period = l.period();
-        if (period - self.mpc.dt).abs() > 1e-9 * period.max(1.0) {
+        if let Some(hz) = l.rate_hz {
             return Err(invalid(
                 "loop.rate_hz",
                 format!(
-                    "must equal 1 / mpc.dt (mpc.dt = {} s gives {} Hz, got {} Hz): the MPC's \
-                     stage is the command period",
-                    self.mpc.dt,
-                    1.0 / self.mpc.dt,
-                    l.rate_hz
+                    "no longer a setting (got {hz} Hz): the tick period is mpc.dt ({} s, one \
+                     MPC stage per command); remove the key",
+                    self.mpc.dt
                 ),
             ));
+        }
+        if self.mpc.dt < 1e-3 {
+            return Err(invalid("mpc.dt", "must be at least 1 ms (the tick period)"));
         }
         check_positive("loop.pose_timeout", l.pose_timeout)?;
         check_positive("loop.state_timeout", l.state_timeout)?;
@@ -642,14 +633,9 @@ impl Config {
         if s.initial_state.iter().any(|v| !v.is_finite()) {
             return Err(invalid("sim.initial_state", "must be 6 finite numbers"));
         }
-        s.plant.validate().map_err(|e| {
-            let m = e.to_string();
-            let key = match backticked(&m) {
-                Some(name) => format!("sim.plant.{name}"),
-                None => "sim.plant".into(),
-            };
-            invalid(key, m)
-        })?;
+        s.plant
+            .validate()
+            .map_err(|e| invalid_in("sim.plant", e.setting(), &e))?;
         let f = &s.faults;
         for (key, v) in [
             ("sim.faults.crc_burst_at", f.crc_burst_at),
@@ -757,8 +743,13 @@ mod tests {
 
     #[test]
     fn errors_name_the_key() {
-        assert!(err("[loop]\nrate_hz = -1\n").contains("`loop.rate_hz`"));
-        assert!(err("[loop]\nrate_hz = 10\n").contains("`loop.rate_hz`"));
+        // The tick period is mpc.dt; the old key is refused with that explanation.
+        let removed = err("[loop]\nrate_hz = 5\n");
+        assert!(
+            removed.contains("`loop.rate_hz`") && removed.contains("mpc.dt"),
+            "{removed}"
+        );
+        assert!(err("[mpc]\ndt = 0.0001\n").contains("`mpc.dt`"));
         assert!(err("[mpc]\nhorizon = 0\n").contains("`mpc.horizon`"));
         assert!(err("[loop]\nprogress_timeout = 0\n").contains("`loop.progress_timeout`"));
         assert!(err("[machine]\nv_max = 0\n").contains("`machine.v_max`"));
@@ -770,10 +761,10 @@ mod tests {
         );
         assert!(err("[ipc]\nprefix = \"\"\n").contains("`ipc.prefix`"));
         assert!(err("[ipc.workspace]\nx_min = 5\nx_max = 1\n").contains("`ipc.workspace`"));
-        let unknown = err("[loop]\nrate_hz = 5\ntypo = 1\n");
+        let unknown = err("[loop]\npose_timeout = 0.5\ntypo = 1\n");
         assert!(unknown.contains("typo"), "{unknown}");
-        let wrong_type = err("[loop]\nrate_hz = \"fast\"\n");
-        assert!(wrong_type.contains("rate_hz"), "{wrong_type}");
+        let wrong_type = err("[loop]\npose_timeout = \"fast\"\n");
+        assert!(wrong_type.contains("pose_timeout"), "{wrong_type}");
         assert!(err("[loop]\npose_reject_stop = 0\n").contains("`loop.pose_reject_stop`"));
         assert!(err("[loop]\npose_max_future = -1\n").contains("`loop.pose_max_future`"));
         assert!(err("[loop.realtime]\nenabled = true\npriority = 0\n")
@@ -787,7 +778,7 @@ mod tests {
     fn a_file_without_weights_keeps_the_default_paths_for_the_caller_to_resolve() {
         let dir = tempfile::tempdir().unwrap();
         let file = dir.path().join("wlnavd.toml");
-        std::fs::write(&file, "[loop]\nrate_hz = 5.0\n").unwrap();
+        std::fs::write(&file, "[loop]\npose_timeout = 0.5\n").unwrap();
         let c = Config::load(&file).unwrap();
         assert_eq!(
             c.weights,

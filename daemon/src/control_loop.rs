@@ -31,24 +31,22 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
-use control::model::{ix, pose_error};
-use control::{Goal, MachineParams, State};
-use shm_ipc::{
-    fault_flags, AbortReason, DaemonEndpoint, GoalOutcome, MachineState as IpcState, Mode, Pose2,
-    Telemetry,
-};
+use control::model::pose_error;
+use control::{Goal, MachineParams, State, VelocityCommand};
+use shm_ipc::{fault_flags, AbortReason, DaemonEndpoint, GoalOutcome, Mode, Pose2, Telemetry};
 use tokio::sync::mpsc;
 
-use crate::can::{DriveMode, MachineStatus};
-use crate::can_io::{CanShared, CanSnapshot, OutCommand, RejectKind};
+use crate::can::{DriveMode, MachineState};
+use crate::can_io::{CanShared, CanSnapshot, OutCommand};
 use crate::clock::DaemonClock;
 use crate::config::Config;
 use crate::controller::{Controller, PlanStatus, Step};
 use crate::goal_lifecycle::{Abort, AcceptedGoal, TickInput, TickPlan};
-use crate::ipc::{fault_names, SharedGoals};
+use crate::ipc::{wire_state, SharedGoals};
 use crate::log_limit::{LogDecision, LogLimiter};
 use crate::notify::Notifier;
 use crate::pose_gate::{PoseGate, PoseVerdict};
+use crate::safety::{self, Decision, InputFaults, InputHealth, Situation, SolveResult, StopCause};
 use crate::stats::LoopStats;
 
 /// Why the loop ended.
@@ -86,28 +84,29 @@ pub struct ControlLoop {
     controller: Box<dyn Controller>,
     notifier: Notifier,
     params: MachineParams,
-    /// The goal generation the controller plans for, with a consistent command
-    /// history (None: re-plan before the next step).
+    /// The tick period: the MPC's Δt.
+    period: f64,
+    /// The goal generation the controller plans for (None: set the goal before the
+    /// next step).
     engaged_generation: Option<u64>,
     /// Outcomes dropped so far (logged when it grows).
     dropped_outcomes: u64,
-    /// Faults that hold until a new goal (solver failure).
+    /// Faults that hold until the stop is complete (solver failure).
     latched: u32,
-    last_cmd: [f64; 2],
+    /// The last command sent (the stop ramp starts from it).
+    last_command: VelocityCommand,
     /// Every pose sample passes this gate (age, future stamps, plausibility).
     pose_gate: PoseGate,
     /// Rejected pose samples are logged at a limited rate.
     pose_log: LogLimiter,
-    fallback_count: u32,
+    /// Ticks in a row without a fresh solution.
+    solve_failures: u32,
     /// The subgoal of the global route driven to on the last tracking tick (None: the
     /// goal itself, or no global layer); the goal lifecycle's progress window runs
     /// towards it.
     subgoal: Option<Goal>,
-    fallback_plan: Vec<State>,
-    fallback_age: usize,
     prev_counters: crate::can::RxCounters,
     mode: Mode,
-    telemetry: Telemetry,
     shutdown_started: Option<f64>,
     tick: u64,
     /// Fresh pose and machine state have been seen at least once (until then the
@@ -115,39 +114,47 @@ pub struct ControlLoop {
     seen_data: bool,
 }
 
-/// Moves `v` towards 0 by at most `step`.
-fn towards_zero(v: f64, step: f64) -> f64 {
-    if v.abs() <= step {
-        0.0
-    } else {
-        v - step.copysign(v)
-    }
+/// What a tick read: the measured state when pose and machine state are fresh,
+/// the machine state alone, and the faults the inputs show.
+struct Inputs {
+    x: Option<State>,
+    /// The fresh, plausible machine state.
+    machine: Option<MachineState>,
+    /// The newest machine state, fresh or not (for telemetry).
+    latest: Option<MachineState>,
+    faults: InputFaults,
+}
+
+/// What the controller's step gave the tick.
+struct Solve {
+    result: SolveResult,
+    /// The command, unless the step failed.
+    command: Option<VelocityCommand>,
+    solve_time: Option<f64>,
 }
 
 impl ControlLoop {
     /// A loop around a controller that passed its first solve.
     pub fn new(ctx: LoopContext, controller: Box<dyn Controller>, notifier: Notifier) -> Self {
-        let horizon = ctx.config.mpc.horizon;
         let params = ctx.config.machine;
+        let period = ctx.config.period();
         let pose_gate = PoseGate::new(ctx.config.pose_gate());
         Self {
             ctx,
             controller,
             notifier,
             params,
+            period,
             engaged_generation: None,
             dropped_outcomes: 0,
             latched: 0,
-            last_cmd: [0.0; 2],
+            last_command: VelocityCommand::ZERO,
             pose_gate,
             pose_log: LogLimiter::new(5, 10.0),
-            fallback_count: 0,
+            solve_failures: 0,
             subgoal: None,
-            fallback_plan: Vec::with_capacity(horizon + 1),
-            fallback_age: 0,
             prev_counters: Default::default(),
             mode: Mode::Startup,
-            telemetry: Telemetry::ZERO,
             shutdown_started: None,
             tick: 0,
             seen_data: false,
@@ -156,7 +163,7 @@ impl ControlLoop {
 
     /// Runs until shutdown (or `loop.max_ticks`); the last command sent is a stop.
     pub fn run(mut self) -> ExitReason {
-        let period = self.ctx.config.control.period();
+        let period = self.period;
         let clock = self.ctx.clock;
         let t0 = clock.now();
         let mut k: u64 = 0;
@@ -194,6 +201,262 @@ impl ControlLoop {
         reason
     }
 
+    /// One tick: inputs → goal lifecycle → safety decision ([`crate::safety`]) →
+    /// controller step when driving → command → telemetry.
+    fn tick(&mut self, start: f64) -> TickOutcome {
+        self.tick += 1;
+        let mut t = Telemetry::ZERO;
+        t.tick = self.tick;
+        t.timestamp_ns = shm_ipc::monotonic_now_ns();
+        let shutting_down = self.shutting_down(start);
+        let inputs = self.read_inputs(start);
+        t.state = self.telemetry_state(&inputs);
+        self.seen_data |= inputs.x.is_some();
+
+        let faults = inputs.faults.stop | self.latched;
+        let abort = safety::goal_abort(shutting_down, faults, inputs.machine.map(|s| s.status));
+        let (plan, stop_requested) = self.goal_tick(start, inputs.x.as_ref(), abort, faults);
+        let mut flags = inputs.faults.flags;
+        if stop_requested {
+            flags |= fault_flags::STOP_REQUESTED;
+        }
+        let mut shown = match plan {
+            TickPlan::NoGoal => None,
+            TickPlan::Hold(g) | TickPlan::Track(g) => Some(g),
+        };
+        let mut decision = safety::decide(&Situation {
+            shutting_down,
+            seen_data: self.seen_data,
+            faults,
+            stop_requested,
+            goal: (&plan).into(),
+        });
+
+        let mut solve = None;
+        if let (Decision::Track, TickPlan::Track(g), Some(x)) = (decision, &plan, &inputs.x) {
+            let s = self.solve(x, g, start, &mut t);
+            if matches!(s.result, SolveResult::Fallback | SolveResult::Failed) {
+                flags |= fault_flags::FALLBACK_PLAN;
+            }
+            decision = safety::after_solve(s.result, self.solve_failures, self.fallback_ticks());
+            if let Decision::Stop(cause) = decision {
+                flags = self.goal_ended_while_tracking(cause, flags);
+                shown = None;
+            }
+            solve = Some(s);
+        }
+        if decision != Decision::Track {
+            self.disengage();
+        }
+
+        let ramp = safety::ramp_down(self.last_command, &self.params, self.period);
+        let (mode, drive, command) = match decision {
+            Decision::Track => {
+                let c = solve.as_ref().and_then(|s| s.command).unwrap_or(ramp);
+                (Mode::Tracking, DriveMode::Drive, c)
+            }
+            Decision::Stop(cause) => {
+                let (mode, drive) = cause.modes(ramp == VelocityCommand::ZERO);
+                (mode, drive, ramp)
+            }
+        };
+        if let Decision::Stop(StopCause::Fault(_)) = decision {
+            flags |= self.latched;
+            if inputs.faults.stop == 0 && command == VelocityCommand::ZERO {
+                // The solver fault has been shown through the whole stop; clear it.
+                self.latched = 0;
+            }
+        }
+
+        let exit = self.exit_after(start, command, inputs.machine.as_ref());
+        let (command, sent) = self.send(start, command, drive, &mut flags);
+        self.set_mode(mode, &mode_detail(shown.as_ref(), mode, flags));
+        self.publish(t, mode, flags, command, shown.as_ref(), inputs.x.as_ref());
+        TickOutcome {
+            sent,
+            solve_time: solve.and_then(|s| s.solve_time),
+            exit,
+        }
+    }
+
+    fn fallback_ticks(&self) -> u32 {
+        self.ctx.config.control.fallback_ticks
+    }
+
+    /// True once shutdown is requested (signal or `loop.max_ticks`); the first such
+    /// tick starts the controlled stop.
+    fn shutting_down(&mut self, start: f64) -> bool {
+        let max_ticks = self.ctx.config.control.max_ticks;
+        let shutting_down =
+            self.ctx.shutdown.load(Ordering::Relaxed) || (max_ticks > 0 && self.tick > max_ticks);
+        if shutting_down && self.shutdown_started.is_none() {
+            self.shutdown_started = Some(start);
+            self.notifier
+                .stopping("stopping: controlled stop before exit");
+            tracing::info!("shutdown: controlled stop");
+        }
+        shutting_down
+    }
+
+    /// Poses through the gate, the machine state and the CAN counters, and the
+    /// faults they show.
+    fn read_inputs(&mut self, start: f64) -> Inputs {
+        let pose_rejected = self.read_poses();
+        let can = self.ctx.can.snapshot();
+        let pose = self.pose_gate.fresh(start);
+        let machine = self.state_fresh(&can, start);
+        let health = InputHealth {
+            pose_fresh: pose.is_some(),
+            pose_rejected,
+            pose_faulted: self.pose_gate.faulted(),
+            state_fresh: machine.is_some(),
+        };
+        let faults = safety::input_faults(
+            health,
+            &can,
+            &self.prev_counters,
+            self.ctx.config.control.can_bad_frames_stop,
+        );
+        self.prev_counters = can.counters;
+        Inputs {
+            x: pose.zip(machine).map(|(p, s)| s.with_pose(&p)),
+            machine,
+            latest: can.latest.map(|(s, _)| s),
+            faults,
+        }
+    }
+
+    /// The state shown in telemetry: the measured one, or what is known of it
+    /// (NaN for the rest).
+    fn telemetry_state(&self, inputs: &Inputs) -> shm_ipc::MachineState {
+        if let Some(x) = &inputs.x {
+            return wire_state(x);
+        }
+        let mut a = [f64::NAN; 6];
+        if let Some(p) = self.pose_gate.last() {
+            a[..3].copy_from_slice(&[p.0.x, p.0.y, p.0.heading]);
+        }
+        if let Some(s) = inputs.latest {
+            a[3..].copy_from_slice(&[s.beta, s.beta_dot, s.v_f]);
+        }
+        shm_ipc::MachineState::from_array(a)
+    }
+
+    /// The goal lifecycle's tick: what to drive, and whether an operator stop is
+    /// latched.
+    fn goal_tick(
+        &mut self,
+        now: f64,
+        state: Option<&State>,
+        abort: Option<Abort>,
+        blocking_faults: u32,
+    ) -> (TickPlan, bool) {
+        let mut goals = self.ctx.goals.lock();
+        let plan = goals.on_tick(TickInput {
+            now,
+            state,
+            abort,
+            blocking_faults,
+            subgoal: self.subgoal,
+        });
+        (plan, goals.operator_stop())
+    }
+
+    /// A goal ended while tracking (`cause`): the solver failed for too long
+    /// (latched fault, goal aborted) or the global layer ended it (already
+    /// reported by [`Self::solve`]). Returns the tick's flags.
+    fn goal_ended_while_tracking(&mut self, cause: StopCause, flags: u32) -> u32 {
+        if cause != StopCause::SolveFailed {
+            return flags;
+        }
+        let n = self.solve_failures;
+        tracing::error!("solver failed {n} ticks in a row: controlled stop");
+        self.latched |= fault_flags::SOLVE_FAILED;
+        self.ctx.goals.lock().abort_active(Abort::new(
+            AbortReason::Fault,
+            format!("fault: solve failed {n} ticks in a row"),
+        ));
+        // This tick stops instead of driving on the fallback plan.
+        (flags & !fault_flags::FALLBACK_PLAN) | fault_flags::SOLVE_FAILED
+    }
+
+    /// Shutdown completes once the command is zero and the machine at rest (or its
+    /// state is unknown, or the timeout passed).
+    fn exit_after(
+        &self,
+        now: f64,
+        command: VelocityCommand,
+        machine: Option<&MachineState>,
+    ) -> Option<ExitReason> {
+        let t_stop = self.shutdown_started?;
+        let cfg = &self.ctx.config.control;
+        let at_rest = machine.map_or(true, |s| s.at_rest(cfg.rest_speed));
+        let timed_out = now - t_stop > cfg.shutdown_timeout;
+        (command == VelocityCommand::ZERO && (at_rest || timed_out)).then(|| {
+            if self.ctx.shutdown.load(Ordering::Relaxed) {
+                ExitReason::Shutdown
+            } else {
+                ExitReason::MaxTicks
+            }
+        })
+    }
+
+    /// Hands the command to the CAN task, limited to the machine's bounds: the one
+    /// place a command leaving the loop is limited (the CAN task's guard only
+    /// verifies). The controller learns what was sent (its delay compensation).
+    fn send(
+        &mut self,
+        now: f64,
+        command: VelocityCommand,
+        mode: DriveMode,
+        flags: &mut u32,
+    ) -> (VelocityCommand, bool) {
+        let command = command.limited(&self.params);
+        let sent = match self.ctx.commands.try_send(OutCommand { command, mode }) {
+            Ok(()) => {
+                self.controller.sent(now, command);
+                true
+            }
+            Err(e) => {
+                *flags |= fault_flags::CAN_BUS;
+                tracing::warn!("command not queued: {e}");
+                false
+            }
+        };
+        self.last_command = command;
+        (command, sent)
+    }
+
+    /// Fills and publishes the tick's telemetry.
+    fn publish(
+        &mut self,
+        mut t: Telemetry,
+        mode: Mode,
+        flags: u32,
+        command: VelocityCommand,
+        shown: Option<&AcceptedGoal>,
+        x: Option<&State>,
+    ) {
+        t.mode = mode.code();
+        t.fault_flags = flags;
+        t.command.beta_dot = command.beta_dot;
+        t.command.v = command.v;
+        if let Some(g) = shown {
+            t.goal_active = 1;
+            t.goal = Pose2::new(g.goal.x, g.goal.y, g.goal.theta);
+            t.goal_request_id = g.request_id;
+            if let Some(x) = x {
+                let e = pose_error(x, &g.goal);
+                t.pose_error_xy = e[0];
+                t.pose_error_heading = e[1];
+            }
+        }
+        self.report_outcome(&mut t);
+        if let Err(e) = self.ctx.endpoint.publish_telemetry(&t) {
+            tracing::warn!("telemetry: {e}");
+        }
+    }
+
     fn set_mode(&mut self, mode: Mode, detail: &str) {
         if mode != self.mode {
             tracing::info!("mode {:?} -> {:?} {detail}", self.mode, mode);
@@ -209,29 +472,8 @@ impl ControlLoop {
 
     fn disengage(&mut self) {
         self.engaged_generation = None;
-        self.fallback_count = 0;
+        self.solve_failures = 0;
         self.subgoal = None;
-    }
-
-    /// Coming to rest without a goal: the ramp, `Stopping` until the command is zero,
-    /// then `Idle`.
-    fn come_to_rest(&self) -> (Mode, [f64; 2], DriveMode) {
-        let cmd = self.ramp_down();
-        if cmd == [0.0, 0.0] {
-            (Mode::Idle, cmd, DriveMode::Hold)
-        } else {
-            (Mode::Stopping, cmd, DriveMode::Stop)
-        }
-    }
-
-    /// The controlled-stop command: the last command ramped towards zero at the
-    /// acceleration limits.
-    fn ramp_down(&self) -> [f64; 2] {
-        let dt = self.ctx.config.control.period();
-        [
-            towards_zero(self.last_cmd[0], self.params.beta_ddot_max * dt),
-            towards_zero(self.last_cmd[1], self.params.a_max * dt),
-        ]
     }
 
     /// Feeds every waiting pose sample through the gate (oldest first, bounded per tick);
@@ -275,7 +517,7 @@ impl ControlLoop {
         rejected
     }
 
-    fn state_fresh(&self, can: &CanSnapshot, now: f64) -> Option<crate::can::MachineState> {
+    fn state_fresh(&self, can: &CanSnapshot, now: f64) -> Option<MachineState> {
         let (s, t) = can.latest?;
         if now - t > self.ctx.config.control.state_timeout {
             return None;
@@ -286,295 +528,6 @@ impl ControlLoop {
             && s.beta_dot.abs() <= p.beta_dot_max * m
             && s.v_f.abs() <= p.v_max * m;
         plausible.then_some(s)
-    }
-
-    fn tick(&mut self, start: f64) -> TickOutcome {
-        let cfg = self.ctx.config.control;
-        self.tick += 1;
-        let mut t = Telemetry::ZERO;
-        t.tick = self.tick;
-        t.timestamp_ns = shm_ipc::monotonic_now_ns();
-        let mut solve_time = None;
-
-        let shutting_down = self.ctx.shutdown.load(Ordering::Relaxed)
-            || (cfg.max_ticks > 0 && self.tick > cfg.max_ticks);
-        if shutting_down && self.shutdown_started.is_none() {
-            self.shutdown_started = Some(start);
-            self.notifier
-                .stopping("stopping: controlled stop before exit");
-            tracing::info!("shutdown: controlled stop");
-        }
-
-        // Inputs.
-        let pose_rejected = self.read_poses();
-        let can = self.ctx.can.snapshot();
-        let pose = self.pose_gate.fresh(start);
-        let state = self.state_fresh(&can, start);
-
-        let mut flags = 0u32;
-        let mut stop_faults = 0u32;
-        if pose.is_none() {
-            flags |= fault_flags::POSE_STALE;
-        }
-        if pose_rejected || self.pose_gate.faulted() {
-            flags |= fault_flags::POSE_REJECTED;
-        }
-        if self.pose_gate.faulted() {
-            // A run of implausible samples: the pose source is not to be trusted.
-            stop_faults |= fault_flags::POSE_REJECTED;
-        }
-        if state.is_none() {
-            flags |= fault_flags::MACHINE_STATE_STALE;
-        }
-        let c = can.counters;
-        let p = self.prev_counters;
-        if c.bad_crc + c.wrong_length + c.out_of_range > p.bad_crc + p.wrong_length + p.out_of_range
-        {
-            flags |= fault_flags::CAN_CRC;
-        }
-        if c.frozen + c.skipped > p.frozen + p.skipped {
-            flags |= fault_flags::CAN_ALIVE;
-        }
-        self.prev_counters = c;
-        let persistent_can = c.consecutive_bad >= cfg.can_bad_frames_stop;
-        if persistent_can {
-            match can.last_reject {
-                Some(RejectKind::Alive) => flags |= fault_flags::CAN_ALIVE,
-                _ => flags |= fault_flags::CAN_CRC,
-            }
-        }
-        if can.closed {
-            flags |= fault_flags::CAN_BUS;
-        }
-        // Stale data and persistent integrity failures stop the machine.
-        stop_faults |= flags
-            & (fault_flags::POSE_STALE | fault_flags::MACHINE_STATE_STALE | fault_flags::CAN_BUS);
-        // (A pose-gate fault was added to `stop_faults` above.)
-        if persistent_can {
-            stop_faults |= flags & (fault_flags::CAN_CRC | fault_flags::CAN_ALIVE);
-        }
-        let machine_blocked = matches!(
-            state.map(|s| s.status),
-            Some(MachineStatus::Manual | MachineStatus::EStop | MachineStatus::Fault)
-        );
-
-        // The measured state (for telemetry, goal check and the MPC).
-        let x = match (pose, state) {
-            (Some(p), Some(s)) => Some(State::from_column_slice(&[
-                p.x, p.y, p.heading, s.beta, s.beta_dot, s.v_f,
-            ])),
-            _ => None,
-        };
-        if let Some(x) = &x {
-            t.state = IpcState::from_array([x[0], x[1], x[2], x[3], x[4], x[5]]);
-        } else {
-            let mut a = [f64::NAN; 6];
-            if let Some(p) = self.pose_gate.last() {
-                a[0] = p.0.x;
-                a[1] = p.0.y;
-                a[2] = p.0.heading;
-            }
-            if let Some((s, _)) = can.latest {
-                a[3] = s.beta;
-                a[4] = s.beta_dot;
-                a[5] = s.v_f;
-            }
-            t.state = IpcState::from_array(a);
-        }
-
-        self.seen_data |= x.is_some();
-
-        // The goal lifecycle: what to drive, and whether the goal ended.
-        let abort = if shutting_down {
-            Some(Abort::new(AbortReason::Shutdown, "daemon shutting down"))
-        } else if stop_faults | self.latched != 0 {
-            Some(Abort::new(
-                AbortReason::Fault,
-                format!("fault: {}", fault_names(stop_faults | self.latched)),
-            ))
-        } else if machine_blocked {
-            Some(Abort::new(
-                AbortReason::Fault,
-                format!(
-                    "fault: machine status {:?}",
-                    state.map(|s| s.status).unwrap_or(MachineStatus::Fault)
-                ),
-            ))
-        } else {
-            None
-        };
-        let (plan, operator_stop) = {
-            let mut goals = self.ctx.goals.lock();
-            let plan = goals.on_tick(TickInput {
-                now: start,
-                state: x.as_ref(),
-                abort,
-                blocking_faults: stop_faults | self.latched,
-                subgoal: self.subgoal,
-            });
-            (plan, goals.operator_stop())
-        };
-        if operator_stop {
-            flags |= fault_flags::STOP_REQUESTED;
-        }
-        // The goal shown in telemetry (dropped again if tracking fails below).
-        let mut shown: Option<AcceptedGoal> = match plan {
-            TickPlan::NoGoal => None,
-            TickPlan::Hold(g) | TickPlan::Track(g) => Some(g),
-        };
-        if !matches!(plan, TickPlan::Track(_)) {
-            self.disengage();
-        }
-
-        // Mode decision.
-        let (mode, mut cmd, drive_mode);
-        if shutting_down {
-            mode = Mode::Stopping;
-            cmd = self.ramp_down();
-            drive_mode = DriveMode::Stop;
-        } else if !self.seen_data && x.is_none() {
-            // Waiting for the first pose and machine state.
-            mode = Mode::Startup;
-            cmd = self.ramp_down();
-            drive_mode = DriveMode::Hold;
-        } else if stop_faults != 0 || self.latched != 0 {
-            flags |= self.latched;
-            mode = Mode::Fault;
-            cmd = self.ramp_down();
-            drive_mode = DriveMode::Fault;
-            if stop_faults == 0 && cmd == [0.0, 0.0] {
-                // The solver fault has been shown through the whole stop; clear it.
-                self.latched = 0;
-            }
-        } else {
-            match plan {
-                TickPlan::NoGoal => {
-                    // No goal (none sent, or it ended) or the machine not in automatic
-                    // mode: come to rest.
-                    (mode, cmd, drive_mode) = self.come_to_rest();
-                }
-                TickPlan::Hold(_) => {
-                    mode = Mode::Reached;
-                    cmd = self.ramp_down();
-                    drive_mode = if cmd == [0.0, 0.0] {
-                        DriveMode::Hold
-                    } else {
-                        DriveMode::Stop
-                    };
-                }
-                TickPlan::Track(g) => {
-                    // Fresh data and no fault: x is Some here.
-                    let x = x.unwrap_or_else(State::zeros);
-                    let tracked = self.track(&x, &g, start, &mut t);
-                    let (c, f, st) = tracked.unwrap_or(([0.0; 2], 0, None));
-                    flags |= f;
-                    solve_time = st;
-                    if tracked.is_none() {
-                        // The global layer ended the goal (no route, no progress).
-                        self.disengage();
-                        shown = None;
-                        (mode, cmd, drive_mode) = self.come_to_rest();
-                    } else if self.fallback_count > cfg.fallback_ticks {
-                        tracing::error!(
-                            "solver failed {} ticks in a row: controlled stop",
-                            self.fallback_count
-                        );
-                        self.latched |= fault_flags::SOLVE_FAILED;
-                        // This tick stops instead of driving on the fallback plan.
-                        flags = (flags & !fault_flags::FALLBACK_PLAN) | fault_flags::SOLVE_FAILED;
-                        self.ctx.goals.lock().abort_active(Abort::new(
-                            AbortReason::Fault,
-                            format!("fault: solve failed {} ticks in a row", self.fallback_count),
-                        ));
-                        self.disengage();
-                        shown = None;
-                        mode = Mode::Fault;
-                        cmd = self.ramp_down();
-                        drive_mode = DriveMode::Fault;
-                    } else {
-                        mode = Mode::Tracking;
-                        cmd = c;
-                        drive_mode = DriveMode::Drive;
-                    }
-                }
-            }
-        }
-
-        // Last-line bounds (the CAN task checks again).
-        let p = &self.params;
-        if !(cmd[0].is_finite() && cmd[1].is_finite()) {
-            cmd = self.ramp_down();
-        }
-        cmd[0] = cmd[0].clamp(-p.beta_dot_max, p.beta_dot_max);
-        cmd[1] = cmd[1].clamp(-p.v_max, p.v_max);
-
-        // Shutdown completes once the command is zero and the machine at rest (or
-        // its state is unknown, or the timeout passed).
-        let mut exit = None;
-        if let Some(t_stop) = self.shutdown_started {
-            let at_rest = match state {
-                Some(s) => s.v_f.abs() < cfg.rest_speed && s.beta_dot.abs() < cfg.rest_speed,
-                None => true,
-            };
-            let timed_out = start - t_stop > cfg.shutdown_timeout;
-            if cmd == [0.0, 0.0] && (at_rest || timed_out) {
-                exit = Some(if self.ctx.shutdown.load(Ordering::Relaxed) {
-                    ExitReason::Shutdown
-                } else {
-                    ExitReason::MaxTicks
-                });
-            }
-        }
-
-        let out = OutCommand {
-            beta_dot: cmd[0],
-            v: cmd[1],
-            mode: drive_mode,
-        };
-        let sent = match self.ctx.commands.try_send(out) {
-            Ok(()) => true,
-            Err(e) => {
-                flags |= fault_flags::CAN_BUS;
-                tracing::warn!("command not queued: {e}");
-                false
-            }
-        };
-        self.last_cmd = cmd;
-        let detail = match (&shown, mode) {
-            (Some(g), _) => format!(
-                "goal ({:.2}, {:.2}, {:.2})",
-                g.goal.x, g.goal.y, g.goal.theta
-            ),
-            (None, Mode::Fault) => format!("faults {flags:#x}"),
-            _ => String::new(),
-        };
-        self.set_mode(mode, &detail);
-
-        // Telemetry.
-        t.mode = mode.code();
-        t.fault_flags = flags;
-        t.command.beta_dot = cmd[0];
-        t.command.v = cmd[1];
-        if let Some(g) = &shown {
-            t.goal_active = 1;
-            t.goal = Pose2::new(g.goal.x, g.goal.y, g.goal.theta);
-            t.goal_request_id = g.request_id;
-            if let Some(x) = &x {
-                let e = pose_error(x, &g.goal);
-                t.pose_error_xy = e[0];
-                t.pose_error_heading = e[1];
-            }
-        }
-        self.report_outcome(&mut t);
-        if let Err(e) = self.ctx.endpoint.publish_telemetry(&t) {
-            tracing::warn!("telemetry: {e}");
-        }
-        self.telemetry = t;
-        TickOutcome {
-            sent,
-            solve_time,
-            exit,
-        }
     }
 
     /// Puts the oldest goal outcome not yet reported (if any) on this tick's telemetry.
@@ -601,16 +554,16 @@ impl ControlLoop {
         t.set_outcome(o.request_id, o.outcome, o.abort_reason, o.seq, &o.text);
     }
 
-    /// One tracking tick: the controller's step, with the fallback on the shifted plan.
-    /// `None` when the global layer ended the goal (reported to the goal lifecycle).
-    fn track(
-        &mut self,
-        x: &State,
-        g: &AcceptedGoal,
-        now: f64,
-        t: &mut Telemetry,
-    ) -> Option<([f64; 2], u32, Option<f64>)> {
-        let mut flags = 0;
+    /// One tracking step of the controller (setting the goal first when it is new).
+    /// The controller owns the fallback: it returns its shifted plan when a solve
+    /// fails; a step without any usable command is `Failed` (the tick ramps down).
+    /// An end by the global layer is reported to the goal lifecycle here.
+    fn solve(&mut self, x: &State, g: &AcceptedGoal, now: f64, t: &mut Telemetry) -> Solve {
+        let failed = |solve_time| Solve {
+            result: SolveResult::Failed,
+            command: None,
+            solve_time,
+        };
         if self.engaged_generation != Some(g.generation) {
             tracing::info!(
                 "goal {}: ({:.2}, {:.2}, {:.2}) with {} obstacle(s)",
@@ -622,20 +575,16 @@ impl ControlLoop {
             );
             self.controller.reset();
             self.latched = 0;
-            self.fallback_count = 0;
+            self.solve_failures = 0;
             if let Err(e) = self.controller.set_goal(x, g.goal, g.obstacles()) {
-                // Validated goals cannot fail here; treat it as a solver failure.
+                // Validated goals cannot fail here; stop at once as on a solver failure.
                 tracing::error!("controller refused the goal: {e}");
-                self.fallback_count = u32::MAX / 2;
-                return Some((self.ramp_down(), fault_flags::SOLVE_FAILED, None));
+                self.solve_failures = u32::MAX;
+                return failed(None);
             }
             self.engaged_generation = Some(g.generation);
-            self.fallback_plan.clear();
-            self.fallback_age = 0;
         }
-        let result = self.controller.step(x, now);
-        let mut solve_time = None;
-        let good = match result {
+        let solve = match self.controller.step(x, now) {
             Ok(Step::Abort(reason)) => {
                 let (wire, what) = match reason {
                     control::planner::AbortReason::NoRoute => (
@@ -648,70 +597,52 @@ impl ControlLoop {
                     ),
                 };
                 self.ctx.goals.lock().abort_active(Abort::new(wire, what));
-                return None;
+                return Solve {
+                    result: SolveResult::RouteEnded,
+                    command: None,
+                    solve_time: None,
+                };
             }
             Ok(Step::Drive(plan)) => {
                 self.subgoal = plan.subgoal;
-                if let Some(s) = plan.subgoal {
-                    t.subgoal_active = 1;
-                    t.subgoal = Pose2::new(s.x, s.y, s.theta);
-                }
-                let mut route = [Pose2::new(0.0, 0.0, 0.0); shm_ipc::MAX_ROUTE];
-                let n = plan.route.len().min(shm_ipc::MAX_ROUTE);
-                for (dst, g) in route.iter_mut().zip(plan.route) {
-                    *dst = Pose2::new(g.x, g.y, g.theta);
-                }
-                t.set_route(&route[..n]);
-                solve_time = Some(plan.solve_time.as_secs_f64());
-                t.solve_time_us = plan.solve_time.as_secs_f64() * 1e6;
-                t.cost = plan.cost;
-                t.qp_iterations = plan.qp_iterations;
-                t.sqp_iterations = plan.sqp_iterations;
-                let finite = plan.command.iter().all(|v| v.is_finite())
+                plan.fill_telemetry(t);
+                let solve_time = Some(plan.solve_time.as_secs_f64());
+                let finite = plan.command.is_finite()
                     && plan.states.iter().all(|s| s.iter().all(|v| v.is_finite()));
-                let mut traj = [IpcState::ZERO; shm_ipc::MAX_TRAJECTORY];
-                let n = plan.states.len().min(shm_ipc::MAX_TRAJECTORY);
-                for (dst, s) in traj.iter_mut().zip(plan.states) {
-                    *dst = IpcState::from_array([s[0], s[1], s[2], s[3], s[4], s[5]]);
-                }
-                t.set_trajectory(&traj[..n]);
-                if finite {
-                    self.fallback_plan.clear();
-                    self.fallback_plan.extend_from_slice(plan.states);
-                    self.fallback_age = 0;
-                    Some((plan.command, plan.status))
-                } else {
-                    None
+                match (finite, plan.status) {
+                    (false, _) => failed(solve_time),
+                    (true, status) => Solve {
+                        result: match status {
+                            PlanStatus::Solved => SolveResult::Solved,
+                            PlanStatus::Fallback => SolveResult::Fallback,
+                        },
+                        command: Some(plan.command),
+                        solve_time,
+                    },
                 }
             }
             Err(e) => {
                 tracing::warn!("solve failed: {e}");
-                None
+                failed(None)
             }
         };
-        let cmd = match good {
-            Some((c, PlanStatus::Solved)) => {
-                self.fallback_count = 0;
-                c
-            }
-            Some((c, PlanStatus::Fallback)) => {
-                // The controller already shifted its plan.
-                self.fallback_count += 1;
-                flags |= fault_flags::FALLBACK_PLAN;
-                c
-            }
-            None => {
-                // No usable plan this tick: drive on our copy of the last one, shifted.
-                self.fallback_count += 1;
-                self.fallback_age += 1;
-                flags |= fault_flags::FALLBACK_PLAN;
-                match self.fallback_plan.get(self.fallback_age) {
-                    Some(s) => [s[ix::BETA_DOT], s[ix::V]],
-                    None => self.ramp_down(),
-                }
-            }
+        self.solve_failures = match solve.result {
+            SolveResult::Solved => 0,
+            _ => self.solve_failures.saturating_add(1),
         };
-        Some((cmd, flags, solve_time))
+        solve
+    }
+}
+
+/// The detail of a mode change in logs and STATUS=.
+fn mode_detail(shown: Option<&AcceptedGoal>, mode: Mode, flags: u32) -> String {
+    match (shown, mode) {
+        (Some(g), _) => format!(
+            "goal ({:.2}, {:.2}, {:.2})",
+            g.goal.x, g.goal.y, g.goal.theta
+        ),
+        (None, Mode::Fault) => format!("faults {flags:#x}"),
+        _ => String::new(),
     }
 }
 

@@ -18,10 +18,12 @@ use std::time::Duration;
 use control::mpc::{Mpc, MpcSettings, Obstacle, QuadraticCost, StageCost, StepStatus};
 use control::planner::{self, NavStep, Navigator, NavigatorSettings};
 use control::weights::{self, NetworkRole, NetworkWeights};
-use control::{Actor, Critic, Goal, MachineParams, State};
+use control::{Actor, Critic, Goal, MachineParams, State, VelocityCommand};
+use shm_ipc::{Pose2, Telemetry};
 use thiserror::Error;
 
 use crate::config::{Config, CostKind};
+use crate::ipc::wire_state;
 
 /// Outcome of one controller step as the loop sees it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -37,7 +39,7 @@ pub enum PlanStatus {
 #[derive(Debug, Clone, Copy)]
 pub struct Plan<'a> {
     /// (β̇, v_f) to send now.
-    pub command: [f64; 2],
+    pub command: VelocityCommand,
     /// Solved or fallback.
     pub status: PlanStatus,
     /// Planned states x₀..x_N.
@@ -55,6 +57,33 @@ pub struct Plan<'a> {
     /// The global route not yet passed, ending with the goal (empty without a global
     /// layer).
     pub route: &'a [Goal],
+}
+
+impl Plan<'_> {
+    /// Puts the plan on the tick's telemetry: solver figures, the planned
+    /// trajectory, the subgoal and the remaining route.
+    pub fn fill_telemetry(&self, t: &mut Telemetry) {
+        if let Some(s) = self.subgoal {
+            t.subgoal_active = 1;
+            t.subgoal = Pose2::new(s.x, s.y, s.theta);
+        }
+        let mut route = [Pose2::new(0.0, 0.0, 0.0); shm_ipc::MAX_ROUTE];
+        let n = self.route.len().min(shm_ipc::MAX_ROUTE);
+        for (dst, g) in route.iter_mut().zip(self.route) {
+            *dst = Pose2::new(g.x, g.y, g.theta);
+        }
+        t.set_route(&route[..n]);
+        t.solve_time_us = self.solve_time.as_secs_f64() * 1e6;
+        t.cost = self.cost;
+        t.qp_iterations = self.qp_iterations;
+        t.sqp_iterations = self.sqp_iterations;
+        let mut traj = [shm_ipc::MachineState::ZERO; shm_ipc::MAX_TRAJECTORY];
+        let n = self.states.len().min(shm_ipc::MAX_TRAJECTORY);
+        for (dst, s) in traj.iter_mut().zip(self.states) {
+            *dst = wire_state(s);
+        }
+        t.set_trajectory(&traj[..n]);
+    }
 }
 
 /// What one controller step decided.
@@ -83,11 +112,16 @@ pub trait Controller {
         goal: Goal,
         obstacles: &[Obstacle],
     ) -> Result<(), ControllerError>;
-    /// Forgets goal, plan and command history (after a stop, before a new start).
+    /// Forgets goal and plan (before a new goal), not the commands sent: they
+    /// still act on the machine.
     fn reset(&mut self);
-    /// One control period from the measured state at time `now` [s, any monotonic
-    /// origin] (called once per tick while tracking, its command sent).
+    /// One control period from the state measured at time `now` [s, the daemon's
+    /// clock] (called once per tick while tracking).
     fn step(&mut self, state: &State, now: f64) -> Result<Step<'_>, ControllerError>;
+    /// The command sent to the machine at `now`, whoever decided it (the step's
+    /// command, a stop ramp, a hold): every tick, so the delay compensation
+    /// works with what the machine was told on the real clock.
+    fn sent(&mut self, now: f64, command: VelocityCommand);
 }
 
 /// Builds the controller on the control thread.
@@ -144,7 +178,7 @@ impl<C: StageCost> Controller for MpcController<C> {
     }
 
     fn reset(&mut self) {
-        self.mpc.reset();
+        self.mpc.clear_goal();
         if let Some(nav) = &mut self.navigator {
             nav.clear();
         }
@@ -170,9 +204,9 @@ impl<C: StageCost> Controller for MpcController<C> {
             .navigator
             .as_ref()
             .map_or(&[][..], |nav| nav.remaining_route());
-        let s = self.mpc.step(state).map_err(err)?;
+        let s = self.mpc.step(state, now).map_err(err)?;
         Ok(Step::Drive(Plan {
-            command: [s.command.beta_dot, s.command.v],
+            command: s.command,
             status: match s.status {
                 StepStatus::Solved => PlanStatus::Solved,
                 StepStatus::Fallback(_) => PlanStatus::Fallback,
@@ -185,6 +219,10 @@ impl<C: StageCost> Controller for MpcController<C> {
             subgoal,
             route,
         }))
+    }
+
+    fn sent(&mut self, now: f64, command: VelocityCommand) {
+        self.mpc.sent(now, command);
     }
 }
 
@@ -335,9 +373,7 @@ pub fn first_solve(c: &mut dyn Controller) -> Result<Duration, ControllerError> 
     c.reset();
     c.set_goal(&State::zeros(), Goal::new(3.0, 0.0, 0.0), &[])?;
     let result = match c.step(&State::zeros(), 0.0) {
-        Ok(Step::Drive(plan))
-            if plan.status == PlanStatus::Solved && plan.command.iter().all(|v| v.is_finite()) =>
-        {
+        Ok(Step::Drive(plan)) if plan.status == PlanStatus::Solved && plan.command.is_finite() => {
             Ok(plan.solve_time)
         }
         Ok(Step::Drive(plan)) => Err(ControllerError(format!(

@@ -284,8 +284,8 @@ async fn run_async(
         tracing::info!("systemd watchdog every {:?}", interval);
     }
     tracing::info!(
-        "ready: {} Hz loop, prefix `{}`",
-        config.control.rate_hz,
+        "ready: {} Hz loop (1 / mpc.dt), prefix `{}`",
+        1.0 / config.period(),
         config.ipc.prefix
     );
 

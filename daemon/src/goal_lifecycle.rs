@@ -380,7 +380,7 @@ mod tests {
         LifecycleSettings {
             machine: MachineParams::default(),
             reach_tolerance: 0.1,
-            reach_speed: 0.05,
+            reach_speed: control::model::REACH_SPEED,
             progress: ProgressSettings {
                 timeout,
                 min_approach: 0.1,

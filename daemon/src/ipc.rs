@@ -39,6 +39,11 @@ pub struct SharedGoals {
     rejected: AtomicU64,
 }
 
+/// The wire form of the model's state (the control layer to the IPC layer).
+pub fn wire_state(x: &control::State) -> shm_ipc::MachineState {
+    shm_ipc::MachineState::from_array([x[0], x[1], x[2], x[3], x[4], x[5]])
+}
+
 /// Names of the fault bits, for reject reasons and logs.
 pub fn fault_names(flags: u32) -> String {
     const NAMES: [(u32, &str); 10] = [

@@ -23,6 +23,7 @@ pub mod logging;
 pub mod notify;
 pub mod pose_gate;
 pub mod realtime;
+pub mod safety;
 pub mod sim;
 pub mod stats;
 

@@ -32,7 +32,7 @@ use tokio::task::JoinHandle;
 
 use crate::can::{
     AliveCounter, CanBus, CanFrame, DriveMode, LoopbackBus, MachineState, MachineStatus, RxTracker,
-    VelocityCommand,
+    VelocityCommandFrame,
 };
 use crate::clock::DaemonClock;
 use crate::config::Config;
@@ -46,7 +46,7 @@ pub struct ReceivedCommand {
     /// Daemon time of reception [s].
     pub time: f64,
     /// The decoded command.
-    pub command: VelocityCommand,
+    pub command: VelocityCommandFrame,
 }
 
 /// What the simulated machine saw and did.
@@ -147,7 +147,7 @@ struct Machine {
     config: crate::config::SimConfig,
     pose_client: Option<Client>,
     log: SimHandle,
-    rx: RxTracker<VelocityCommand>,
+    rx: RxTracker<VelocityCommandFrame>,
     alive: AliveCounter,
     last_command_time: f64,
     stopped_by_timeout: bool,
@@ -212,7 +212,7 @@ impl Machine {
         }
         if !self.stopped_by_timeout && now - self.last_command_time > MACHINE_COMMAND_TIMEOUT {
             self.stopped_by_timeout = true;
-            let _ = self.plant.command(control::VelocityCommand::default());
+            let _ = self.plant.command(control::VelocityCommand::ZERO);
             self.log.with(|l| l.command_timeouts += 1);
         }
         let x = self.plant.state();
@@ -230,12 +230,12 @@ impl Machine {
         self.advance(now);
         match self.rx.accept(frame) {
             Ok(cmd) => {
-                let (beta_dot, v) = match cmd.mode {
-                    DriveMode::Drive | DriveMode::Stop => (cmd.beta_dot_cmd, cmd.v_cmd),
-                    DriveMode::Hold | DriveMode::Fault => (0.0, 0.0),
+                let command = match cmd.mode {
+                    DriveMode::Drive | DriveMode::Stop => cmd.command(),
+                    DriveMode::Hold | DriveMode::Fault => control::VelocityCommand::ZERO,
                 };
                 // Finite by decoding; the plant saturates at the machine's bounds.
-                let _ = self.plant.command(control::VelocityCommand { beta_dot, v });
+                let _ = self.plant.command(command);
                 self.last_command_time = now;
                 self.stopped_by_timeout = false;
                 let record = self.record;

@@ -48,6 +48,9 @@ impl Controller for Stalling {
         }
         self.inner.step(state, now)
     }
+    fn sent(&mut self, now: f64, command: control::VelocityCommand) {
+        self.inner.sent(now, command)
+    }
 }
 
 #[test]

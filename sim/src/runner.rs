@@ -23,22 +23,20 @@ use anyhow::{bail, Context, Result};
 use control::delay::DelayCompensator;
 use control::mlp::PAPER_HIDDEN;
 use control::model::{
-    converged, env_step, ix, Control, Goal, MachineParams, State, SUCCESS_TOLERANCE,
+    converged, env_step, ix, Control, Goal, MachineParams, State, REACH_SPEED, SUCCESS_TOLERANCE,
 };
 use control::mpc::{Mpc, MpcSettings};
 use control::planner::{AbortReason, NavStep, Navigator, NavigatorSettings};
-use control::plant::{Plant, PlantConfig, PlantPerturbation, VelocityCommand};
+use control::plant::{Plant, PlantConfig, PlantPerturbation};
 use control::scenario::Scenario;
 use control::weights::{decode, random_network, NetworkMetadata, NetworkRole};
+use control::VelocityCommand;
 use control::{Actor, ActorWorkspace, Critic};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::clearance::ClearanceMeter;
 use crate::ocp::{self, BaselineSettings, Guess, MinTimeSettings};
 use crate::results::ResultRow;
-
-/// Success-test speed threshold of `t_settle` [m/s] (DESIGN §7).
-pub const SETTLE_SPEED: f64 = 0.05;
 
 /// How long a run with [`EvalConfig::end_at_rest`] must stay converged and at rest [s].
 pub const AT_REST_FOR: f64 = 1.0;
@@ -70,7 +68,7 @@ impl RestCounter {
     /// Takes the true state of a tick; true when the run may end.
     fn done(&mut self, x: &State, goal: &Goal, tolerance: f64) -> bool {
         let Some(n) = self.needed else { return false };
-        if converged(x, goal, tolerance) && x[ix::V].abs() < SETTLE_SPEED {
+        if converged(x, goal, tolerance) && x[ix::V].abs() < REACH_SPEED {
             self.ticks += 1;
         } else {
             self.ticks = 0;
@@ -201,7 +199,7 @@ pub struct EvalConfig {
     /// plant's true state and geometry.
     pub perturbation: PlantPerturbation,
     /// End a closed-loop run once the true state has stayed inside the success
-    /// test at rest (|v_f| < [`SETTLE_SPEED`]) for [`AT_REST_FOR`] (the
+    /// test at rest (|v_f| < [`REACH_SPEED`]) for [`AT_REST_FOR`] (the
     /// robustness sweep; `t_settle` is then not reported).
     pub end_at_rest: bool,
     /// Success-test tolerance (DESIGN §7: 0.1).
@@ -322,7 +320,7 @@ pub fn score(
     let t_settle = first.map(|_| {
         let last_bad = states
             .iter()
-            .rposition(|x| !inside(x) || x[ix::V].abs() >= SETTLE_SPEED);
+            .rposition(|x| !inside(x) || x[ix::V].abs() >= REACH_SPEED);
         last_bad.map_or(0.0, |k| at(k + 1))
     });
     // A run that never stays inside and slow by its end has not settled.
@@ -401,9 +399,9 @@ pub fn run_mpc(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run> 
         if k == steps || rest.done(&plant.state(), &sc.goal, cfg.tolerance) {
             break;
         }
+        let now = k as f64 * settings.dt;
         if let (Some(nav), Some(rec)) = (nav.as_mut(), navigation.as_mut()) {
             if !aborted {
-                let now = k as f64 * settings.dt;
                 let t0 = Instant::now();
                 let step = nav.update(&x, now);
                 rec.update_ms.push(t0.elapsed().as_secs_f64() * 1e3);
@@ -424,18 +422,17 @@ pub fn run_mpc(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run> 
                 }
             }
         }
-        if aborted {
+        let cmd = if aborted {
             // An aborted goal ends the run: the machine is commanded to rest
             // (the plant ramps down within its limits).
-            plant.command(VelocityCommand {
-                beta_dot: 0.0,
-                v: 0.0,
-            })?;
+            VelocityCommand::ZERO
         } else {
-            let sol = mpc.step(&x)?;
+            let sol = mpc.step(&x, now)?;
             solve_ms.push(sol.solve_time.as_secs_f64() * 1e3);
-            plant.command(sol.command)?;
-        }
+            sol.command
+        };
+        plant.command(cmd)?;
+        mpc.sent(now, cmd);
         plant.advance_observed(settings.dt, |x| clearance.observe(x));
     }
     let row = score(

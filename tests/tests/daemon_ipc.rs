@@ -64,7 +64,7 @@ fn goal_sent_through_the_client_is_reached() {
     let mut tracker = GoalTracker::new(id, goal);
     let opts = FollowOptions {
         timeout: Duration::from_secs_f64(30.0 / scale * 3.0 + 10.0),
-        max_ticks: Some((30.0 / TICK_S) as u64),
+        max_seconds: Some(30.0),
         ..FollowOptions::default()
     };
     let mut last = None;

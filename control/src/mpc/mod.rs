@@ -45,7 +45,7 @@ use crate::actor::{Actor, ActorWorkspace};
 use crate::delay::DelayCompensator;
 use crate::delay_estimate::DelayEstimator;
 use crate::gain::GainEstimator;
-use crate::model::{Control, Goal, MachineParams, State};
+use crate::model::{Control, Goal, MachineParams, State, VelocityCommand};
 
 /// The MPC: built once, then `set_goal` and `step` every tick.
 pub struct Mpc<C: StageCost, D: Dynamics = Rk4Model, B: QpBackend = ClarabelBackend> {
@@ -76,8 +76,9 @@ pub struct Mpc<C: StageCost, D: Dynamics = Rk4Model, B: QpBackend = ClarabelBack
     backup_us: Vec<Control>,
     /// False until a plan exists for the current goal.
     has_plan: bool,
-    /// Ticks since the last reset; the delay compensator's clock is tick × Δt.
-    tick: u64,
+    /// The state measured at the last step and its time (the delay estimate
+    /// predicts the next measurement from it once the command is sent).
+    measured: Option<(f64, State)>,
     solution: Solution,
 }
 
@@ -153,7 +154,7 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
             backup_xs: vec![State::zeros(); n + 1],
             backup_us: vec![Control::zeros(); n],
             has_plan: false,
-            tick: 0,
+            measured: None,
             solution: Solution::new(n),
         })
     }
@@ -193,15 +194,42 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
         &self.backend
     }
 
-    /// Forgets the goal, the plan and the command history (e.g. after a stop).
-    pub fn reset(&mut self) {
+    /// Forgets the goal and the plan, and keeps the command history: the
+    /// commands sent in the last delay window still act on the machine (a new
+    /// goal while driving, or a start after a stop ramp).
+    pub fn clear_goal(&mut self) {
         self.goal = None;
         self.n_obstacles = 0;
         self.has_plan = false;
-        self.tick = 0;
+    }
+
+    /// Forgets the goal, the plan and the command history: for a new machine
+    /// (e.g. the simulator's next scenario), not for a new goal of the same one.
+    pub fn reset(&mut self) {
+        self.clear_goal();
+        self.measured = None;
         self.delay.reset();
         self.gain.reset();
         self.delay_estimate.reset();
+    }
+
+    /// Records the command actually sent to the machine at `now` [s, the clock
+    /// of [`Self::step`]]: the delay compensation and the online estimates
+    /// work with what the machine was told, whoever decided it (the MPC's own
+    /// command, a stop ramp, a hold). Call it once per command sent, in time
+    /// order.
+    pub fn sent(&mut self, now: f64, command: VelocityCommand) {
+        // With the gain estimate, the machine is expected to achieve gain × sent.
+        let achieved = if self.settings.gain_estimation {
+            self.gain.record(command)
+        } else {
+            command
+        };
+        self.delay.record(now, achieved);
+        if self.settings.delay_estimation {
+            let measured = self.measured.filter(|(t, _)| *t == now).map(|(_, x)| x);
+            self.delay_estimate.record(now, measured.as_ref(), achieved);
+        }
     }
 
     /// The delay compensated now [s]: the configured one, or its online estimate.

@@ -153,6 +153,17 @@ pub enum MpcError {
     QpSetup(String),
 }
 
+impl MpcError {
+    /// The setting (`MpcSettings` field name) a configuration error is about.
+    pub fn setting(&self) -> Option<&'static str> {
+        match self {
+            Self::Setting { name, .. } => Some(name),
+            Self::TooManyObstacles { .. } => Some("max_obstacles"),
+            _ => None,
+        }
+    }
+}
+
 fn setting(name: &'static str, requirement: &'static str, value: impl ToString) -> MpcError {
     MpcError::Setting {
         name,

@@ -2,8 +2,8 @@
 
 use std::time::Duration;
 
+use crate::model::VelocityCommand;
 use crate::model::{Control, State};
-use crate::plant::VelocityCommand;
 
 use super::qp::QpStatus;
 

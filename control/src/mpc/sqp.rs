@@ -5,8 +5,8 @@
 use std::time::{Duration, Instant};
 
 use crate::critic::{Derivatives, TerminalDerivatives};
+use crate::model::VelocityCommand;
 use crate::model::{ix, Control, Goal, State};
-use crate::plant::VelocityCommand;
 
 use super::constraints::{fill_bounds, fill_obstacles};
 use super::cost::{stage_block, terminal_block, StageCost};
@@ -45,12 +45,14 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
     /// answered with the shifted previous plan, and the command is always
     /// finite and within the machine's velocity bounds.
     ///
-    /// The tick clock advances by Δt per call: call it once per command period
-    /// and send the command it returns (the delay compensation assumes so).
-    pub fn step(&mut self, measured: &State) -> Result<&Solution, MpcError> {
+    /// `now` is the time `measured` was taken [s, any monotonic clock, the one
+    /// [`Mpc::sent`] is given]: the delay compensation propagates the state over
+    /// the commands sent before it. The command returned is not recorded: send
+    /// it (or what is sent instead) through [`Mpc::sent`].
+    pub fn step(&mut self, measured: &State, now: f64) -> Result<&Solution, MpcError> {
         let start = Instant::now();
         let goal = self.goal.ok_or(MpcError::NoGoal)?;
-        let now = self.tick as f64 * self.settings.dt;
+        self.measured = Some((now, *measured));
         if self.settings.delay_estimation && finite(measured) {
             self.delay_estimate.observe(measured);
             let d = self.delay_estimate.delay();
@@ -94,45 +96,27 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
         };
         self.solution.status = status;
 
-        // Output: the plan and (β̇, v_f) of x₁, checked and clamped.
-        let p = self.params;
+        // Output: the plan and (β̇, v_f) of x₁, checked and limited.
         let mut command = if self.has_plan {
             VelocityCommand {
                 beta_dot: self.xs[1][ix::BETA_DOT],
                 v: self.xs[1][ix::V],
             }
         } else {
-            VelocityCommand {
-                beta_dot: 0.0,
-                v: 0.0,
-            }
+            VelocityCommand::ZERO
         };
-        if !(command.beta_dot.is_finite() && command.v.is_finite()) {
-            command = VelocityCommand {
-                beta_dot: 0.0,
-                v: 0.0,
-            };
-            if self.solution.status == StepStatus::Solved {
-                self.solution.status = StepStatus::Fallback(FallbackReason::NonFiniteSolution);
-            }
+        if !command.is_finite() && self.solution.status == StepStatus::Solved {
+            self.solution.status = StepStatus::Fallback(FallbackReason::NonFiniteSolution);
         }
-        command.beta_dot = command.beta_dot.clamp(-p.beta_dot_max, p.beta_dot_max);
-        command.v = command.v.clamp(-p.v_max, p.v_max);
+        command = command.limited(&self.params);
         // With the gain estimate: send the command that achieves the plan's
-        // velocities, and propagate the delay with what it should achieve.
-        let (command, achieved) = if self.settings.gain_estimation {
-            self.gain.command(command)
-        } else {
-            (command, command)
-        };
+        // velocities.
+        if self.settings.gain_estimation {
+            command = self.gain.to_send(command);
+        }
         self.solution.command = command;
         self.solution.states.copy_from_slice(&self.xs);
         self.solution.controls.copy_from_slice(&self.us);
-        self.delay.record(now, achieved);
-        if self.settings.delay_estimation {
-            self.delay_estimate.record(now, measured, achieved);
-        }
-        self.tick += 1;
         self.solution.solve_time = start.elapsed();
         Ok(&self.solution)
     }

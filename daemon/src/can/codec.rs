@@ -365,7 +365,7 @@ impl TryFrom<u8> for MachineStatus {
 
 /// The velocity command (message [`VELOCITY_COMMAND`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct VelocityCommand {
+pub struct VelocityCommandFrame {
     /// Articulation rate command β̇_cmd (rad/s), positive bends the front left.
     pub beta_dot_cmd: f64,
     /// Front speed command v_cmd (m/s), positive forward.
@@ -671,7 +671,7 @@ impl Unpacker {
     }
 }
 
-impl CanMessage for VelocityCommand {
+impl CanMessage for VelocityCommandFrame {
     const SPEC: &'static MessageSpec = &VELOCITY_COMMAND;
 
     fn encode(&self) -> Result<Encoded, EncodeError> {
@@ -727,7 +727,26 @@ impl CanMessage for MachineState {
     }
 }
 
-impl VelocityCommand {
+impl VelocityCommandFrame {
+    /// The frame carrying `command` (the edge from the control layer to the DBC
+    /// message).
+    pub fn new(command: control::VelocityCommand, mode: DriveMode, alive: AliveCounter) -> Self {
+        Self {
+            beta_dot_cmd: command.beta_dot,
+            v_cmd: command.v,
+            mode,
+            alive,
+        }
+    }
+
+    /// The velocities it carries.
+    pub fn command(&self) -> control::VelocityCommand {
+        control::VelocityCommand {
+            beta_dot: self.beta_dot_cmd,
+            v: self.v_cmd,
+        }
+    }
+
     /// Encode into a frame (see [`CanMessage::encode`]).
     pub fn encode(&self) -> Result<Encoded, EncodeError> {
         <Self as CanMessage>::encode(self)
@@ -740,6 +759,24 @@ impl VelocityCommand {
 }
 
 impl MachineState {
+    /// The model's state (DESIGN §2) from this machine state and a pose of the
+    /// front axle: the conversion from the CAN and pose layers to the control layer.
+    pub fn with_pose(&self, pose: &shm_ipc::Pose2) -> control::State {
+        control::State::from_column_slice(&[
+            pose.x,
+            pose.y,
+            pose.heading,
+            self.beta,
+            self.beta_dot,
+            self.v_f,
+        ])
+    }
+
+    /// |v_f| and |β̇| both below `speed`.
+    pub fn at_rest(&self, speed: f64) -> bool {
+        self.v_f.abs() < speed && self.beta_dot.abs() < speed
+    }
+
     /// Encode into a frame (see [`CanMessage::encode`]).
     pub fn encode(&self) -> Result<Encoded, EncodeError> {
         <Self as CanMessage>::encode(self)

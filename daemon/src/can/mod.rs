@@ -17,7 +17,7 @@ pub mod tracker;
 pub use bus::{CanBus, CanError, LoopbackBus};
 pub use codec::{
     AliveCounter, DecodeError, DriveMode, EncodeError, Encoded, MachineState, MachineStatus,
-    Saturation, VelocityCommand, MACHINE_STATE_ID, VELOCITY_COMMAND_ID,
+    Saturation, VelocityCommandFrame, MACHINE_STATE_ID, VELOCITY_COMMAND_ID,
 };
 pub use log::{CandumpReader, CandumpWriter, LogRecord, LoggingBus, ReplayError};
 pub use socketcan_bus::SocketCanBus;

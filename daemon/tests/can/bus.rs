@@ -5,7 +5,7 @@ use wlnavd::can::codec::frame_crc;
 use wlnavd::can::tracker::RxError;
 use wlnavd::can::{
     AliveCounter, AliveError, CanBus, CanError, CanFrame, DecodeError, DriveMode, LoopbackBus,
-    MachineState, MachineStatus, RxTracker, VelocityCommand,
+    MachineState, MachineStatus, RxTracker, VelocityCommandFrame,
 };
 
 fn state(alive: AliveCounter, v_f: f64) -> MachineState {
@@ -181,14 +181,14 @@ async fn wrong_length_and_foreign_frames() {
 async fn command_out_state_in_through_dyn_bus() {
     let (a, mut machine) = LoopbackBus::pair("dyn");
     let mut bus: Box<dyn CanBus> = Box::new(a);
-    let cmd = VelocityCommand {
+    let cmd = VelocityCommandFrame {
         beta_dot_cmd: -0.3,
         v_cmd: 0.7,
         mode: DriveMode::Drive,
         alive: AliveCounter::new(4).unwrap(),
     };
     bus.send(&cmd.encode().unwrap().frame).await.unwrap();
-    let got = VelocityCommand::decode(&machine.recv().await.unwrap()).unwrap();
+    let got = VelocityCommandFrame::decode(&machine.recv().await.unwrap()).unwrap();
     assert!(
         (got.v_cmd - cmd.v_cmd).abs() < 1e-9 && (got.beta_dot_cmd - cmd.beta_dot_cmd).abs() < 1e-9
     );

@@ -7,7 +7,7 @@ use wlnavd::can::codec::{
 };
 use wlnavd::can::{
     AliveCounter, CanFrame, DecodeError, DriveMode, EncodeError, MachineState, MachineStatus,
-    VelocityCommand, MACHINE_STATE_ID, VELOCITY_COMMAND_ID,
+    VelocityCommandFrame, MACHINE_STATE_ID, VELOCITY_COMMAND_ID,
 };
 
 const MODES: [DriveMode; 4] = [
@@ -62,7 +62,7 @@ fn command_round_trip_every_signal() {
     let mut n = 0u32;
     for (i, &rate) in rates.iter().enumerate() {
         for (j, &v) in speeds.iter().enumerate() {
-            let cmd = VelocityCommand {
+            let cmd = VelocityCommandFrame {
                 beta_dot_cmd: rate,
                 v_cmd: v,
                 mode: MODES[(i + j) % MODES.len()],
@@ -76,7 +76,7 @@ fn command_round_trip_every_signal() {
             );
             assert_eq!(enc.frame.id(), VELOCITY_COMMAND_ID);
             assert_eq!(enc.frame.len(), 8);
-            let back = VelocityCommand::decode(&enc.frame).expect("own frame decodes");
+            let back = VelocityCommandFrame::decode(&enc.frame).expect("own frame decodes");
             assert_close(back.beta_dot_cmd, rate, ANGLE_FACTOR, "beta_dot_cmd");
             assert_close(back.v_cmd, v, SPEED_FACTOR, "v_cmd");
             assert_eq!(back.mode, cmd.mode);
@@ -90,13 +90,13 @@ fn command_round_trip_every_signal() {
     // All alive counter values and modes on their own.
     for c in 0..16 {
         for m in MODES {
-            let cmd = VelocityCommand {
+            let cmd = VelocityCommandFrame {
                 beta_dot_cmd: 0.0,
                 v_cmd: 0.0,
                 mode: m,
                 alive: alive(c),
             };
-            let back = VelocityCommand::decode(&cmd.encode().unwrap().frame).unwrap();
+            let back = VelocityCommandFrame::decode(&cmd.encode().unwrap().frame).unwrap();
             assert_eq!(back, cmd);
         }
     }
@@ -163,7 +163,7 @@ fn required_ranges_and_resolution_are_covered() {
 #[test]
 fn known_bytes() {
     // β̇ = 0.1 rad/s → 2000 = 0x07D0; v = −0.5 m/s → −5000 = 0xEC78; Drive, alive 1.
-    let cmd = VelocityCommand {
+    let cmd = VelocityCommandFrame {
         beta_dot_cmd: 0.1,
         v_cmd: -0.5,
         mode: DriveMode::Drive,
@@ -186,7 +186,7 @@ fn saturates_out_of_range_and_reports_it() {
         (ANGLE_LIMIT + 0.6 * ANGLE_FACTOR, 0.0, &["beta_dot_cmd"]),
     ];
     for (rate, v, want) in cases {
-        let cmd = VelocityCommand {
+        let cmd = VelocityCommandFrame {
             beta_dot_cmd: rate,
             v_cmd: v,
             mode: DriveMode::Drive,
@@ -198,7 +198,7 @@ fn saturates_out_of_range_and_reports_it() {
         for name in want {
             assert!(enc.saturated.contains(name));
         }
-        let back = VelocityCommand::decode(&enc.frame).unwrap();
+        let back = VelocityCommandFrame::decode(&enc.frame).unwrap();
         assert!(back.beta_dot_cmd.abs() <= ANGLE_LIMIT + 1e-12);
         assert!(back.v_cmd.abs() <= SPEED_LIMIT + 1e-12);
         if rate > ANGLE_LIMIT + ANGLE_FACTOR {
@@ -237,7 +237,7 @@ fn saturates_out_of_range_and_reports_it() {
 #[test]
 fn rejects_non_finite_input() {
     for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
-        let cmd = VelocityCommand {
+        let cmd = VelocityCommandFrame {
             beta_dot_cmd: 0.0,
             v_cmd: bad,
             mode: DriveMode::Drive,
@@ -341,7 +341,7 @@ fn typed_decode_errors() {
         );
     }
     // Undefined mode 4..=15 in a command.
-    let cmd = VelocityCommand {
+    let cmd = VelocityCommandFrame {
         beta_dot_cmd: 0.0,
         v_cmd: 0.0,
         mode: DriveMode::Stop,
@@ -350,7 +350,7 @@ fn typed_decode_errors() {
     for m in 4..16u8 {
         let mut d = *cmd.encode().unwrap().frame.raw_data();
         d[6] |= m << 4;
-        let e = VelocityCommand::decode(&with_crc(VELOCITY_COMMAND_ID, d)).unwrap_err();
+        let e = VelocityCommandFrame::decode(&with_crc(VELOCITY_COMMAND_ID, d)).unwrap_err();
         assert!(e.to_string().contains("WLNAV_VelocityCommand.mode"), "{e}");
     }
     // Reserved bytes 4 and 5 of the command are ignored (but CRC-protected).
@@ -358,7 +358,7 @@ fn typed_decode_errors() {
     d[4] = 0xAB;
     d[5] = 0xCD;
     assert_eq!(
-        VelocityCommand::decode(&with_crc(VELOCITY_COMMAND_ID, d)),
+        VelocityCommandFrame::decode(&with_crc(VELOCITY_COMMAND_ID, d)),
         Ok(cmd)
     );
 }
@@ -387,7 +387,7 @@ fn arbitrary_bytes_never_panic() {
         if MachineState::decode(&f).is_ok() {
             ok += 1;
         }
-        if VelocityCommand::decode(&f).is_ok() {
+        if VelocityCommandFrame::decode(&f).is_ok() {
             ok += 1;
         }
     }
@@ -407,7 +407,7 @@ fn spec_tables_list_every_byte() {
     assert_eq!(used_bits(&VELOCITY_COMMAND), !0x0000_FFFF_0000_0000);
     assert_eq!(MESSAGES.len(), 2);
     assert_eq!(
-        <VelocityCommand as CanMessage>::SPEC.id,
+        <VelocityCommandFrame as CanMessage>::SPEC.id,
         VELOCITY_COMMAND_ID
     );
     assert_eq!(<MachineState as CanMessage>::SPEC.id, MACHINE_STATE_ID);

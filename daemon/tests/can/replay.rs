@@ -10,7 +10,7 @@ use wlnavd::can::tracker::RxError;
 use wlnavd::can::{
     AliveCounter, AliveError, CanBus, CanFrame, CandumpReader, CandumpWriter, DecodeError,
     DriveMode, LogRecord, LoggingBus, LoopbackBus, MachineState, MachineStatus, ReplayError,
-    RxTracker, VelocityCommand, MACHINE_STATE_ID, VELOCITY_COMMAND_ID,
+    RxTracker, VelocityCommandFrame, MACHINE_STATE_ID, VELOCITY_COMMAND_ID,
 };
 
 fn data_file(name: &str) -> PathBuf {
@@ -64,7 +64,7 @@ fn hand_written_log_decodes_to_expected_values() {
             // The log holds only a few commands (alive 0, 1, 15): decode without the
             // sequence check.
             VELOCITY_COMMAND_ID => {
-                got_cmds.push((line, VelocityCommand::decode(&r.frame).unwrap()))
+                got_cmds.push((line, VelocityCommandFrame::decode(&r.frame).unwrap()))
             }
             _ => foreign += 1,
         }
@@ -204,7 +204,7 @@ fn writer_output_reads_back() {
     let mut frames = Vec::new();
     let mut alive = AliveCounter::ZERO;
     for i in 0..40 {
-        let cmd = VelocityCommand {
+        let cmd = VelocityCommandFrame {
             beta_dot_cmd: 0.01 * f64::from(i) - 0.2,
             v_cmd: 0.05 * f64::from(i) - 1.0,
             mode: DriveMode::Drive,
@@ -244,7 +244,10 @@ fn writer_output_reads_back() {
             Some(r.timestamp),
             t.duration_since(std::time::UNIX_EPOCH).ok()
         );
-        assert_eq!(VelocityCommand::decode(&r.frame).unwrap().alive, cmd.alive);
+        assert_eq!(
+            VelocityCommandFrame::decode(&r.frame).unwrap().alive,
+            cmd.alive
+        );
     }
     assert_eq!(back.last().unwrap().frame, extra);
 }
@@ -260,7 +263,7 @@ async fn logging_bus_logs_both_directions() {
     let mut c_alive = AliveCounter::ZERO;
     let mut s_alive = AliveCounter::ZERO;
     for i in 0..10 {
-        let cmd = VelocityCommand {
+        let cmd = VelocityCommandFrame {
             beta_dot_cmd: 0.1,
             v_cmd: 0.02 * f64::from(i),
             mode: DriveMode::Drive,

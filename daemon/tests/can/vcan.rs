@@ -11,8 +11,8 @@
 use std::time::Duration;
 
 use wlnavd::can::{
-    AliveCounter, CanBus, DriveMode, MachineState, MachineStatus, SocketCanBus, VelocityCommand,
-    MACHINE_STATE_ID, VELOCITY_COMMAND_ID,
+    AliveCounter, CanBus, DriveMode, MachineState, MachineStatus, SocketCanBus,
+    VelocityCommandFrame, MACHINE_STATE_ID, VELOCITY_COMMAND_ID,
 };
 
 fn iface() -> String {
@@ -25,7 +25,7 @@ async fn frames_cross_vcan_both_ways() {
     let mut daemon = SocketCanBus::open_filtered(&name, &[MACHINE_STATE_ID]).expect("open vcan");
     let mut machine =
         SocketCanBus::open_filtered(&name, &[VELOCITY_COMMAND_ID]).expect("open vcan");
-    let cmd = VelocityCommand {
+    let cmd = VelocityCommandFrame {
         beta_dot_cmd: 0.25,
         v_cmd: -1.0,
         mode: DriveMode::Drive,
@@ -36,7 +36,7 @@ async fn frames_cross_vcan_both_ways() {
         .await
         .expect("command arrives")
         .unwrap();
-    assert_eq!(VelocityCommand::decode(&got), Ok(cmd));
+    assert_eq!(VelocityCommandFrame::decode(&got), Ok(cmd));
 
     let st = MachineState {
         beta: -0.4,

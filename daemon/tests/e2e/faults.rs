@@ -34,7 +34,7 @@ enum Inject {
 /// the stop ramp within the acceleration limits, and the telemetry's fault bits.
 fn pose_fault_stops_the_machine(name: &str, inject: Inject, expect_flag: u32) {
     let config = sim_config_external_pose(name);
-    let (period, params) = (config.control.period(), config.machine);
+    let (period, params) = (config.period(), config.machine);
     let prefix = config.ipc.prefix.clone();
     let d = start(config, None);
     let phase = Arc::new(Mutex::new(Inject::Truth));
@@ -212,7 +212,7 @@ fn machine_state_dropout_stops_the_machine() {
     config.sim.faults.state_dropout_duration = 1000.0;
     let (timeout, period, params) = (
         config.control.state_timeout,
-        config.control.period(),
+        config.period(),
         config.machine,
     );
     let d = start(config, None);

@@ -14,7 +14,7 @@ use std::time::Duration;
 
 use common::*;
 use control::mpc::{Mpc, Obstacle};
-use control::{Goal, State};
+use control::{Goal, State, VelocityCommand};
 use shm_ipc::{fault_flags, Mode, Telemetry};
 use wlnavd::can::DriveMode;
 use wlnavd::controller::{
@@ -102,7 +102,7 @@ fn stale_pose_stops_within_two_ticks_with_fault_flag() {
     let drop_at = 3.0;
     config.sim.faults.pose_dropout_at = drop_at;
     config.sim.faults.pose_dropout_duration = 1000.0;
-    let (timeout, period) = (config.control.pose_timeout, config.control.period());
+    let (timeout, period) = (config.control.pose_timeout, config.period());
     let params = config.machine;
     let d = start(config, None);
     d.goal(10.0, 0.0, 0.0);
@@ -180,7 +180,7 @@ fn persistent_can_fault(name: &str, crc: bool) {
     } else {
         fault_flags::CAN_ALIVE
     };
-    let (period, params) = (config.control.period(), config.machine);
+    let (period, params) = (config.period(), config.machine);
     let frames = f64::from(config.control.can_bad_frames_stop);
     let frame_period = 1.0 / config.sim.state_rate_hz;
     let d = start(config, None);
@@ -241,7 +241,10 @@ impl Controller for Failing {
                 return Err(ControllerError("injected solver failure".into()));
             }
             return Ok(Step::Drive(Plan {
-                command: [f64::NAN, f64::NAN],
+                command: VelocityCommand {
+                    beta_dot: f64::NAN,
+                    v: f64::NAN,
+                },
                 status: wlnavd::controller::PlanStatus::Solved,
                 states: &self.nan_states,
                 cost: f64::NAN,
@@ -254,6 +257,9 @@ impl Controller for Failing {
         }
         self.inner.step(state, now)
     }
+    fn sent(&mut self, now: f64, command: VelocityCommand) {
+        self.inner.sent(now, command)
+    }
 }
 
 #[test]
@@ -261,7 +267,7 @@ fn solver_failure_falls_back_then_stops() {
     let config = sim_config("solver");
     let (machine, settings) = (config.machine, config.mpc);
     let fallback_ticks = config.control.fallback_ticks as usize;
-    let (period, params) = (config.control.period(), config.machine);
+    let (period, params) = (config.period(), config.machine);
     let fail = Arc::new(AtomicBool::new(false));
     let f = fail.clone();
     let factory: ControllerFactory = Box::new(move || {
@@ -292,12 +298,17 @@ fn solver_failure_falls_back_then_stops() {
         fallback_ticks,
         "ticks on the fallback plan before the stop"
     );
+    // A controller without a plan of its own to fall back on: the loop keeps
+    // tracking (the next solve may recover) on the stop ramp.
+    let mut last_v = f64::INFINITY;
     for t in &fallback {
         assert_eq!(mode(t), Mode::Tracking);
         assert!(
-            t.command.v.is_finite() && t.command.v > 0.0,
-            "fallback drives on the shifted plan"
+            t.command.v.is_finite() && t.command.v > 0.0 && t.command.v < last_v,
+            "a failed step ramps the speed down: {} after {last_v}",
+            t.command.v
         );
+        last_v = t.command.v;
     }
     let faulted = seen.last().unwrap();
     assert_eq!(mode(faulted), Mode::Fault);

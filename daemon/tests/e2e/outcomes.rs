@@ -226,8 +226,10 @@ fn an_enclosed_goal_ends_aborted_no_route_with_the_machine_at_rest() {
         .filter(|t| t.goal_request_id == a && t.tick <= ended.tick)
         .count();
     assert!(driven <= 2, "the goal was driven for {driven} ticks");
+    // (NaN: no machine state yet, on the first ticks.)
     assert!(
-        log.iter().all(|t| t.state.v_f.abs() < 0.05),
+        log.iter()
+            .all(|t| t.state.v_f.is_nan() || t.state.v_f.abs() < 0.05),
         "the machine moved"
     );
     d.stop();

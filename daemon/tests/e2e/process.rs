@@ -6,7 +6,7 @@ use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use shm_ipc::{Client, IpcConfig, Mode, Pose2};
-use wlnavd::can::{CandumpReader, DriveMode, VelocityCommand, VELOCITY_COMMAND_ID};
+use wlnavd::can::{CandumpReader, DriveMode, VelocityCommandFrame, VELOCITY_COMMAND_ID};
 
 use crate::common::{assert_systemd_verifies, unique_prefix};
 
@@ -82,11 +82,11 @@ fn sigterm_stops_the_machine_and_the_stop_is_the_last_frame() {
     let status = wait_exit(&mut child, Duration::from_secs(30));
     assert!(status.success(), "exit status {status:?}");
 
-    let commands: Vec<VelocityCommand> = CandumpReader::open(&log)
+    let commands: Vec<VelocityCommandFrame> = CandumpReader::open(&log)
         .unwrap()
         .map(|r| r.unwrap().frame)
         .filter(|f| f.id() == VELOCITY_COMMAND_ID)
-        .map(|f| VelocityCommand::decode(&f).unwrap())
+        .map(|f| VelocityCommandFrame::decode(&f).unwrap())
         .collect();
     assert!(commands.len() > 10);
     let last = commands.last().unwrap();
@@ -271,7 +271,7 @@ fn a_config_file_without_weights_finds_the_default_weights() {
     // "Every key is optional": a file that leaves out [weights] behaves like no file.
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("wlnavd.toml");
-    std::fs::write(&path, "[loop]\nrate_hz = 5.0\n").unwrap();
+    std::fs::write(&path, "[loop]\npose_timeout = 0.5\n").unwrap();
     let out = Command::new(BIN)
         .current_dir(repo_root())
         .arg("--config")
