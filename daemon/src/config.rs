@@ -196,8 +196,8 @@ pub struct LoopConfig {
     pub pose_timeout: f64,
     /// A machine state older than this is stale → controlled stop. Default 0.3 s.
     pub state_timeout: f64,
-    /// Ticks the loop may drive on the shifted previous plan after a failed or
-    /// non-finite solve before it stops. Default 2.
+    /// Ticks in a row without a fresh solve (driving on the controller's shifted
+    /// plan, or on the stop ramp when it has none) before the loop stops. Default 2.
     pub fallback_ticks: u32,
     /// Consecutive rejected machine-state frames (bad CRC, frozen or skipping alive
     /// counter, bad length or range) that count as persistent → controlled stop.

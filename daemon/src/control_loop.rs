@@ -2,31 +2,35 @@
 //! `t₀ + k·T` of the [`DaemonClock`] (no drift: a late tick does not shift the
 //! next one; missed deadlines are skipped and counted as overruns).
 //!
-//! Per tick:
-//! 1. newest pose (from `{prefix}/v2/pose`), newest machine state and CAN integrity
-//!    counters (from the CAN I/O task);
-//! 2. staleness and plausibility checks: every pose sample passes the
-//!    [`crate::pose_gate`] (future stamps, jumps, workspace; a run of rejects is a
-//!    pose fault), the machine state its bounds;
-//! 3. the goal lifecycle's tick ([`crate::goal_lifecycle`]: the goal to drive, and
-//!    whether it ended: succeeded, aborted on a fault or for lack of progress), then
-//!    the mode decision (below);
-//! 4. while tracking: the MPC step (which propagates the measured state over the
-//!    actuator delay, `mpc.delay`, with the commands already sent, then solves);
-//! 5. the command, through the stop ramp when stopping, to the CAN I/O task;
-//! 6. telemetry on `{prefix}/v2/telemetry`, with at most one goal outcome (the oldest
+//! Per tick ([`ControlLoop::tick`], a short pipeline; every decision that matters
+//! for safety is a pure function in [`crate::safety`], unit-tested there):
+//! 1. inputs: every waiting pose sample through the [`crate::pose_gate`] (future
+//!    stamps, jumps, workspace; a run of rejects is a pose fault), the newest machine
+//!    state (fresh and plausible) and the CAN integrity counters; the faults they
+//!    show ([`safety::input_faults`]);
+//! 2. the goal lifecycle's tick ([`crate::goal_lifecycle`]: the goal to drive, and
+//!    whether it ended: succeeded, aborted on a fault ([`safety::goal_abort`]) or for
+//!    lack of progress);
+//! 3. the decision ([`safety::decide`]): drive, or stop with its cause; while
+//!    driving, the controller's step (it owns the fallback on its shifted plan) and
+//!    [`safety::after_solve`] (a global-layer abort, or too many ticks without a
+//!    fresh solve, stops);
+//! 4. the command — the controller's, or the stop ramp ([`safety::ramp_down`]) —
+//!    limited to the machine's bounds, to the CAN I/O task, and back to the
+//!    controller ([`Controller::sent`]: its delay compensation runs on the daemon's
+//!    clock with the commands actually sent);
+//! 5. telemetry on `{prefix}/v2/telemetry`, with at most one goal outcome (the oldest
 //!    not yet reported); WATCHDOG=1 if the tick was healthy.
 //!
 //! Safety (DESIGN §6): a controlled stop — velocities ramped to zero at no more
 //! than the machine's acceleration limits (β̈_max, a_max) from the last command —
 //! on: no goal, goal reached, stale or implausible pose (a run of gate rejects) or
-//! machine state,
-//! persistent CAN integrity failures (consecutive rejected frames ≥
-//! `loop.can_bad_frames_stop`; single ones are counted and flagged), a failed or
-//! non-finite solve that persists beyond `loop.fallback_ticks` ticks on the
-//! shifted plan, a stop or cancel request, no progress towards the goal, and
-//! shutdown. A fault drops the goal (outcome `aborted`, reason `fault`): the machine
-//! stays stopped until a new goal arrives after the fault has cleared.
+//! machine state, persistent CAN integrity failures (consecutive rejected frames ≥
+//! `loop.can_bad_frames_stop`; single ones are counted and flagged), a solve that
+//! fails for more than `loop.fallback_ticks` ticks, a stop or cancel request, no
+//! progress towards the goal, no route, and shutdown. A fault drops the goal
+//! (outcome `aborted`, reason `fault`): the machine stays stopped until a new goal
+//! arrives after the fault has cleared.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;

@@ -25,28 +25,12 @@ use crate::runner::{EvalConfig, Method, Networks};
 
 /// A scale factor K of `--plant-scale-lf`, `--plant-scale-lr`, `--actuator-gain`.
 pub fn parse_factor(s: &str) -> Result<f64, String> {
-    let k: f64 = s
-        .trim()
-        .parse()
-        .map_err(|_| format!("`{s}` is not a number"))?;
-    if k.is_finite() && k > 0.0 && k <= 10.0 {
-        Ok(k)
-    } else {
-        Err(format!("must be a factor in (0, 10] (got {s})"))
-    }
+    parse_number(s, |k| k > 0.0 && k <= 10.0, "a factor in (0, 10]")
 }
 
 /// A duration S [s] of `--plant-delay`, `--pose-latency`.
 pub fn parse_seconds(s: &str) -> Result<f64, String> {
-    let t: f64 = s
-        .trim()
-        .parse()
-        .map_err(|_| format!("`{s}` is not a number of seconds"))?;
-    if t.is_finite() && (0.0..=10.0).contains(&t) {
-        Ok(t)
-    } else {
-        Err(format!("must be in [0, 10] s (got {s})"))
-    }
+    parse_number(s, |t| (0.0..=10.0).contains(&t), "in [0, 10] s")
 }
 
 /// `SXY,STHETA` of `--pose-noise`: standard deviations [m], [rad].
@@ -57,18 +41,28 @@ pub fn parse_pose_noise(s: &str) -> Result<(f64, f64), String> {
             "expected SXY,STHETA (two standard deviations, [m] and [rad]), got `{s}`"
         ));
     };
-    let sd = |v: &str| -> Result<f64, String> {
-        let x: f64 = v
-            .trim()
-            .parse()
-            .map_err(|_| format!("`{v}` is not a number"))?;
-        if x.is_finite() && (0.0..=10.0).contains(&x) {
-            Ok(x)
-        } else {
-            Err(format!("standard deviations must be in [0, 10] (got {v})"))
-        }
+    let sd = |v| {
+        parse_number(
+            v,
+            |x| (0.0..=10.0).contains(&x),
+            "a standard deviation in [0, 10]",
+        )
     };
     Ok((sd(a)?, sd(b)?))
+}
+
+/// `text` as a finite number that `valid` accepts; `range` describes the valid
+/// values in the error.
+fn parse_number(text: &str, valid: impl Fn(f64) -> bool, range: &str) -> Result<f64, String> {
+    let v: f64 = text
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{text}` is not a number"))?;
+    if v.is_finite() && valid(v) {
+        Ok(v)
+    } else {
+        Err(format!("must be {range} (got {text})"))
+    }
 }
 
 /// The perturbation options as parsed (each `None` when not given).
