@@ -5,7 +5,9 @@ both files must load with `safetensors.numpy.load_file`, hold `layers.{i}.weight
 carry the metadata DESIGN §4 lists.
 
     python3 -m venv /tmp/st && /tmp/st/bin/pip install safetensors numpy
-    /tmp/st/bin/python scripts/check_weights_python.py critic-weights
+    /tmp/st/bin/python scripts/check_weights_python.py critic-weights/avant635
+
+The argument is one machine's directory (default: critic-weights/avant635).
 """
 import sys
 from pathlib import Path
@@ -51,7 +53,7 @@ def check(path: Path, role: str) -> str:
 
 
 def main() -> None:
-    root = Path(sys.argv[1] if len(sys.argv) > 1 else "critic-weights")
+    root = Path(sys.argv[1] if len(sys.argv) > 1 else "critic-weights/avant635")
     for role in ("critic", "actor"):
         print(check(root / f"{role}.safetensors", role))
 

@@ -70,8 +70,8 @@ dpkg -i "$deb" || fail "dpkg -i $deb"
 
 for f in /usr/bin/wlnavd /usr/bin/wlnav /lib/systemd/system/wlnavd.service \
   /etc/wlnav/wlnavd.toml /usr/lib/sysusers.d/wlnavd.conf \
-  /usr/share/wlnav/critic-weights/critic.safetensors \
-  /usr/share/wlnav/critic-weights/actor.safetensors \
+  /usr/share/wlnav/critic-weights/avant635/critic.safetensors \
+  /usr/share/wlnav/critic-weights/avant635/actor.safetensors \
   /usr/share/doc/wlnavd/examples/wlnavd.service.d/realtime.conf; do
   [ -e "$f" ] || fail "not installed: $f"
 done
@@ -90,8 +90,8 @@ if echo "$verify" | grep -q 'wlnavd.service'; then
 fi
 
 /usr/bin/wlnavd --config /etc/wlnav/wlnavd.toml --print-config |
-  grep -q '^critic = "/usr/share/wlnav/critic-weights/critic.safetensors"' ||
-  fail "the installed configuration does not point at /usr/share/wlnav/critic-weights/"
+  grep -q '^critic = "/usr/share/wlnav/critic-weights/avant635/critic.safetensors"' ||
+  fail "the installed configuration does not point at /usr/share/wlnav/critic-weights/avant635/"
 # As the unit's ExecStartPre does: the service user reads the configuration and weights.
 runuser -u wlnav -- /usr/bin/wlnavd --config /etc/wlnav/wlnavd.toml --check-config ||
   fail "wlnavd --check-config of the installed configuration and weights (as user wlnav)"

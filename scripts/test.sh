@@ -18,13 +18,17 @@ fi
 
 cargo test --workspace --locked "$@"
 
-# The committed weights must open in Python's safetensors too (issue 3).
-if [ -f critic-weights/critic.safetensors ]; then
+# The committed weights (one directory per machine) must open in Python's
+# safetensors too (issue 3).
+machines=(critic-weights/*/critic.safetensors)
+if [ -f "${machines[0]}" ]; then
   venv=target/python-check
   [ -x "$venv/bin/python" ] || python3 -m venv "$venv"
   "$venv/bin/python" -c "import safetensors, numpy" 2>/dev/null ||
     "$venv/bin/pip" install -q safetensors numpy
-  "$venv/bin/python" scripts/check_weights_python.py critic-weights
+  for critic in "${machines[@]}"; do
+    "$venv/bin/python" scripts/check_weights_python.py "$(dirname "$critic")"
+  done
 fi
 
 # The programs of examples/ against a running daemon (issue 17).

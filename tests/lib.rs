@@ -155,12 +155,12 @@ pub fn unique_prefix(test: &str) -> String {
 }
 
 /// The MPC cost the tests run the daemon with: `WLNAV_E2E_COST` if set, else the trained
-/// critic when `critic-weights/` holds it, else the quadratic bring-up cost (no weights).
+/// critic when `critic-weights/avant635/` (the default machine's) holds it, else the quadratic bring-up cost (no weights).
 pub fn cost() -> String {
     if let Ok(c) = std::env::var("WLNAV_E2E_COST") {
         return c;
     }
-    let w = repo_root().join("critic-weights");
+    let w = repo_root().join("critic-weights/avant635");
     if w.join("critic.safetensors").is_file() && w.join("actor.safetensors").is_file() {
         "critic".into()
     } else {

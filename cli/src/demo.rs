@@ -68,7 +68,7 @@ pub struct DemoArgs {
     /// The wlnavd binary [default: next to this executable, then PATH]
     #[arg(long)]
     pub wlnavd: Option<PathBuf>,
-    /// MPC stage cost for wlnavd (`critic`, the trained critic in critic-weights/, or
+    /// MPC stage cost for wlnavd (`critic`, the trained critic in critic-weights/avant635/, or
     /// `quadratic`, a bring-up cost that needs no weights) [default: wlnavd's, the critic]
     #[arg(long, value_name = "COST")]
     pub cost: Option<String>,
@@ -188,7 +188,7 @@ pub fn run(cli: &Cli, a: &DemoArgs) -> anyhow::Result<u8> {
                     // A fresh checkout before the trained critic is committed: say so
                     // plainly and run with the bring-up cost rather than not at all.
                     emit(
-                        "  NOTE     no trained weights in critic-weights/: the daemon cannot \
+                        "  NOTE     no trained weights in critic-weights/avant635/: the daemon cannot \
                          use the critic. Running with the quadratic bring-up cost instead \
                          (reaches goals ahead of the machine; manoeuvres need the critic).",
                     );
@@ -201,7 +201,7 @@ pub fn run(cli: &Cli, a: &DemoArgs) -> anyhow::Result<u8> {
         }
     };
     let cost_text = match cost.as_deref() {
-        None | Some("critic") => "critic (trained weights from critic-weights/)",
+        None | Some("critic") => "critic (trained weights from critic-weights/avant635/)",
         Some("quadratic") => "quadratic bring-up cost (no trained weights)",
         Some(other) => other,
     };

@@ -1,6 +1,6 @@
 //! One full MPC tick (delay compensation, critic derivatives, QP update and
 //! solve, output) at N = 10, 20, 40 with the committed critic and actor
-//! (`critic-weights/`; random networks of the paper's sizes when absent, said
+//! (`critic-weights/avant635/`; random networks of the paper's sizes when absent, said
 //! on stdout), for both Hessian modes, in closed loop on the simulated machine (0.2 s delay) with
 //! two obstacles. Besides criterion's estimates it prints the median and p99
 //! of 400 ticks per configuration.
@@ -10,7 +10,7 @@ use std::time::{Duration, Instant};
 use control::mlp::PAPER_HIDDEN;
 use control::model::{Goal, MachineParams, State};
 use control::mpc::{Mpc, MpcSettings, Obstacle};
-use control::weights::{decode, random_network, NetworkMetadata, NetworkRole};
+use control::weights::{self, random_network, NetworkMetadata, NetworkRole, WeightsProblem};
 use control::{Actor, Critic, HessianMode, Plant, PlantConfig};
 use criterion::{criterion_group, criterion_main, Criterion};
 
@@ -19,20 +19,14 @@ const OBSTACLES: [Obstacle; 2] = [Obstacle::new(3.0, 1.0, 0.8), Obstacle::new(1.
 
 /// The committed networks, or random ones of the paper's sizes.
 fn networks() -> (Critic, Actor) {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../critic-weights");
-    let load = |name: &str| {
-        let path = dir.join(name);
-        std::fs::read(&path)
-            .ok()
-            .map(|bytes| decode(&bytes, &path.display().to_string()).expect("valid weight file"))
-    };
-    match (load("critic.safetensors"), load("actor.safetensors")) {
-        (Some(c), Some(a)) => (
-            Critic::from_weights(c).expect("valid critic"),
-            Actor::from_weights(a).expect("valid actor"),
-        ),
-        _ => {
-            println!("no weights in {}: random networks", dir.display());
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("..")
+        .join(weights::DEFAULT_DIR);
+    match weights::load_networks(&dir, &MachineParams::default(), MpcSettings::default().dt) {
+        Ok(networks) => networks,
+        Err(e) if !matches!(e.problem, WeightsProblem::Read { .. }) => panic!("{e}"),
+        Err(e) => {
+            println!("{e}: random networks");
             (
                 Critic::from_weights(random_network(
                     NetworkMetadata::new(NetworkRole::Critic, 8),

@@ -10,25 +10,22 @@
 //! ```
 
 use control::model::{Goal, MachineParams, State};
+use control::mpc::MpcSettings;
 use control::obstacle::Obstacle;
 use control::planner::{Navigator, NavigatorSettings, PlannerKind};
-use control::weights::decode;
-use control::{Actor, Critic};
+use control::weights;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let planner = match std::env::args().nth(1).as_deref() {
         Some("waypoint-graph") => PlannerKind::WaypointGraph,
         _ => PlannerKind::HybridAStar,
     };
-    let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../critic-weights/");
-    let read = |name: &str| -> Result<_, Box<dyn std::error::Error>> {
-        let path = format!("{dir}{name}");
-        Ok(decode(&std::fs::read(&path)?, &path)?)
-    };
-    let networks = (
-        Actor::from_weights(read("actor.safetensors")?)?,
-        Critic::from_weights(read("critic.safetensors")?)?,
-    );
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("..")
+        .join(weights::DEFAULT_DIR);
+    let (critic, actor) =
+        weights::load_networks(&dir, &MachineParams::default(), MpcSettings::default().dt)?;
+    let networks = (actor, critic);
     let mut settings = NavigatorSettings::default();
     let file = std::env::args().nth(2);
     settings.planner = planner;

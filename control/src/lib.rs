@@ -1,6 +1,7 @@
 //! wlnav's numerical core: the wheel-loader model, a simulated machine, the
-//! critic and actor kernels and the MPC. Pure computation: no I/O, no async, no
-//! global state; functions take buffers and return results.
+//! critic and actor kernels and the MPC. Pure computation: no I/O (the one
+//! exception: [`weights`] reads weight files, the one loader every program uses),
+//! no async, no global state; functions take buffers and return results.
 
 pub mod actor;
 pub mod cost;

@@ -2,18 +2,28 @@
 //! `layers.{i}.bias` [out], and the metadata of DESIGN §4 in the header. A
 //! PyTorch user loads them with `safetensors.torch.load_file`.
 //!
-//! This module works on bytes; callers read and write the files, so every
-//! error carries the file's name as `source`.
+//! The one loader of weight files: [`load`] reads, decodes and checks the role;
+//! [`load_for`] also checks the machine parameters and Δt the network was
+//! trained for against the caller's (daemon, simulator, training, benches and
+//! tests all go through these). Reading is the only I/O of this crate; every
+//! error names the file.
+//!
+//! The published weights live in one directory per machine under
+//! `critic-weights/` ([`DEFAULT_DIR`] is the default machine's), each holding
+//! [`CRITIC_FILE`] and [`ACTOR_FILE`].
 
 use std::collections::HashMap;
 use std::fmt;
+use std::path::Path;
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use safetensors::tensor::{Dtype, TensorView};
 use safetensors::SafeTensors;
 
+use crate::actor::Actor;
 use crate::cost::{CostForm, CostWeights};
+use crate::critic::Critic;
 use crate::encoder::{Encoder, ACTOR_INPUTS, CRITIC_INPUTS, DEFAULT_POS_SCALE, ENCODER_ID};
 use crate::mlp::{Layer, Mlp, MlpError};
 use crate::model::MachineParams;
@@ -24,6 +34,13 @@ pub const FORMAT_VERSION: u32 = 1;
 pub const ACTIVATION: &str = "softplus";
 /// Actor outputs: mean (2) and log-std (2) of the Gaussian before tanh.
 pub const ACTOR_OUTPUTS: usize = 4;
+/// The critic's file name in a weights directory.
+pub const CRITIC_FILE: &str = "critic.safetensors";
+/// The actor's file name in a weights directory.
+pub const ACTOR_FILE: &str = "actor.safetensors";
+/// The default machine's (Avant 635) weights directory, relative to the
+/// repository root (or an installation's `share/wlnav`).
+pub const DEFAULT_DIR: &str = "critic-weights/avant635";
 
 /// What a network file holds.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -227,29 +244,27 @@ impl NetworkMetadata {
     }
 
     /// Checks the network was trained for the configured machine and time step:
-    /// the encoder scales by the bounds, so other bounds mean other inputs.
+    /// the encoder scales by the bounds, so other bounds mean other inputs. The
+    /// problem names the first key that differs and both values.
     pub fn check_compatible(
         &self,
         configured: &MachineParams,
         dt: f64,
     ) -> Result<(), WeightsProblem> {
         let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * a.abs().max(b.abs()).max(1.0);
+        let mismatch = |key: String, trained: f64, configured: f64| WeightsProblem::Mismatch {
+            key,
+            trained: trained.to_string(),
+            configured: configured.to_string(),
+        };
         for ((name, file), (_, conf)) in self.machine.fields().into_iter().zip(configured.fields())
         {
             if !close(file, conf) {
-                return Err(WeightsProblem::Incompatible {
-                    key: format!("machine.{name}"),
-                    file: file.to_string(),
-                    expected: conf.to_string(),
-                });
+                return Err(mismatch(format!("machine.{name}"), file, conf));
             }
         }
         if !close(self.dt, dt) {
-            return Err(WeightsProblem::Incompatible {
-                key: "dt".into(),
-                file: self.dt.to_string(),
-                expected: dt.to_string(),
-            });
+            return Err(mismatch("dt".into(), self.dt, dt));
         }
         Ok(())
     }
@@ -258,6 +273,11 @@ impl NetworkMetadata {
 /// What is wrong with a weight file.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum WeightsProblem {
+    #[error("cannot read: {message}")]
+    Read {
+        kind: std::io::ErrorKind,
+        message: String,
+    },
     #[error("not a safetensors file: {0}")]
     Format(String),
     #[error("header has no metadata")]
@@ -271,6 +291,13 @@ pub enum WeightsProblem {
         key: String,
         file: String,
         expected: String,
+    },
+    /// Trained for another machine or Δt than the caller's.
+    #[error("trained for `{key}` = {trained}, incompatible with the configured {configured}")]
+    Mismatch {
+        key: String,
+        trained: String,
+        configured: String,
     },
     #[error("tensor `{0}` is missing")]
     MissingTensor(String),
@@ -464,6 +491,50 @@ pub fn decode(bytes: &[u8], source: &str) -> Result<NetworkWeights, WeightsError
         meta,
         mlp,
     })
+}
+
+/// Reads and decodes the network file at `path` and checks it is a `role`
+/// network. Errors name the file.
+pub fn load(path: &Path, role: NetworkRole) -> Result<NetworkWeights, WeightsError> {
+    let source = path.display().to_string();
+    let bytes = std::fs::read(path).map_err(|e| {
+        WeightsError::new(
+            &source,
+            WeightsProblem::Read {
+                kind: e.kind(),
+                message: e.to_string(),
+            },
+        )
+    })?;
+    decode(&bytes, &source)?.require_role(role)
+}
+
+/// [`load`], and checks the network was trained for `machine` and time step
+/// `dt` ([`NetworkMetadata::check_compatible`]): the message names the key and
+/// both values.
+pub fn load_for(
+    path: &Path,
+    role: NetworkRole,
+    machine: &MachineParams,
+    dt: f64,
+) -> Result<NetworkWeights, WeightsError> {
+    let w = load(path, role)?;
+    w.meta
+        .check_compatible(machine, dt)
+        .map_err(|p| WeightsError::new(&w.source, p))?;
+    Ok(w)
+}
+
+/// The critic and actor of one machine's weights directory ([`CRITIC_FILE`],
+/// [`ACTOR_FILE`]), both checked with [`load_for`].
+pub fn load_networks(
+    dir: &Path,
+    machine: &MachineParams,
+    dt: f64,
+) -> Result<(Critic, Actor), WeightsError> {
+    let critic = load_for(&dir.join(CRITIC_FILE), NetworkRole::Critic, machine, dt)?;
+    let actor = load_for(&dir.join(ACTOR_FILE), NetworkRole::Actor, machine, dt)?;
+    Ok((Critic::from_weights(critic)?, Actor::from_weights(actor)?))
 }
 
 /// Serialises a network to safetensors bytes.

@@ -5,9 +5,10 @@
 mod common;
 
 use control::model::{Goal, MachineParams, State};
+use control::mpc::MpcSettings;
 use control::obstacle::Obstacle;
 use control::planner::{NavStep, Navigator, NavigatorSettings, PlanOutcome, PlannerKind};
-use control::weights::decode;
+use control::weights;
 use control::{Actor, Critic};
 
 #[global_allocator]
@@ -16,15 +17,13 @@ static GLOBAL: common::CountingAllocator = common::CountingAllocator;
 /// The trained networks (a random actor never drives into the wall, so
 /// nothing would be in its way).
 fn trained() -> (Actor, Critic) {
-    let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../critic-weights/");
-    let read = |name: &str| {
-        let path = format!("{dir}{name}");
-        decode(&std::fs::read(&path).expect("weights file"), &path).expect("valid weights")
-    };
-    (
-        Actor::from_weights(read("actor.safetensors")).unwrap(),
-        Critic::from_weights(read("critic.safetensors")).unwrap(),
-    )
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("..")
+        .join(weights::DEFAULT_DIR);
+    let (critic, actor) =
+        weights::load_networks(&dir, &MachineParams::default(), MpcSettings::default().dt)
+            .expect("the committed weights");
+    (actor, critic)
 }
 
 #[test]

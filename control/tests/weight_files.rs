@@ -6,11 +6,14 @@ mod common;
 use std::collections::HashMap;
 
 use control::model::{Control, Goal, MachineParams, State};
-use control::weights::{decode, encode, FileDtype, NetworkRole, WeightsProblem};
+use control::weights::{
+    decode, encode, load, load_for, FileDtype, NetworkRole, WeightsProblem, ACTOR_FILE,
+    CRITIC_FILE, DEFAULT_DIR,
+};
 use control::{Actor, ActorWorkspace, Critic, CriticWorkspace};
 use safetensors::tensor::{Dtype, TensorView};
 
-const FILE: &str = "critic-weights/critic.safetensors";
+const FILE: &str = "critic-weights/avant635/critic.safetensors";
 
 fn good_bytes() -> Vec<u8> {
     let w = common::random_critic_weights(4, 1);
@@ -218,7 +221,11 @@ fn incompatible_metadata() {
     assert!(w.meta.check_compatible(&configured, 0.2).is_ok());
     configured.v_max = 2.0;
     let e = w.meta.check_compatible(&configured, 0.2).unwrap_err();
-    assert!(e.to_string().contains("machine.v_max"), "{e}");
+    assert!(
+        e.to_string()
+            .contains("trained for `machine.v_max` = 1, incompatible with the configured 2"),
+        "{e}"
+    );
     let e = w
         .meta
         .check_compatible(&MachineParams::default(), 0.1)
@@ -256,4 +263,61 @@ fn actor_action_is_bounded_tanh_of_mean() {
         assert!((a[1] - m[1].tanh() * p.a_max).abs() < 1e-15);
         assert!(a[0].abs() <= p.beta_ddot_max && a[1].abs() <= p.a_max);
     }
+}
+
+#[test]
+fn load_names_the_file_on_a_read_error_a_wrong_role_and_a_mismatch() {
+    let dir = tempfile::tempdir().unwrap();
+    let missing = dir.path().join("nothing-here.safetensors");
+    let e = load(&missing, NetworkRole::Critic).unwrap_err();
+    assert!(
+        matches!(e.problem, WeightsProblem::Read { kind, .. } if kind == std::io::ErrorKind::NotFound),
+        "{e:?}"
+    );
+    let msg = e.to_string();
+    assert!(msg.contains(&missing.display().to_string()), "{msg}");
+    assert!(msg.contains("cannot read"), "{msg}");
+
+    let path = dir.path().join(CRITIC_FILE);
+    std::fs::write(&path, good_bytes()).unwrap();
+    let w = load(&path, NetworkRole::Critic).unwrap();
+    assert_eq!(w.source, path.display().to_string());
+    let e = load(&path, NetworkRole::Actor).unwrap_err();
+    assert_eq!(
+        e.problem,
+        WeightsProblem::WrongRole {
+            expected: NetworkRole::Actor,
+            found: NetworkRole::Critic
+        }
+    );
+    assert!(e.to_string().contains(&path.display().to_string()), "{e}");
+
+    let machine = MachineParams::default();
+    assert!(load_for(&path, NetworkRole::Critic, &machine, 0.2).is_ok());
+    let other = MachineParams {
+        l_f: 0.9,
+        ..machine
+    };
+    let e = load_for(&path, NetworkRole::Critic, &other, 0.2).unwrap_err();
+    let msg = e.to_string();
+    assert!(msg.contains(&path.display().to_string()), "{msg}");
+    assert!(
+        msg.contains("`machine.l_f`") && msg.contains("0.9"),
+        "{msg}"
+    );
+    let e = load_for(&path, NetworkRole::Critic, &machine, 0.1).unwrap_err();
+    assert!(e.to_string().contains("`dt` = 0.2"), "{e}");
+}
+
+#[test]
+fn the_default_machine_directory_holds_both_networks() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("..")
+        .join(DEFAULT_DIR);
+    let critic = load(&dir.join(CRITIC_FILE), NetworkRole::Critic).unwrap();
+    let actor = load(&dir.join(ACTOR_FILE), NetworkRole::Actor).unwrap();
+    // Both for the default machine (the daemon's default configuration).
+    let (machine, dt) = (MachineParams::default(), critic.meta.dt);
+    critic.meta.check_compatible(&machine, dt).unwrap();
+    actor.meta.check_compatible(&machine, dt).unwrap();
 }

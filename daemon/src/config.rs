@@ -13,8 +13,8 @@
 //! cost = "critic"      # "critic" (the trained network) or "quadratic" (no weights; for bring-up)
 //! planner = "hybrid-astar"  # the global layer (DESIGN §10): "hybrid-astar", "waypoint-graph" or "none"
 //! [weights]
-//! critic = "critic-weights/critic.safetensors"
-//! actor = "critic-weights/actor.safetensors"   # "" = no actor (zero-control warm start)
+//! critic = "critic-weights/avant635/critic.safetensors"   # control::weights::DEFAULT_DIR
+//! actor = "critic-weights/avant635/actor.safetensors"     # "" = no actor (zero-control warm start)
 //! [loop]              # the tick period is mpc.dt (one MPC stage per command)
 //! pose_timeout = 0.5   # s: older pose -> controlled stop
 //! progress_timeout = 10.0  # s without approach -> goal aborted (no-progress)
@@ -44,6 +44,7 @@ use std::path::{Path, PathBuf};
 
 use control::mpc::MpcSettings;
 use control::progress::ProgressSettings;
+use control::weights;
 use control::{MachineParams, PlantConfig};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
@@ -165,7 +166,8 @@ pub enum CostKind {
     Quadratic,
 }
 
-/// `[weights]`.
+/// `[weights]`. Their metadata must name the configured `[machine]` and `mpc.dt`
+/// (start-up refuses them otherwise).
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct WeightsConfig {
@@ -175,12 +177,21 @@ pub struct WeightsConfig {
     pub actor: PathBuf,
 }
 
-impl Default for WeightsConfig {
-    fn default() -> Self {
+impl WeightsConfig {
+    /// The critic and actor of a weights directory (one per machine, e.g.
+    /// `critic-weights/avant635`).
+    pub fn in_dir(dir: &Path) -> Self {
         Self {
-            critic: PathBuf::from("critic-weights/critic.safetensors"),
-            actor: PathBuf::from("critic-weights/actor.safetensors"),
+            critic: dir.join(weights::CRITIC_FILE),
+            actor: dir.join(weights::ACTOR_FILE),
         }
+    }
+}
+
+impl Default for WeightsConfig {
+    /// The default machine's: `critic-weights/avant635/{critic,actor}.safetensors`.
+    fn default() -> Self {
+        Self::in_dir(Path::new(weights::DEFAULT_DIR))
     }
 }
 

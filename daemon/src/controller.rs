@@ -12,12 +12,11 @@
 //! loop starts: corrupt or incompatible weights stop start-up with an error that
 //! names the file and the problem.
 
-use std::path::Path;
 use std::time::Duration;
 
 use control::mpc::{Mpc, MpcSettings, Obstacle, QuadraticCost, StageCost, StepStatus};
 use control::planner::{self, NavStep, Navigator, NavigatorSettings};
-use control::weights::{self, NetworkRole, NetworkWeights};
+use control::weights::{self, NetworkRole};
 use control::{Actor, Critic, Goal, MachineParams, State, VelocityCommand};
 use shm_ipc::{Pose2, Telemetry};
 use thiserror::Error;
@@ -229,15 +228,8 @@ impl<C: StageCost> Controller for MpcController<C> {
 /// Start-up failures: each names the file or setting and the problem.
 #[derive(Debug, Error)]
 pub enum LoadError {
-    /// The weight file could not be read.
-    #[error("weights file {path}: cannot read: {source}")]
-    Read {
-        /// The file.
-        path: String,
-        /// The OS error.
-        source: std::io::Error,
-    },
-    /// The file is not valid weights, or not for this machine.
+    /// The weight file cannot be read, is not valid weights, or is not for this
+    /// machine and Δt ([`weights::load_for`]).
     #[error(transparent)]
     Weights(#[from] weights::WeightsError),
     /// The MPC could not be built.
@@ -246,36 +238,6 @@ pub enum LoadError {
     /// The global layer could not be built.
     #[error("controller.planner: {0}")]
     Navigator(String),
-}
-
-/// Reads and validates one network file: format, shapes, finiteness, role, and
-/// compatibility with the configured machine and Δt.
-pub fn load_network(
-    path: &Path,
-    role: NetworkRole,
-    machine: &MachineParams,
-    dt: f64,
-) -> Result<NetworkWeights, LoadError> {
-    let name = path.display().to_string();
-    let bytes = std::fs::read(path).map_err(|source| LoadError::Read {
-        path: name.clone(),
-        source,
-    })?;
-    let w = weights::decode(&bytes, &name)?;
-    if w.meta.role != role {
-        return Err(weights::WeightsError::new(
-            &name,
-            weights::WeightsProblem::WrongRole {
-                expected: role,
-                found: w.meta.role,
-            },
-        )
-        .into());
-    }
-    w.meta
-        .check_compatible(machine, dt)
-        .map_err(|p| weights::WeightsError::new(&name, p))?;
-    Ok(w)
 }
 
 /// The quadratic bring-up cost: position, heading and a constant pull towards the
@@ -299,7 +261,7 @@ pub fn load_controller(config: &Config) -> Result<ControllerFactory, LoadError> 
     {
         None
     } else {
-        let w = load_network(
+        let w = weights::load_for(
             &config.weights.actor,
             NetworkRole::Actor,
             &machine,
@@ -310,7 +272,7 @@ pub fn load_controller(config: &Config) -> Result<ControllerFactory, LoadError> 
     let nav_settings = config.navigator_settings();
     match config.controller.cost {
         CostKind::Critic => {
-            let w = load_network(
+            let w = weights::load_for(
                 &config.weights.critic,
                 NetworkRole::Critic,
                 &machine,

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::Parser;
-use wlnavd::config::{CanBackend, Config, CostKind};
+use wlnavd::config::{CanBackend, Config, CostKind, WeightsConfig};
 use wlnavd::logging::{self, LogTarget};
 use wlnavd::{RunOptions, ShutdownHandle};
 
@@ -14,7 +14,7 @@ use wlnavd::{RunOptions, ShutdownHandle};
 #[command(name = "wlnavd", version)]
 struct Args {
     /// Configuration file (TOML). Without it the built-in defaults are used: the
-    /// simulated machine, prefix `wlnav`, weights from critic-weights/.
+    /// simulated machine, prefix `wlnav`, weights from critic-weights/avant635/.
     #[arg(short, long, value_name = "FILE")]
     config: Option<PathBuf>,
     /// Run against the built-in simulated machine (sets can.backend = "sim").
@@ -30,7 +30,8 @@ struct Args {
     /// bring-up cost that needs no weights.
     #[arg(long, value_enum, value_name = "COST")]
     cost: Option<CostArg>,
-    /// Directory holding critic.safetensors and actor.safetensors (overrides weights.*).
+    /// Directory holding critic.safetensors and actor.safetensors (overrides weights.*),
+    /// e.g. critic-weights/avant635; they must be for the configured machine and mpc.dt.
     #[arg(long, value_name = "DIR")]
     weights_dir: Option<PathBuf>,
     /// Log every CAN frame to FILE in candump -L format (overrides can.log).
@@ -111,8 +112,7 @@ fn build_config(args: &Args) -> Result<Config, String> {
         };
     }
     if let Some(d) = &args.weights_dir {
-        config.weights.critic = d.join("critic.safetensors");
-        config.weights.actor = d.join("actor.safetensors");
+        config.weights = WeightsConfig::in_dir(d);
     }
     if let Some(l) = &args.can_log {
         config.can.log = l.clone();

@@ -4,13 +4,13 @@
 //! wlnav-sim eval --scenarios sim/scenarios/paper128.csv --methods mpc,actor,baseline,min-time \
 //!     [--horizon N] [--hessian exact|gauss-newton] [--obstacles distance|cbf] \
 //!     [--sqp-iterations K] [--step-length A] [--obstacle-margin M] \
-//!     [--delay 0.2] [--lag 0.1] [--tolerance 0.1] [--weights critic-weights] --out out/eval \
+//!     [--delay 0.2] [--lag 0.1] [--tolerance 0.1] [--weights critic-weights/avant635] --out out/eval \
 //!     [--plant-scale-lf K] [--plant-scale-lr K] [--plant-delay S] [--actuator-gain K] \
 //!     [--pose-noise SXY,STHETA] [--pose-latency S]
 //! # controller options left out take the daemon's defaults (MpcSettings::default());
 //! # the plant is ideal unless --delay / --lag are given (the paper's test); the
 //! # perturbations make the plant differ from the MPC's model (DESIGN §12)
-//! wlnav-sim paper [--weights critic-weights] [--out docs]
+//! wlnav-sim paper [--weights critic-weights/avant635] [--out docs]
 //! wlnav-sim robustness [--obstacles-per-kind 10] [--out docs]   # docs/robustness.md
 //! wlnav-sim scenarios --out sim/scenarios   # paper128, selection64, obstacles200 (seeded)
 //! ```
@@ -77,9 +77,10 @@ enum Obstacles {
 
 #[derive(clap::Args, Clone)]
 struct Common {
-    /// Directory with critic.safetensors and actor.safetensors; random
-    /// networks (with a warning) when it has none.
-    #[arg(long, default_value = "critic-weights")]
+    /// One machine's directory with critic.safetensors and actor.safetensors (the
+    /// evaluation runs the machine and Δt of their metadata); random networks
+    /// (with a warning) when it has none.
+    #[arg(long, default_value = control::weights::DEFAULT_DIR)]
     weights: PathBuf,
     /// Refuse to fall back to random networks.
     #[arg(long)]
@@ -296,14 +297,7 @@ fn base_config(c: &Common, nets: &Networks) -> Result<EvalConfig> {
         params: nets.machine,
         ..Default::default()
     };
-    if (cfg.mpc.dt - nets.dt).abs() > 1e-9 {
-        bail!(
-            "{}: trained for Δt = {} s, the MPC runs {} s",
-            nets.source,
-            nets.dt,
-            cfg.mpc.dt
-        );
-    }
+    nets.check_for(&cfg.params, cfg.mpc.dt)?;
     cfg.min_time.tolerance = c.tolerance;
     if let Some(j) = c.jobs {
         cfg.jobs = j.max(1);

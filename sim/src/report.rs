@@ -67,9 +67,10 @@ pub fn paper(
     if nets.random {
         let _ = writeln!(
             md,
-            "- **The critic and actor are random (untrained) networks**: `critic-weights/` did not exist when this page was \
-             generated. The MPC and actor rows show that the pipeline runs, not how good the controller is; the baseline and \
-             min-time rows do not depend on the networks."
+            "- **The critic and actor are random (untrained) networks**: the weights directory (`--weights`, \
+             default `{}/`) held none when this page was generated. The MPC and actor rows show that the pipeline \
+             runs, not how good the controller is; the baseline and min-time rows do not depend on the networks.",
+            control::weights::DEFAULT_DIR
         );
     }
     let _ = writeln!(

@@ -29,7 +29,7 @@ use control::mpc::{Mpc, MpcSettings};
 use control::planner::{AbortReason, NavStep, Navigator, NavigatorSettings};
 use control::plant::{Plant, PlantConfig, PlantPerturbation};
 use control::scenario::Scenario;
-use control::weights::{decode, random_network, NetworkMetadata, NetworkRole};
+use control::weights::{self, random_network, NetworkMetadata, NetworkRole};
 use control::VelocityCommand;
 use control::{Actor, ActorWorkspace, Critic};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -137,21 +137,24 @@ pub struct Networks {
 }
 
 impl Networks {
-    /// Loads `dir/critic.safetensors` and `dir/actor.safetensors`.
+    /// Loads `dir/critic.safetensors` and `dir/actor.safetensors` (one machine's
+    /// directory, e.g. `critic-weights/avant635`); refuses an actor trained for
+    /// another machine or Δt than the critic.
     pub fn load(dir: &Path) -> Result<Self> {
-        let read = |name: &str| -> Result<_> {
-            let path = dir.join(name);
-            let bytes =
-                std::fs::read(&path).with_context(|| format!("reading {}", path.display()))?;
-            Ok(decode(&bytes, &path.display().to_string())?)
-        };
-        let critic_w = read("critic.safetensors")?;
-        let actor_w = read("actor.safetensors")?;
+        let critic_w = weights::load(&dir.join(weights::CRITIC_FILE), NetworkRole::Critic)?;
         let (machine, dt) = (critic_w.meta.machine, critic_w.meta.dt);
-        actor_w
-            .meta
-            .check_compatible(&machine, dt)
-            .map_err(|p| anyhow::anyhow!("{}: actor and critic disagree: {p}", dir.display()))?;
+        let actor_w = weights::load_for(
+            &dir.join(weights::ACTOR_FILE),
+            NetworkRole::Actor,
+            &machine,
+            dt,
+        )
+        .with_context(|| {
+            format!(
+                "{}: actor and critic disagree (the critic's machine and Δt are the configured ones)",
+                dir.display()
+            )
+        })?;
         Ok(Self {
             critic: Critic::from_weights(critic_w)?,
             actor: Actor::from_weights(actor_w)?,
@@ -160,6 +163,20 @@ impl Networks {
             machine,
             dt,
         })
+    }
+
+    /// Refuses a machine or Δt other than the networks were trained for (the
+    /// encoder scales by the machine's bounds): the message names both values.
+    pub fn check_for(&self, machine: &MachineParams, dt: f64) -> Result<()> {
+        self.critic
+            .metadata()
+            .check_compatible(machine, dt)
+            .map_err(|p| {
+                anyhow::anyhow!(
+                    "networks {}: the evaluation's machine or Δt is not theirs: {p}",
+                    self.source
+                )
+            })
     }
 
     /// Random networks of the paper's sizes (they do not reach goals).
@@ -666,6 +683,7 @@ pub fn run_all(
     nets: &Networks,
     scenarios: &[Scenario],
 ) -> Result<Vec<ScenarioRuns>> {
+    nets.check_for(&cfg.params, cfg.mpc.dt)?;
     let bar = if cfg.progress {
         ProgressBar::new(scenarios.len() as u64)
     } else {

@@ -206,12 +206,12 @@ fn runner_runs_every_method_in_parallel_and_writes_outputs() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
-/// The committed critic (critic-weights/) moves the MPC from rest beside its goal:
+/// The committed critic (critic-weights/avant635/) moves the MPC from rest beside its goal:
 /// `scenarios/beside16.csv` starts 0.12–0.3 m sideways, where a critic trained
 /// without a terminal set holds the machine still (README, training the critic).
 #[test]
 fn committed_critic_drives_from_beside_the_goal_into_it() {
-    let nets = Networks::load(&manifest("../critic-weights")).unwrap();
+    let nets = committed();
     let path = manifest("scenarios/beside16.csv");
     let set = scenario::parse(&std::fs::read_to_string(&path).unwrap(), "beside16.csv").unwrap();
     assert_eq!(set.len(), 16);
@@ -234,7 +234,7 @@ fn committed_critic_drives_from_beside_the_goal_into_it() {
 /// navigator it goes around, keeps clear of the circles and records the route.
 #[test]
 fn the_navigator_takes_the_mpc_around_walls() {
-    let nets = Networks::load(&manifest("../critic-weights")).unwrap();
+    let nets = committed();
     let path = manifest("scenarios/obstacles200.csv");
     let set: Vec<Scenario> =
         scenario::parse(&std::fs::read_to_string(&path).unwrap(), "obstacles200.csv")
@@ -273,7 +273,7 @@ fn the_navigator_takes_the_mpc_around_walls() {
 /// obstacle (clearance ≥ −5 mm; the actor does not see obstacles).
 #[test]
 fn no_method_beats_the_min_time_bound_among_obstacles() {
-    let nets = Networks::load(&manifest("../critic-weights")).unwrap();
+    let nets = committed();
     let mut set = scenario::parse(
         &std::fs::read_to_string(manifest("scenarios/obstacles.csv")).unwrap(),
         "obstacles.csv",
@@ -329,6 +329,11 @@ fn no_method_beats_the_min_time_bound_among_obstacles() {
     assert!(compared >= 4, "only {compared} runs reached their goals");
 }
 
+/// The default machine's committed networks (critic-weights/avant635/).
+fn committed() -> Networks {
+    Networks::load(&manifest("..").join(control::weights::DEFAULT_DIR)).unwrap()
+}
+
 #[test]
 fn networks_carry_the_machine_they_were_trained_for() {
     use control::weights::{encode, random_network, FileDtype, NetworkMetadata, NetworkRole};
@@ -362,4 +367,39 @@ fn networks_carry_the_machine_they_were_trained_for() {
     let e = format!("{:#}", Networks::load(&dir).unwrap_err());
     assert!(e.contains("disagree") && e.contains("l_f"), "{e}");
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// An evaluation configured for another machine or Δt than its networks' is
+/// refused before anything runs, naming the key and both values.
+#[test]
+fn an_evaluation_of_another_machine_than_the_networks_is_refused() {
+    let nets = Networks::random(2); // trained-for: the default machine, Δt 0.2 s
+    let set = control::scenario::paper_scenarios()[..1].to_vec();
+    let mut cfg = EvalConfig {
+        methods: vec![Method::Actor],
+        jobs: 1,
+        progress: false,
+        ..Default::default()
+    };
+    cfg.params.l_f = 0.9;
+    let e = format!(
+        "{:#}",
+        sim::eval::evaluate(&cfg, &nets, &set).err().unwrap()
+    );
+    assert!(
+        e.contains("`machine.l_f` = 0.6") && e.contains("configured 0.9"),
+        "{e}"
+    );
+    cfg.params = Default::default();
+    cfg.mpc.dt = 0.1;
+    let e = format!(
+        "{:#}",
+        sim::eval::evaluate(&cfg, &nets, &set).err().unwrap()
+    );
+    assert!(
+        e.contains("`dt` = 0.2") && e.contains("configured 0.1"),
+        "{e}"
+    );
+    cfg.mpc.dt = 0.2;
+    assert!(sim::eval::evaluate(&cfg, &nets, &set).is_ok());
 }

@@ -1,13 +1,13 @@
 //! `wlnav-train`: train, export, evaluate and verify the ALAC actor and critic.
 
 use std::fs;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 
-use control::weights::decode;
+use control::weights::{self, NetworkRole, NetworkWeights};
 use control::{Actor, Critic};
 use train::config::TrainConfig;
 use train::evaluate::VerifySummary;
@@ -67,8 +67,9 @@ enum Cmd {
         #[arg(long, default_value_t = 300)]
         updates: u64,
     },
-    /// Copy a run's exported weights, config and learning curves to a
-    /// directory (critic-weights/) and write its README with the figures.
+    /// Copy a run's exported weights, config and learning curves to a machine's
+    /// directory (e.g. critic-weights/avant635/) and write its README with the
+    /// figures. Refuses weights whose machine or Δt is not the run config's.
     Publish {
         #[arg(long)]
         run: PathBuf,
@@ -87,7 +88,8 @@ enum Cmd {
         #[arg(long, default_value_t = 200)]
         episodes: usize,
         /// A training config whose `[terminal]` set the critic was trained with
-        /// (e.g. critic-weights/train-config.toml); default: no terminal set.
+        /// (e.g. critic-weights/avant635/train-config.toml); default: no terminal
+        /// set. Its machine and dt must be the weights'.
         #[arg(long)]
         terminal_from: Option<PathBuf>,
         #[arg(long)]
@@ -107,7 +109,8 @@ enum Cmd {
         #[arg(long, default_value_t = 12)]
         max_stalls: usize,
         /// A training config whose `[terminal]` set the critic was trained with
-        /// (e.g. critic-weights/train-config.toml); default: no terminal set.
+        /// (e.g. critic-weights/avant635/train-config.toml); default: no terminal
+        /// set. Its machine and dt must be the weights'.
         #[arg(long)]
         terminal_from: Option<PathBuf>,
         #[arg(long)]
@@ -125,14 +128,45 @@ fn git_commit() -> String {
         .unwrap_or_else(|| "unknown".into())
 }
 
-fn load_config(path: &PathBuf) -> Result<TrainConfig> {
+fn load_config(path: &Path) -> Result<TrainConfig> {
     let text = fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
     TrainConfig::from_toml(&text).with_context(|| format!("in {}", path.display()))
 }
 
-fn load_net(path: &PathBuf) -> Result<control::weights::NetworkWeights> {
-    let bytes = fs::read(path).with_context(|| format!("reading {}", path.display()))?;
-    Ok(decode(&bytes, &path.display().to_string())?)
+/// Loads a network file; with `config` (a training config and its file), refuses
+/// weights trained for another machine or Δt than the config's, naming both values.
+fn load_net(
+    path: &Path,
+    role: NetworkRole,
+    config: Option<(&TrainConfig, &Path)>,
+) -> Result<NetworkWeights> {
+    Ok(match config {
+        None => weights::load(path, role)?,
+        Some((cfg, file)) => {
+            weights::load_for(path, role, &cfg.machine, cfg.dt).with_context(|| {
+                format!(
+                    "{} is for another machine or Δt than the weights",
+                    file.display()
+                )
+            })?
+        }
+    })
+}
+
+/// The actor at `path`, refused if it was trained for another machine or Δt
+/// than `critic`.
+fn load_actor_for(path: &Path, critic: &Critic) -> Result<Actor> {
+    let meta = critic.metadata();
+    let w = weights::load_for(path, NetworkRole::Actor, &meta.machine, meta.dt)
+        .context("the actor and the critic were trained for different machines or Δt")?;
+    Ok(Actor::from_weights(w)?)
+}
+
+/// The training config at `path` (`--terminal-from`), if given.
+fn terminal_config(path: &Option<PathBuf>) -> Result<Option<(TrainConfig, &Path)>> {
+    path.as_deref()
+        .map(|p| Ok((load_config(p)?, p)))
+        .transpose()
 }
 
 /// The training config matching exported weights (machine, cost, dt from their metadata).
@@ -147,15 +181,15 @@ fn config_from_metadata(meta: &control::weights::NetworkMetadata) -> TrainConfig
     }
 }
 
-/// `cfg` with the `[terminal]` set of the training config at `path`, if any.
-fn with_terminal(cfg: TrainConfig, path: &Option<PathBuf>) -> Result<TrainConfig> {
-    Ok(match path {
-        Some(p) => TrainConfig {
-            terminal: load_config(p)?.terminal,
+/// `cfg` with the `[terminal]` set of `from`, if any.
+fn with_terminal(cfg: TrainConfig, from: Option<&TrainConfig>) -> TrainConfig {
+    match from {
+        Some(c) => TrainConfig {
+            terminal: c.terminal.clone(),
             ..cfg
         },
         None => cfg,
-    })
+    }
 }
 
 fn main() -> Result<()> {
@@ -206,7 +240,7 @@ fn main() -> Result<()> {
             tolerance,
             out,
         } => {
-            let actor = Actor::from_weights(load_net(&actor)?)?;
+            let actor = Actor::from_weights(load_net(&actor, NetworkRole::Actor, None)?)?;
             let text = fs::read_to_string(&scenarios)
                 .with_context(|| format!("reading {}", scenarios.display()))?;
             let set = control::scenario::parse(&text, &scenarios.display().to_string())?;
@@ -252,8 +286,13 @@ fn main() -> Result<()> {
             terminal_from,
             out,
         } => {
-            let actor = Actor::from_weights(load_net(&actor)?)?;
-            let cfg = with_terminal(config_from_metadata(actor.metadata()), &terminal_from)?;
+            let terminal = terminal_config(&terminal_from)?;
+            let check = terminal.as_ref().map(|(c, p)| (c, *p));
+            let actor = Actor::from_weights(load_net(&actor, NetworkRole::Actor, check)?)?;
+            let cfg = with_terminal(
+                config_from_metadata(actor.metadata()),
+                terminal.as_ref().map(|(c, _)| c),
+            );
             let gammas = if gamma.is_empty() {
                 vec![cfg.gamma]
             } else {
@@ -271,9 +310,14 @@ fn main() -> Result<()> {
             terminal_from,
             out,
         } => {
-            let actor = Actor::from_weights(load_net(&actor)?)?;
-            let critic = Critic::from_weights(load_net(&critic)?)?;
-            let cfg = with_terminal(config_from_metadata(critic.metadata()), &terminal_from)?;
+            let terminal = terminal_config(&terminal_from)?;
+            let check = terminal.as_ref().map(|(c, p)| (c, *p));
+            let critic = Critic::from_weights(load_net(&critic, NetworkRole::Critic, check)?)?;
+            let actor = load_actor_for(&actor, &critic)?;
+            let cfg = with_terminal(
+                config_from_metadata(critic.metadata()),
+                terminal.as_ref().map(|(c, _)| c),
+            );
             let samples = train::evaluate::lyapunov_samples(&actor, &critic, &cfg, episodes, 7);
             let v = VerifySummary::of(&samples);
             println!(
@@ -370,11 +414,26 @@ fn actor_on_paper_set(actor: &Actor, cfg: &TrainConfig, tolerance: f64) -> (usiz
     (ok.len(), ok.iter().sum::<f64>() / ok.len().max(1) as f64)
 }
 
-fn publish(run_dir: &std::path::Path, out: &std::path::Path, command: &str) -> Result<()> {
+fn publish(run_dir: &Path, out: &Path, command: &str) -> Result<()> {
+    // The run's config and its exported weights must be for the same machine and Δt
+    // (checked before anything is copied).
+    let config_path = run_dir.join(run::CONFIG);
+    let run_cfg = load_config(&config_path)?;
+    let check = Some((&run_cfg, config_path.as_path()));
+    let critic = Critic::from_weights(load_net(
+        &run_dir.join(weights::CRITIC_FILE),
+        NetworkRole::Critic,
+        check,
+    )?)?;
+    let actor = Actor::from_weights(load_net(
+        &run_dir.join(weights::ACTOR_FILE),
+        NetworkRole::Actor,
+        check,
+    )?)?;
     fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     for name in [
-        "critic.safetensors",
-        "actor.safetensors",
+        weights::CRITIC_FILE,
+        weights::ACTOR_FILE,
         "log.csv",
         "eval.csv",
     ] {
@@ -382,15 +441,9 @@ fn publish(run_dir: &std::path::Path, out: &std::path::Path, command: &str) -> R
         fs::copy(&src, out.join(name)).with_context(|| format!("copying {}", src.display()))?;
     }
     train::plot::learning_curves(out).context("drawing the learning curves")?;
-    fs::copy(run_dir.join(run::CONFIG), out.join("train-config.toml"))
-        .context("copying the run's config")?;
-    let actor = Actor::from_weights(load_net(&out.join("actor.safetensors"))?)?;
-    let critic = Critic::from_weights(load_net(&out.join("critic.safetensors"))?)?;
+    fs::copy(&config_path, out.join("train-config.toml")).context("copying the run's config")?;
     let meta = critic.metadata().clone();
-    let cfg = with_terminal(
-        config_from_metadata(&meta),
-        &Some(out.join("train-config.toml")),
-    )?;
+    let cfg = with_terminal(config_from_metadata(&meta), Some(&run_cfg));
     let v = VerifySummary::of(&train::evaluate::lyapunov_samples(
         &actor, &critic, &cfg, 200, 7,
     ));
@@ -429,7 +482,7 @@ fn publish(run_dir: &std::path::Path, out: &std::path::Path, command: &str) -> R
          - within 0.3: {ok03}/128 (mean time {t03:.2} s)\n\n\
          The MPC with this critic is evaluated in `docs/results.md`.\n\n\
          The Python check (DESIGN §4: a PyTorch/NumPy user opens both files): `scripts/test.sh` runs\n\
-         `scripts/check_weights_python.py critic-weights` in a venv with `safetensors` and `numpy`\n\
+         `scripts/check_weights_python.py {out}` in a venv with `safetensors` and `numpy`\n\
          (`safetensors.numpy.load_file`: same tensor names `layers.{{i}}.weight|bias`, chained\n\
          shapes, metadata keys).\n\n\
          ## Learning curves\n\n![learning curves](learning_curves.svg)\n\n\

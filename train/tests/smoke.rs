@@ -1,6 +1,7 @@
 //! A short training run lowers the critic loss, writes a checkpoint and
 //! weights that load, and `--resume` continues from the same step count.
 
+use control::weights::{self, NetworkRole};
 use train::config::TrainConfig;
 use train::run::{train, RunOptions, CHECKPOINT};
 
@@ -42,9 +43,12 @@ fn smoke_run_learns_checkpoints_and_resumes() {
         first.last_critic_loss
     );
     assert!(out.join(CHECKPOINT).exists());
-    for name in ["critic.safetensors", "actor.safetensors"] {
-        let bytes = std::fs::read(out.join(name)).unwrap();
-        let w = control::weights::decode(&bytes, name).unwrap();
+    // Exported for the run's machine and Δt.
+    for (name, role) in [
+        (weights::CRITIC_FILE, NetworkRole::Critic),
+        (weights::ACTOR_FILE, NetworkRole::Actor),
+    ] {
+        let w = weights::load_for(&out.join(name), role, &cfg.machine, cfg.dt).unwrap();
         assert_eq!(w.meta.steps, 300);
         assert_eq!(w.meta.git_commit, "test");
     }

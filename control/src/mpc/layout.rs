@@ -33,13 +33,11 @@
 //! moves with θ and β (DESIGN §10); the front rows write zeros there.
 
 use super::settings::ObstacleConstraint;
+/// State and control dimensions: the model's.
+pub use crate::model::{NU, NX};
 
 /// Stage variables z = (x, u).
-pub const NZ: usize = 8;
-/// State dimension.
-pub const NX: usize = 6;
-/// Control dimension.
-pub const NU: usize = 2;
+pub const NZ: usize = NX + NU;
 /// Soft-bounded state components: β, β̇, v_f.
 pub const SOFT_STATES: [usize; 3] = [3, 4, 5];
 /// State components an obstacle row depends on: x_f, y_f, θ, β.

@@ -6,24 +6,23 @@ use super::hybrid_astar::primitive_free;
 use super::primitives::{build, compose};
 use super::*;
 use crate::goal_check::GoalConflict;
+use crate::mpc::MpcSettings;
 use crate::obstacle::{footprint_clearance, AxlePoint};
-use crate::weights::decode;
+use crate::weights;
 
 fn params() -> MachineParams {
     MachineParams::default()
 }
 
-/// The trained networks in `critic-weights/`.
+/// The default machine's trained networks (`critic-weights/avant635/`).
 fn trained() -> (Actor, Critic) {
-    let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../critic-weights/");
-    let read = |name: &str| {
-        let path = format!("{dir}{name}");
-        decode(&std::fs::read(&path).expect("weights file"), &path).expect("valid weights")
-    };
-    (
-        Actor::from_weights(read("actor.safetensors")).unwrap(),
-        Critic::from_weights(read("critic.safetensors")).unwrap(),
-    )
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("..")
+        .join(weights::DEFAULT_DIR);
+    let (critic, actor) =
+        weights::load_networks(&dir, &MachineParams::default(), MpcSettings::default().dt)
+            .expect("the committed weights");
+    (actor, critic)
 }
 
 fn navigator(kind: PlannerKind, networks: bool) -> Navigator {

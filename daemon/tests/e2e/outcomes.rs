@@ -242,8 +242,8 @@ fn a_goal_behind_a_wall_is_reached_around_it_along_the_global_route() {
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     let mut config = sim_config("wall");
     config.controller.cost = wlnavd::config::CostKind::Critic;
-    config.weights.critic = root.join("critic-weights/critic.safetensors");
-    config.weights.actor = root.join("critic-weights/actor.safetensors");
+    config.weights =
+        wlnavd::config::WeightsConfig::in_dir(&root.join(control::weights::DEFAULT_DIR));
     let params = config.machine;
     let d = start(config, None);
     let wall: Vec<Obstacle> = (0..6)
