@@ -44,7 +44,7 @@ use std::path::{Path, PathBuf};
 
 use control::mpc::MpcSettings;
 use control::progress::ProgressSettings;
-use control::weights;
+use control::weights::{self, NetworkRole};
 use control::{MachineParams, PlantConfig};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
@@ -107,6 +107,26 @@ pub struct Config {
     pub ipc: IpcSection,
     /// The simulated machine.
     pub sim: SimConfig,
+    /// Which keys the configuration text set (not a setting).
+    #[serde(skip)]
+    pub given: KeysGiven,
+}
+
+/// Which keys a configuration text sets: paths it leaves out are found like
+/// without a file, and a machine it leaves out is the critic's
+/// ([`Config::adopt_trained_machine`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct KeysGiven {
+    /// `weights.critic`.
+    pub critic: bool,
+    /// `weights.actor`.
+    pub actor: bool,
+    /// `can.log`.
+    pub can_log: bool,
+    /// Any key of `[machine]`.
+    pub machine: bool,
+    /// `mpc.dt`.
+    pub dt: bool,
 }
 
 /// `[controller]`.
@@ -475,11 +495,12 @@ impl Config {
 
     /// Parses TOML text (`source` names it in errors) and validates it.
     pub fn from_toml(text: &str, source: &str) -> Result<Self, ConfigError> {
-        let config: Config = toml::from_str(text).map_err(|e| ConfigError::Parse {
+        let mut config: Config = toml::from_str(text).map_err(|e| ConfigError::Parse {
             path: source.to_owned(),
             message: e.to_string().trim_end().to_owned(),
         })?;
         config.validate()?;
+        config.given = Self::keys_given(text);
         Ok(config)
     }
 
@@ -495,7 +516,7 @@ impl Config {
         })?;
         let mut config = Self::from_toml(&text, &path.display().to_string())?;
         let base = path.parent().unwrap_or(Path::new("."));
-        let given = Self::paths_given(&text);
+        let given = config.given;
         let defaults = (config.weights.clone(), config.can.log.clone());
         config.resolve_paths(&[base.to_path_buf()]);
         if !given.critic {
@@ -510,18 +531,38 @@ impl Config {
         Ok(config)
     }
 
-    /// Which path keys a configuration text sets.
-    fn paths_given(text: &str) -> PathsGiven {
+    /// Which keys a configuration text sets.
+    fn keys_given(text: &str) -> KeysGiven {
         let v: toml::Table = toml::from_str(text).unwrap_or_default();
-        let has = |section: &str, key: &str| {
-            v.get(section)
-                .and_then(|s| s.as_table())
-                .is_some_and(|s| s.contains_key(key))
-        };
-        PathsGiven {
+        let section = |name: &str| v.get(name).and_then(|s| s.as_table());
+        let has = |name: &str, key: &str| section(name).is_some_and(|s| s.contains_key(key));
+        KeysGiven {
             critic: has("weights", "critic"),
             actor: has("weights", "actor"),
             can_log: has("can", "log"),
+            machine: section("machine").is_some_and(|s| !s.is_empty()),
+            dt: has("mpc", "dt"),
+        }
+    }
+
+    /// The machine travels with the weights (DESIGN §4): when the configuration
+    /// gives no `[machine]` (or no `mpc.dt`), the critic's metadata does. A machine
+    /// the configuration gives is checked against the weights when they are loaded
+    /// (and refused if it differs). With the quadratic cost, or a critic that
+    /// cannot be read (reported when the controller loads), the configured
+    /// machine stays.
+    pub fn adopt_trained_machine(&mut self) {
+        if self.controller.cost != CostKind::Critic || (self.given.machine && self.given.dt) {
+            return;
+        }
+        let Ok(w) = control::weights::load(&self.weights.critic, NetworkRole::Critic) else {
+            return;
+        };
+        if !self.given.machine {
+            self.machine = w.meta.machine;
+        }
+        if !self.given.dt {
+            self.mpc.dt = w.meta.dt;
         }
     }
 
@@ -724,12 +765,6 @@ impl Config {
 }
 
 /// Which path keys a configuration file sets (see [`Config::load`]).
-struct PathsGiven {
-    critic: bool,
-    actor: bool,
-    can_log: bool,
-}
-
 fn can_max_lost_limit() -> u8 {
     crate::can::AliveTracker::MAX_LOST_LIMIT
 }
@@ -742,7 +777,9 @@ mod tests {
     fn defaults_are_valid_and_round_trip() {
         let c = Config::default();
         c.validate().unwrap();
-        let back = Config::from_toml(&c.to_toml(), "t").unwrap();
+        let mut back = Config::from_toml(&c.to_toml(), "t").unwrap();
+        assert!(back.given.machine && back.given.dt, "a full file gives everything");
+        back.given = c.given;
         assert_eq!(back, c);
     }
 
@@ -783,6 +820,42 @@ mod tests {
         assert!(err("[loop.realtime]\npriority = 100\n").contains("`loop.realtime.priority`"));
         assert!(err("[loop.realtime]\ncpu = 100000\n").contains("`loop.realtime.cpu`"));
         assert!(err("[loop.realtime]\nprio = 10\n").contains("prio"));
+    }
+
+    #[test]
+    fn the_machine_and_dt_come_from_the_critic_unless_the_file_gives_them() {
+        use control::weights::{encode, random_network, FileDtype, NetworkMetadata};
+        let dir = tempfile::tempdir().unwrap();
+        let mut meta = NetworkMetadata::new(NetworkRole::Critic, 4);
+        meta.machine.l_f = 0.9;
+        meta.machine.v_max = 1.5;
+        meta.dt = 0.25;
+        let w = random_network(meta, &[8], 1);
+        let bytes = encode(&w.meta, &w.mlp, FileDtype::F32).unwrap();
+        std::fs::write(dir.path().join("critic.safetensors"), bytes).unwrap();
+        let file = dir.path().join("wlnavd.toml");
+        let weights = "[weights]\ncritic = \"critic.safetensors\"\nactor = \"\"\n";
+        std::fs::write(&file, weights).unwrap();
+        let mut c = Config::load(&file).unwrap();
+        c.adopt_trained_machine();
+        assert_eq!(c.machine, w.meta.machine);
+        assert_eq!((c.mpc.dt, c.period()), (0.25, 0.25));
+        c.validate().unwrap();
+        crate::controller::load_controller(&c).unwrap();
+
+        // A file that gives the machine keeps it, and loading refuses the mismatch.
+        std::fs::write(&file, format!("{weights}[machine]\nl_f = 0.6\n")).unwrap();
+        let mut c = Config::load(&file).unwrap();
+        c.adopt_trained_machine();
+        assert_eq!((c.machine.l_f, c.mpc.dt), (0.6, 0.25));
+        let e = crate::controller::load_controller(&c).err().unwrap().to_string();
+        assert!(e.contains("l_f") && e.contains("incompatible"), "{e}");
+
+        // The quadratic cost keeps the configured (default) machine.
+        std::fs::write(&file, format!("{weights}[controller]\ncost = \"quadratic\"\n")).unwrap();
+        let mut c = Config::load(&file).unwrap();
+        c.adopt_trained_machine();
+        assert_eq!(c.machine, MachineParams::default());
     }
 
     #[test]

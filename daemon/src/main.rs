@@ -120,6 +120,7 @@ fn build_config(args: &Args) -> Result<Config, String> {
     if let Some(n) = args.max_ticks {
         config.control.max_ticks = n;
     }
+    config.adopt_trained_machine();
     // Command-line values are validated like the file's.
     config.validate().map_err(|e| e.to_string())?;
     Ok(config)

@@ -195,6 +195,20 @@ fn incompatible_weights_exit_nonzero_naming_the_key() {
         ..Default::default()
     };
     write_networks(dir.path(), None, machine);
+    // Without [machine] the daemon drives the machine the weights were trained for.
+    let config = dir.path().join("wlnavd.toml");
+    let out = Command::new(BIN)
+        .arg("--config")
+        .arg(&config)
+        .arg("--print-config")
+        .output()
+        .unwrap();
+    let printed = String::from_utf8_lossy(&out.stdout);
+    assert!(printed.contains("v_max = 2.0"), "{printed}");
+    // A configuration that gives another machine is refused.
+    let mut text = std::fs::read_to_string(&config).unwrap();
+    text.push_str("[machine]\nv_max = 1.0\n");
+    std::fs::write(&config, text).unwrap();
     let (status, err) = run_with_config(dir.path(), &unique_prefix("incompatible"));
     assert_eq!(status.code(), Some(1), "{err}");
     assert!(err.contains("actor.safetensors"), "{err}");
