@@ -778,7 +778,10 @@ mod tests {
         let c = Config::default();
         c.validate().unwrap();
         let mut back = Config::from_toml(&c.to_toml(), "t").unwrap();
-        assert!(back.given.machine && back.given.dt, "a full file gives everything");
+        assert!(
+            back.given.machine && back.given.dt,
+            "a full file gives everything"
+        );
         back.given = c.given;
         assert_eq!(back, c);
     }
@@ -848,11 +851,18 @@ mod tests {
         let mut c = Config::load(&file).unwrap();
         c.adopt_trained_machine();
         assert_eq!((c.machine.l_f, c.mpc.dt), (0.6, 0.25));
-        let e = crate::controller::load_controller(&c).err().unwrap().to_string();
+        let e = crate::controller::load_controller(&c)
+            .err()
+            .unwrap()
+            .to_string();
         assert!(e.contains("l_f") && e.contains("incompatible"), "{e}");
 
         // The quadratic cost keeps the configured (default) machine.
-        std::fs::write(&file, format!("{weights}[controller]\ncost = \"quadratic\"\n")).unwrap();
+        std::fs::write(
+            &file,
+            format!("{weights}[controller]\ncost = \"quadratic\"\n"),
+        )
+        .unwrap();
         let mut c = Config::load(&file).unwrap();
         c.adopt_trained_machine();
         assert_eq!(c.machine, MachineParams::default());

@@ -10,4 +10,5 @@ pub mod evaluate;
 pub mod nets;
 pub mod plot;
 pub mod run;
+pub mod select;
 pub mod stalls;

@@ -25,7 +25,9 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Cmd {
-    /// Train a new run, or continue one with --resume.
+    /// Train a new run (or continue one with --resume); once it is complete (its
+    /// updates or wall hours reached), drive the MPC with every checkpoint on a
+    /// selection set and publish the best to OUT/published.
     Train {
         /// TOML configuration (defaults for missing keys); with --resume the run's own config is used.
         #[arg(long)]
@@ -42,6 +44,13 @@ enum Cmd {
         /// this many hours.
         #[arg(long)]
         max_wall_hours: Option<f64>,
+        /// Goals of the closed-loop selection set (seeded, generated for the run's
+        /// machine) on which the run's candidates are compared once it is complete.
+        #[arg(long, default_value_t = 64)]
+        selection_goals: usize,
+        /// The run's random seed (default: the config's `seed`); not with --resume.
+        #[arg(long, conflicts_with = "resume")]
+        seed: Option<u64>,
     },
     /// Write critic.safetensors and actor.safetensors from a run's checkpoint.
     Export {
@@ -201,6 +210,8 @@ fn main() -> Result<()> {
             resume,
             max_updates,
             max_wall_hours,
+            selection_goals,
+            seed,
         } => {
             if let Some(h) = max_wall_hours {
                 anyhow::ensure!(
@@ -208,11 +219,14 @@ fn main() -> Result<()> {
                     "--max-wall-hours must be a positive number of hours, got {h}"
                 );
             }
-            let cfg = match (&config, resume) {
+            let mut cfg = match (&config, resume) {
                 (_, true) => load_config(&out.join(run::CONFIG))?,
                 (Some(p), false) => load_config(p)?,
                 (None, false) => TrainConfig::default(),
             };
+            if let Some(s) = seed {
+                cfg.seed = s;
+            }
             let opts = RunOptions {
                 out_dir: out.clone(),
                 resume,
@@ -221,11 +235,41 @@ fn main() -> Result<()> {
                 git_commit: git_commit(),
                 quiet: false,
             };
+            anyhow::ensure!(selection_goals > 0, "--selection-goals must be at least 1");
             let s = run::train(&cfg, &opts)?;
             println!(
                 "{} updates, {} env steps in {:.0} s; critic loss {:.4e} -> {:.4e}; lambda_l {:.3}; weights in {}",
                 s.updates, s.env_steps, s.wall_s, s.first_critic_loss, s.last_critic_loss, s.lambda_l, out.display()
             );
+            let complete =
+                s.updates >= cfg.total_updates || opts.max_wall_s.is_some_and(|w| s.wall_s >= w);
+            if !complete {
+                println!("the run is not complete: the selection runs when it is (--resume)");
+                return Ok(());
+            }
+            let goals =
+                train::select::selection_goals(selection_goals, train::select::SELECTION_SEED);
+            println!(
+                "selection: every candidate's MPC on {} goals (seed {:#x}, {} s each)",
+                goals.len(),
+                train::select::SELECTION_SEED,
+                train::select::DURATION
+            );
+            let scores = train::select::select(&out, &cfg, &goals, |c| {
+                println!(
+                    "  update {:>9}: {}/{} reached, mean {:.2} s",
+                    c.updates, c.reached, c.goals, c.mean_time
+                )
+            })?;
+            let best = &scores[0];
+            let command: Vec<String> = std::env::args().collect();
+            publish(
+                &out,
+                &best.dir,
+                &out.join("published"),
+                &command.join(" "),
+                Some(&scores),
+            )?;
         }
         Cmd::Export { run, out } => {
             let cfg = load_config(&run.join(run::CONFIG))?;
@@ -276,7 +320,7 @@ fn main() -> Result<()> {
             run: run_dir,
             out,
             command,
-        } => publish(&run_dir, &out, &command)?,
+        } => publish(&run_dir, &run_dir, &out, &command, None)?,
         Cmd::Bench { updates } => bench(updates)?,
         Cmd::Stalls {
             actor,
@@ -414,30 +458,39 @@ fn actor_on_paper_set(actor: &Actor, cfg: &TrainConfig, tolerance: f64) -> (usiz
     (ok.len(), ok.iter().sum::<f64>() / ok.len().max(1) as f64)
 }
 
-fn publish(run_dir: &Path, out: &Path, command: &str) -> Result<()> {
+/// Publishes the networks in `weights_dir` (the run's exports, or its selected
+/// candidate) with the run's config, logs and curves and a README with the
+/// figures; `selection` is the closed-loop selection that chose them, best first.
+fn publish(
+    run_dir: &Path,
+    weights_dir: &Path,
+    out: &Path,
+    command: &str,
+    selection: Option<&[train::select::CandidateScore]>,
+) -> Result<()> {
     // The run's config and its exported weights must be for the same machine and Δt
     // (checked before anything is copied).
     let config_path = run_dir.join(run::CONFIG);
     let run_cfg = load_config(&config_path)?;
     let check = Some((&run_cfg, config_path.as_path()));
     let critic = Critic::from_weights(load_net(
-        &run_dir.join(weights::CRITIC_FILE),
+        &weights_dir.join(weights::CRITIC_FILE),
         NetworkRole::Critic,
         check,
     )?)?;
     let actor = Actor::from_weights(load_net(
-        &run_dir.join(weights::ACTOR_FILE),
+        &weights_dir.join(weights::ACTOR_FILE),
         NetworkRole::Actor,
         check,
     )?)?;
     fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    for name in [
-        weights::CRITIC_FILE,
-        weights::ACTOR_FILE,
-        "log.csv",
-        "eval.csv",
+    for (dir, name) in [
+        (weights_dir, weights::CRITIC_FILE),
+        (weights_dir, weights::ACTOR_FILE),
+        (run_dir, "log.csv"),
+        (run_dir, "eval.csv"),
     ] {
-        let src = run_dir.join(name);
+        let src = dir.join(name);
         fs::copy(&src, out.join(name)).with_context(|| format!("copying {}", src.display()))?;
     }
     train::plot::learning_curves(out).context("drawing the learning curves")?;
@@ -460,10 +513,46 @@ fn publish(run_dir: &Path, out: &Path, command: &str) -> Result<()> {
         .and_then(|r| r.get(2))
         .copied()
         .unwrap_or(f64::NAN);
+    let (how, selection_table) = match selection {
+        None => (
+            format!(
+                ", then\n`wlnav-train publish --run {} --out {} --command ...`",
+                run_dir.display(),
+                out.display()
+            ),
+            String::new(),
+        ),
+        Some(scores) => {
+            let goals = scores.first().map_or(0, |s| s.goals);
+            let mut table = format!(
+                "\n## Closed-loop selection\n\nEach checkpoint's MPC (daemon settings, ideal plant) \
+                 from rest to {goals} goals of the seeded selection set ({:#x}, distances 3–10 m, \
+                 bearings and headings uniform; not an acceptance set), {} s each; best first \
+                 (`selection.csv` in the run directory):\n\n\
+                 | update | reached | mean time to converge [s] |\n|---|---|---|\n",
+                train::select::SELECTION_SEED,
+                train::select::DURATION
+            );
+            for s in scores {
+                table.push_str(&format!(
+                    "| {} | {}/{} | {:.2} |\n",
+                    s.updates, s.reached, s.goals, s.mean_time
+                ));
+            }
+            (
+                format!(
+                    ": the checkpoint at update {}, chosen by the closed-loop selection below \
+                     among the run's {} checkpoints",
+                    scores.first().map_or(0, |s| s.updates),
+                    scores.len()
+                ),
+                table,
+            )
+        }
+    };
     let readme = format!(
         "# Trained actor and critic\n\n\
-         Produced by `{command}` (config: `train-config.toml`), then\n\
-         `wlnav-train publish --run {run} --out {out} --command ...`.\n\n\
+         Produced by `{command}` (config: `train-config.toml`){how}.\n\n\
          | | |\n|---|---|\n\
          | git commit of the training binary | `{commit}` |\n\
          | gradient updates | {steps} |\n\
@@ -486,8 +575,7 @@ fn publish(run_dir: &Path, out: &Path, command: &str) -> Result<()> {
          (`safetensors.numpy.load_file`: same tensor names `layers.{{i}}.weight|bias`, chained\n\
          shapes, metadata keys).\n\n\
          ## Learning curves\n\n![learning curves](learning_curves.svg)\n\n\
-         `log.csv` and `eval.csv` are the run's logs.\n",
-        run = run_dir.display(),
+         `log.csv` and `eval.csv` are the run's logs.\n{selection_table}",
         out = out.display(),
         commit = meta.git_commit,
         steps = meta.steps,

@@ -24,6 +24,10 @@ use crate::env::VecEnv;
 use crate::evaluate::success_rate;
 
 pub const CHECKPOINT: &str = "checkpoint.safetensors";
+/// Where every checkpoint's networks are kept (`candidates/u000123456/`), for
+/// the closed-loop selection after training: later checkpoints are not always
+/// the better controllers.
+pub const CANDIDATES: &str = "candidates";
 pub const CONFIG: &str = "config.toml";
 const LOG_HEADER: &str =
     "updates,env_steps,wall_s,updates_per_s,critic_loss,penalty,actor_loss,lambda_l,lambda_e,entropy,delta_l,mean_l";
@@ -139,6 +143,17 @@ pub fn exported(agent: &Agent, git_commit: &str) -> Result<(NetworkWeights, Netw
         mlp: Agent::to_control_mlp(&agent.actor)?,
     };
     Ok((critic, actor))
+}
+
+/// The directory of the candidate exported at `updates`.
+pub fn candidate_dir(run_dir: &Path, updates: u64) -> PathBuf {
+    run_dir.join(CANDIDATES).join(format!("u{updates:09}"))
+}
+
+/// Exports the networks into the run directory and keeps them as a candidate.
+fn export_checkpoint(agent: &Agent, dir: &Path, git_commit: &str) -> Result<()> {
+    export(agent, dir, git_commit)?;
+    export(agent, &candidate_dir(dir, agent.updates), git_commit)
 }
 
 /// Writes `critic.safetensors` and `actor.safetensors` into `dir`.
@@ -387,7 +402,7 @@ pub fn train(cfg: &TrainConfig, opts: &RunOptions) -> Result<RunSummary> {
             }
             if last_ckpt.elapsed().as_secs_f64() > cfg.checkpoint_minutes * 60.0 {
                 save_checkpoint(&agent, dir, wall())?;
-                export(&agent, dir, &opts.git_commit)?;
+                export_checkpoint(&agent, dir, &opts.git_commit)?;
                 if let Err(e) = crate::plot::learning_curves(dir) {
                     say(format!("learning curves not drawn: {e:#}"));
                 }
@@ -400,7 +415,7 @@ pub fn train(cfg: &TrainConfig, opts: &RunOptions) -> Result<RunSummary> {
         }
     }
     save_checkpoint(&agent, dir, wall())?;
-    export(&agent, dir, &opts.git_commit)?;
+    export_checkpoint(&agent, dir, &opts.git_commit)?;
     if dir.join("log.csv").exists() {
         if let Err(e) = crate::plot::learning_curves(dir) {
             say(format!("learning curves not drawn: {e:#}"));

@@ -3,7 +3,7 @@
 
 use control::weights::{self, NetworkRole};
 use train::config::TrainConfig;
-use train::run::{train, RunOptions, CHECKPOINT};
+use train::run::{candidate_dir, train, RunOptions, CHECKPOINT};
 
 fn small() -> TrainConfig {
     TrainConfig {
@@ -78,6 +78,16 @@ fn smoke_run_learns_checkpoints_and_resumes() {
     )
     .unwrap();
     assert_eq!(resumed.updates, 400);
+    // Each end of a part (and each timed checkpoint) keeps its networks as a
+    // candidate for the closed-loop selection.
+    for updates in [300, 400] {
+        let w = weights::load(
+            &candidate_dir(&out, updates).join(weights::CRITIC_FILE),
+            NetworkRole::Critic,
+        )
+        .unwrap();
+        assert_eq!(w.meta.steps, updates);
+    }
     let log = std::fs::read_to_string(out.join("log.csv")).unwrap();
     let steps: Vec<u64> = log
         .lines()
