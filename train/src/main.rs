@@ -379,6 +379,21 @@ fn main() -> Result<()> {
                 v.decrease_share_reaching * 100.0,
                 v.decrease_share_stopping * 100.0
             );
+            // The same property in closed loop with the MPC, on the selection set.
+            let goals = train::select::selection_goals(64, train::select::SELECTION_SEED);
+            let (mut pairs, mut decreases, mut reached) = (0, 0, 0);
+            for g in &goals {
+                let run = train::select::closed_loop(&critic, &actor, &cfg, *g)?;
+                pairs += run.tick_pairs;
+                decreases += run.critic_decreases;
+                reached += usize::from(run.time.is_some());
+            }
+            println!(
+                "the MPC in closed loop on the selection set ({} goals, {reached} reached): the \
+                 critic L(x, u0, g) decreases from tick to tick on {:.1}% of {pairs} ticks",
+                goals.len(),
+                100.0 * decreases as f64 / pairs.max(1) as f64
+            );
             let csv = train::evaluate::lyapunov_csv(&samples);
             if let Some(p) = out {
                 fs::write(&p, csv).with_context(|| format!("writing {}", p.display()))?;
