@@ -7,8 +7,10 @@
 //! model of the critic cost, eq. 20–21, Hessian blocks made positive
 //! semidefinite; linearised RK4 dynamics; hard control bounds; soft state and
 //! obstacle constraints with exact L1 slacks, so the QP is always feasible),
-//! solve it with Clarabel, and send (β̇, v_f) of the planned x₁. Optionally a
-//! few more SQP iterations run within the time budget.
+//! solve it with Clarabel, and return (β̇, v_f) of the planned x₁ (the caller
+//! reports what it actually sent through [`Mpc::sent`], which the delay
+//! compensation and the online estimates use). Optionally a few more SQP
+//! iterations run within the time budget.
 //!
 //! The parts talk through small traits so tests can swap them:
 //! [`StageCost`] (the critic, or [`QuadraticCost`]), [`Dynamics`] ([`Rk4Model`],

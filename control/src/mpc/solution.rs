@@ -35,7 +35,8 @@ pub enum StepStatus {
 /// overwritten every tick.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Solution {
-    /// (β̇, v_f) of the planned x₁, clamped to the machine's bounds; always finite.
+    /// (β̇, v_f) of the planned x₁ ([`VelocityCommand::limited`] to the machine's
+    /// bounds, divided by the actuator-gain estimate when on); always finite.
     pub command: VelocityCommand,
     pub status: StepStatus,
     /// The delay-compensated initial state x̂ the plan starts from.
