@@ -63,23 +63,30 @@ fn compensation_equals_the_plant_integrated_over_the_delay() {
     }
 }
 
+/// The quadratic-cost MPC with `settings` towards (4, 2, 1), and an ideal plant
+/// with the same input delay, moving at 0.3 m/s.
+fn mpc_and_plant(settings: MpcSettings) -> (Mpc<QuadraticCost>, Plant) {
+    let p = MachineParams::default();
+    let mut cost = QuadraticCost::diagonal([0.2, 0.2, 0.5, 0.1, 0.5, 0.5], [0.5, 0.5]);
+    cost.q_pos = 2.0;
+    let mut mpc = Mpc::new(p, cost, None, settings).unwrap();
+    mpc.set_goal(Goal::new(4.0, 2.0, 1.0), &[]).unwrap();
+    let config = PlantConfig {
+        delay: settings.delay,
+        ..PlantConfig::ideal()
+    };
+    let plant = Plant::new(p, config, State::new(0.0, 0.0, 0.0, 0.0, 0.0, 0.3)).unwrap();
+    (mpc, plant)
+}
+
 #[test]
 fn mpc_plans_from_the_delay_compensated_state() {
-    let p = MachineParams::default();
     for delay in [0.2, 0.3] {
         let settings = MpcSettings {
             delay,
             ..MpcSettings::default()
         };
-        let mut cost = QuadraticCost::diagonal([0.2, 0.2, 0.5, 0.1, 0.5, 0.5], [0.5, 0.5]);
-        cost.q_pos = 2.0;
-        let mut mpc = Mpc::new(p, cost, None, settings).unwrap();
-        mpc.set_goal(Goal::new(4.0, 2.0, 1.0), &[]).unwrap();
-        let config = PlantConfig {
-            delay,
-            ..PlantConfig::ideal()
-        };
-        let mut plant = Plant::new(p, config, State::new(0.0, 0.0, 0.0, 0.0, 0.0, 0.3)).unwrap();
+        let (mut mpc, mut plant) = mpc_and_plant(settings);
         let mut worst: f64 = 0.0;
         for tick in 0..40 {
             let now = tick as f64 * settings.dt;
@@ -117,15 +124,7 @@ fn mpc_compensates_with_the_commands_sent_on_the_real_clock() {
         gain_estimation: false,
         ..MpcSettings::default()
     };
-    let mut cost = QuadraticCost::diagonal([0.2, 0.2, 0.5, 0.1, 0.5, 0.5], [0.5, 0.5]);
-    cost.q_pos = 2.0;
-    let mut mpc = Mpc::new(p, cost, None, settings).unwrap();
-    mpc.set_goal(Goal::new(4.0, 2.0, 1.0), &[]).unwrap();
-    let config = PlantConfig {
-        delay,
-        ..PlantConfig::ideal()
-    };
-    let mut plant = Plant::new(p, config, State::new(0.0, 0.0, 0.0, 0.0, 0.0, 0.3)).unwrap();
+    let (mut mpc, mut plant) = mpc_and_plant(settings);
     let (mut now, mut worst, mut last) = (3.7, 0.0_f64, VelocityCommand::ZERO);
     for tick in 0..40 {
         if tick == 20 {

@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 use control::model::{converged, Goal, State, SUCCESS_TOLERANCE};
 use control::mpc::{Mpc, MpcSettings};
-use control::weights::{self, NetworkRole};
+use control::weights;
 use control::{Actor, Critic, CriticWorkspace, Plant, PlantConfig};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -78,17 +78,6 @@ pub struct ClosedLoop {
     pub critic_decreases: usize,
 }
 
-/// The time the MPC with `critic` and `actor` takes from rest at the origin to
-/// converge to `goal` (None: not within [`DURATION`]), on an ideal plant.
-pub fn time_to_goal(
-    critic: &Critic,
-    actor: &Actor,
-    cfg: &TrainConfig,
-    goal: Goal,
-) -> Result<Option<f64>> {
-    Ok(closed_loop(critic, actor, cfg, goal)?.time)
-}
-
 /// The MPC with `critic` and `actor` from rest at the origin towards `goal` on an
 /// ideal plant, for at most [`DURATION`]: when it converges, and how often the
 /// critic decreased from tick to tick on the way (the Lyapunov property in
@@ -149,21 +138,10 @@ pub fn score(
     cfg: &TrainConfig,
     goals: &[Goal],
 ) -> Result<CandidateScore> {
-    let critic = Critic::from_weights(weights::load_for(
-        &dir.join(weights::CRITIC_FILE),
-        NetworkRole::Critic,
-        &cfg.machine,
-        cfg.dt,
-    )?)?;
-    let actor = Actor::from_weights(weights::load_for(
-        &dir.join(weights::ACTOR_FILE),
-        NetworkRole::Actor,
-        &cfg.machine,
-        cfg.dt,
-    )?)?;
+    let (critic, actor) = weights::load_networks(dir, &cfg.machine, cfg.dt)?;
     let mut times = Vec::with_capacity(goals.len());
     for g in goals {
-        if let Some(t) = time_to_goal(&critic, &actor, cfg, *g)? {
+        if let Some(t) = closed_loop(&critic, &actor, cfg, *g)?.time {
             times.push(t);
         }
     }
@@ -273,10 +251,7 @@ mod tests {
             .join("..")
             .join(weights::DEFAULT_DIR);
         let cfg = TrainConfig::default();
-        let load =
-            |name, role| weights::load_for(&dir.join(name), role, &cfg.machine, cfg.dt).unwrap();
-        let critic = Critic::from_weights(load(weights::CRITIC_FILE, NetworkRole::Critic)).unwrap();
-        let actor = Actor::from_weights(load(weights::ACTOR_FILE, NetworkRole::Actor)).unwrap();
+        let (critic, actor) = weights::load_networks(&dir, &cfg.machine, cfg.dt).unwrap();
         let run = closed_loop(&critic, &actor, &cfg, Goal::new(4.5, 0.0, 0.0)).unwrap();
         let t = run.time.expect("the goal is reached");
         assert!((t - 5.2).abs() < 0.21, "{t} s");
