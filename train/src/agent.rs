@@ -13,10 +13,12 @@ use control::mlp::{Layer, Mlp as ControlMlp};
 use control::weights::{NetworkMetadata, NetworkRole, ACTOR_OUTPUTS};
 
 use crate::buffer::Batch;
-use crate::config::TrainConfig;
+use crate::config::{Kernel, TrainConfig};
+use crate::fused::{self, NetGradient};
 use crate::nets::{
     actor_mean_action, actor_sample, critic_value, f32_tensor, gradient_penalty, Mlp,
 };
+use crate::params::{self, ReadParams};
 
 /// Adam on a set of variables, with its moments kept as tensors so they can be
 /// checkpointed (candle's own optimiser hides them).
@@ -31,6 +33,8 @@ pub struct Adam {
 const BETA1: f64 = 0.9;
 const BETA2: f64 = 0.999;
 const ADAM_EPS: f64 = 1e-8;
+/// (β₁, β₂, ε) of every Adam here.
+const ADAM: (f64, f64, f64) = (BETA1, BETA2, ADAM_EPS);
 
 impl Adam {
     pub fn new(vars: Vec<Var>, lr: f64) -> Result<Self> {
@@ -46,10 +50,22 @@ impl Adam {
         })
     }
 
-    pub fn step(&mut self, grads: &GradStore) -> Result<()> {
+    /// Counts a step; returns its learning rate and bias corrections (lr, c₁, c₂).
+    pub fn advance(&mut self) -> (f64, f64, f64) {
         self.t += 1;
         let c1 = 1.0 - BETA1.powi(self.t as i32);
         let c2 = 1.0 - BETA2.powi(self.t as i32);
+        (self.lr, c1, c2)
+    }
+
+    /// The same step with a flat gradient, in place (the fused kernels).
+    pub fn step_flat(&mut self, grad: &NetGradient) -> Result<()> {
+        let schedule = self.advance();
+        params::adam_step(&self.vars, (&self.m, &self.v), grad, schedule, ADAM)
+    }
+
+    pub fn step(&mut self, grads: &GradStore) -> Result<()> {
+        let (_, c1, c2) = self.advance();
         for ((var, m), v) in self.vars.iter().zip(&self.m).zip(&self.v) {
             let Some(g) = grads.get(var.as_tensor()) else {
                 continue;
@@ -113,6 +129,30 @@ pub struct Agent {
     pub updates: u64,
     pub env_steps: u64,
     pub rng: ChaCha8Rng,
+    /// Buffers of the fused kernels, kept from update to update.
+    fused: FusedBuffers,
+}
+
+/// Per thread a workspace and a gradient, and the per-row results of a step.
+#[derive(Default)]
+struct FusedBuffers {
+    shares: [(fused::Workspace, NetGradient); 2],
+    l_sa: Vec<f32>,
+    entropy_term: Vec<f32>,
+    delta_l: Vec<f32>,
+}
+
+/// What the critic and the actor steps of an update leave for the rest of it.
+struct StepParts {
+    critic_loss: f64,
+    penalty: f64,
+    actor_loss: f64,
+    /// mean(log π(s) + H).
+    mean_entropy_term: f64,
+    /// ΔL per row.
+    delta_l: Vec<f32>,
+    /// mean L(s, a).
+    mean_l: f64,
 }
 
 /// Smallest log λ_l: λ_l lives in (0, 1].
@@ -147,6 +187,7 @@ impl Agent {
             updates: 0,
             env_steps: 0,
             rng,
+            fused: FusedBuffers::default(),
         })
     }
 
@@ -158,10 +199,15 @@ impl Agent {
         self.log_lambda_l.exp()
     }
 
-    fn normal(&mut self, rows: usize) -> Result<Tensor> {
-        let v: Vec<f32> = (0..rows * 2)
+    /// Standard normal draws, rows × 2.
+    fn normal_values(&mut self, rows: usize) -> Vec<f32> {
+        (0..rows * 2)
             .map(|_| StandardNormal.sample(&mut self.rng))
-            .collect();
+            .collect()
+    }
+
+    fn normal(&mut self, rows: usize) -> Result<Tensor> {
+        let v = self.normal_values(rows);
         f32_tensor(&v, rows, 2, &self.device)
     }
 
@@ -201,11 +247,155 @@ impl Agent {
         })
     }
 
-    /// One ALAC update: critic, actor, multipliers, Polyak target. With
+    /// One ALAC update: critic, actor, multipliers, Polyak target, by the
+    /// configured kernel.
+    pub fn update(&mut self, batch: &Batch) -> Result<UpdateStats> {
+        let parts = match self.cfg.kernel {
+            Kernel::Fused => self.fused_steps(batch)?,
+            Kernel::Candle => self.candle_steps(batch)?,
+        };
+        // Multipliers by gradient ascent on J(λ) in log space.
+        let mean_delta = multiplier_delta(
+            &parts.delta_l,
+            &batch.own_goal,
+            self.cfg.multiplier_own_goals,
+        );
+        let lr = self.cfg.multiplier_lr;
+        self.lambda_e_opt
+            .ascend(&mut self.log_lambda_e, parts.mean_entropy_term, lr);
+        self.lambda_l_opt
+            .ascend(&mut self.log_lambda_l, mean_delta, lr);
+        self.log_lambda_l = self.log_lambda_l.clamp(LOG_LAMBDA_MIN, 0.0);
+        self.log_lambda_e = self.log_lambda_e.clamp(-20.0, 5.0);
+        match self.cfg.kernel {
+            Kernel::Fused => params::polyak(&self.critic_target, &self.critic, self.cfg.tau)?,
+            Kernel::Candle => self.critic_target.polyak_from(&self.critic, self.cfg.tau)?,
+        }
+        self.updates += 1;
+        Ok(UpdateStats {
+            critic_loss: parts.critic_loss,
+            penalty: parts.penalty,
+            actor_loss: parts.actor_loss,
+            lambda_l: self.lambda_l(),
+            lambda_e: self.lambda_e(),
+            entropy: -(parts.mean_entropy_term - self.cfg.target_entropy),
+            delta_l: mean_delta,
+            mean_l: parts.mean_l,
+        })
+    }
+
+    /// The critic and actor steps in the fused kernels ([`crate::fused`]): the
+    /// same objectives, random draws and order as [`Agent::candle_steps`].
+    fn fused_steps(&mut self, batch: &Batch) -> Result<StepParts> {
+        let n = batch.len;
+        let eps_critic = self.normal_values(n);
+        let eps_actor = self.normal_values(2 * n);
+        let cfg = &self.cfg;
+        let set = fused::Settings::new(cfg, n);
+        let rows = fused::Rows::from(batch);
+        // With two threads the second takes rows split..n.
+        let split = if cfg.two_threads { n / 2 } else { n };
+        let multipliers = (self.lambda_e() as f32, self.lambda_l() as f32);
+        let buf = &mut self.fused;
+        buf.l_sa.resize(n, 0.0);
+        buf.entropy_term.resize(n, 0.0);
+        buf.delta_l.resize(n, 0.0);
+
+        let critic = {
+            let read = ReadParams::new(&[&self.critic, &self.critic_target, &self.actor])?;
+            let (c, t, a) = (read.layers(0)?, read.layers(1)?, read.layers(2)?);
+            let nets = fused::Nets {
+                critic: &c,
+                target: &t,
+                actor: &a,
+            };
+            let share = |range: std::ops::Range<usize>,
+                         ws: &mut fused::Workspace,
+                         grad: &mut NetGradient,
+                         l_sa: &mut [f32]| {
+                grad.reset(nets.critic);
+                let eps = &eps_critic[2 * range.start..2 * range.end];
+                fused::critic_gradient(ws, nets, rows.range(range), eps, set, l_sa, grad)
+            };
+            let [(ws0, g0), (ws1, g1)] = &mut buf.shares;
+            let (l0, l1) = buf.l_sa.split_at_mut(split);
+            let [a, b] = on_shares(
+                split < n,
+                || share(0..split, ws0, g0, l0),
+                || share(split..n, ws1, g1, l1),
+            )?;
+            if split < n {
+                g0.add(g1);
+            }
+            fused::CriticShare {
+                loss: a.loss + b.loss,
+                penalty: a.penalty + b.penalty,
+            }
+        };
+        self.critic_opt.step_flat(&buf.shares[0].1)?;
+
+        let actor_loss = {
+            let read = ReadParams::new(&[&self.critic, &self.actor])?;
+            let (c, a) = (read.layers(0)?, read.layers(1)?);
+            let nets = fused::Nets {
+                critic: &c,
+                target: &c,
+                actor: &a,
+            };
+            let l_sa = &buf.l_sa;
+            let share = |range: std::ops::Range<usize>,
+                         ws: &mut fused::Workspace,
+                         grad: &mut NetGradient,
+                         outs: (&mut [f32], &mut [f32])| {
+                grad.reset(nets.actor);
+                // The actor noise of row i of s sits at i, of s′ at n + i.
+                let eps = (
+                    &eps_actor[2 * range.start..2 * range.end],
+                    &eps_actor[2 * (n + range.start)..2 * (n + range.end)],
+                );
+                let l_sa = &l_sa[range.clone()];
+                fused::actor_gradient(
+                    ws,
+                    nets,
+                    rows.range(range),
+                    eps,
+                    l_sa,
+                    set,
+                    multipliers,
+                    outs,
+                    grad,
+                )
+            };
+            let [(ws0, g0), (ws1, g1)] = &mut buf.shares;
+            let (e0, e1) = buf.entropy_term.split_at_mut(split);
+            let (d0, d1) = buf.delta_l.split_at_mut(split);
+            let [a, b] = on_shares(
+                split < n,
+                || share(0..split, ws0, g0, (e0, d0)),
+                || share(split..n, ws1, g1, (e1, d1)),
+            )?;
+            if split < n {
+                g0.add(g1);
+            }
+            a.loss + b.loss
+        };
+        self.actor_opt.step_flat(&buf.shares[0].1)?;
+        let mean = |v: &[f32]| v.iter().map(|x| f64::from(*x)).sum::<f64>() / n as f64;
+        Ok(StepParts {
+            critic_loss: critic.loss,
+            penalty: critic.penalty,
+            actor_loss,
+            mean_entropy_term: mean(&buf.entropy_term),
+            delta_l: buf.delta_l.clone(),
+            mean_l: mean(&buf.l_sa),
+        })
+    }
+
+    /// The critic and actor steps in the candle graph (the reference). With
     /// `two_threads` each step's gradient is computed on the two halves of the
     /// batch at once and averaged: the same update (the losses are batch means),
     /// on both cores.
-    pub fn update(&mut self, batch: &Batch) -> Result<UpdateStats> {
+    fn candle_steps(&mut self, batch: &Batch) -> Result<StepParts> {
         let n = batch.len;
         let t = self.batch_tensors(batch)?;
         let (eps_critic, eps_actor) = (self.normal(n)?, self.normal(2 * n)?);
@@ -284,31 +474,12 @@ impl Agent {
             (out, actor)
         };
 
-        // Multipliers by gradient ascent on J(λ) in log space.
-        let mean_entropy_term = actor.entropy_term.mean_all()?.to_scalar::<f32>()? as f64;
-        let mean_delta = multiplier_delta(
-            &actor.delta_l.to_vec1::<f32>()?,
-            &batch.own_goal,
-            self.cfg.multiplier_own_goals,
-        );
-        let lr = self.cfg.multiplier_lr;
-        self.lambda_e_opt
-            .ascend(&mut self.log_lambda_e, mean_entropy_term, lr);
-        self.lambda_l_opt
-            .ascend(&mut self.log_lambda_l, mean_delta, lr);
-        self.log_lambda_l = self.log_lambda_l.clamp(LOG_LAMBDA_MIN, 0.0);
-        self.log_lambda_e = self.log_lambda_e.clamp(-20.0, 5.0);
-
-        self.critic_target.polyak_from(&self.critic, self.cfg.tau)?;
-        self.updates += 1;
-        Ok(UpdateStats {
+        Ok(StepParts {
             critic_loss: critic_loss.to_scalar::<f32>()? as f64,
             penalty,
             actor_loss: actor.loss.to_scalar::<f32>()? as f64,
-            lambda_l: self.lambda_l(),
-            lambda_e: self.lambda_e(),
-            entropy: -(mean_entropy_term - self.cfg.target_entropy),
-            delta_l: mean_delta,
+            mean_entropy_term: actor.entropy_term.mean_all()?.to_scalar::<f32>()? as f64,
+            delta_l: actor.delta_l.to_vec1::<f32>()?,
             mean_l: l_sa.mean_all()?.to_scalar::<f32>()? as f64,
         })
     }
@@ -388,7 +559,7 @@ impl Agent {
             ("lambda_e_adam", self.lambda_e_opt),
             ("lambda_l_adam", self.lambda_l_opt),
         ] {
-            meta.insert(format!("{name}"), format!("{},{},{}", s.m, s.v, s.t));
+            meta.insert(name.to_string(), format!("{},{},{}", s.m, s.v, s.t));
         }
         (tensors, meta)
     }
@@ -502,6 +673,26 @@ fn on_two_threads<T: Send>(f: impl Fn(usize) -> Result<T> + Sync) -> Result<[T; 
             .join()
             .map_err(|_| candle_core::Error::Msg("a training thread panicked".into()))?;
         Ok([first?, second?])
+    })
+}
+
+/// `first()` here and, when `two`, `second()` on another thread at the same
+/// time (the default in its place otherwise).
+fn on_shares<T: Send + Default>(
+    two: bool,
+    first: impl FnOnce() -> T,
+    second: impl FnOnce() -> T + Send,
+) -> Result<[T; 2]> {
+    if !two {
+        return Ok([first(), T::default()]);
+    }
+    std::thread::scope(|scope| {
+        let other = scope.spawn(second);
+        let mine = first();
+        let other = other
+            .join()
+            .map_err(|_| candle_core::Error::Msg("a training thread panicked".into()))?;
+        Ok([mine, other])
     })
 }
 
@@ -687,6 +878,234 @@ mod tests {
         assert!((1..n)
             .filter(|i| i % 3 != 0)
             .any(|i| (delta[i] as f64 + lambda_l * l[i] as f64).abs() > 1e-3));
+    }
+
+    /// ‖a − b‖∞ / ‖b‖∞.
+    fn relative_difference(a: &[f32], b: &[f32]) -> f64 {
+        assert_eq!(a.len(), b.len());
+        let diff = a
+            .iter()
+            .zip(b)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0f32, f32::max);
+        let scale = b.iter().map(|y| y.abs()).fold(0.0f32, f32::max);
+        f64::from(diff) / f64::from(scale).max(1e-30)
+    }
+
+    /// The candle gradient of each of `net`'s parameters, in the fused layout.
+    fn candle_gradient(net: &Mlp, grads: &GradStore) -> Vec<Vec<f32>> {
+        net.vars()
+            .iter()
+            .map(|v| {
+                grads
+                    .get(v.as_tensor())
+                    .expect("a gradient for every parameter")
+                    .flatten_all()
+                    .unwrap()
+                    .to_vec1::<f32>()
+                    .unwrap()
+            })
+            .collect()
+    }
+
+    fn fused_flat(grad: &NetGradient) -> Vec<Vec<f32>> {
+        grad.layers
+            .iter()
+            .flat_map(|(w, b)| [w.clone(), b.clone()])
+            .collect()
+    }
+
+    /// Issue 19: the fused kernels' gradients equal candle's autograd on the
+    /// same batch and draws, to 1e-5 relative per parameter tensor: the critic
+    /// objective with and without the gradient penalty (ρ = 1 makes the double
+    /// backward carry most of it), and the actor objective.
+    #[test]
+    fn fused_gradients_equal_candles_on_the_same_batch() {
+        for rho in [0.0, 1.0] {
+            let cfg = TrainConfig {
+                gradient_penalty: rho,
+                ..Default::default()
+            };
+            let mut agent = Agent::new(&cfg).unwrap();
+            let n = 64;
+            let b = batch(n);
+            let t = agent.batch_tensors(&b).unwrap();
+            let eps_critic = agent.normal_values(n);
+            let eps_actor = agent.normal_values(2 * n);
+            let set = fused::Settings::new(&cfg, n);
+            let rows = fused::Rows::from(&b);
+
+            // Critic.
+            let eps = f32_tensor(&eps_critic, n, 2, &agent.device).unwrap();
+            let a2 = actor_sample(&agent.actor, &t.s2, &eps)
+                .unwrap()
+                .action
+                .detach();
+            let (loss, penalty, l_sa) =
+                critic_objective(&agent.critic, &agent.critic_target, &cfg, &t, &a2).unwrap();
+            let want = candle_gradient(&agent.critic, &loss.backward().unwrap());
+            let read =
+                ReadParams::new(&[&agent.critic, &agent.critic_target, &agent.actor]).unwrap();
+            let (c, tg, a) = (
+                read.layers(0).unwrap(),
+                read.layers(1).unwrap(),
+                read.layers(2).unwrap(),
+            );
+            let nets = fused::Nets {
+                critic: &c,
+                target: &tg,
+                actor: &a,
+            };
+            let mut ws = fused::Workspace::default();
+            let mut grad = NetGradient::default();
+            grad.reset(&c);
+            let mut fused_l_sa = vec![0.0; n];
+            let share = fused::critic_gradient(
+                &mut ws,
+                nets,
+                rows,
+                &eps_critic,
+                set,
+                &mut fused_l_sa,
+                &mut grad,
+            );
+            let loss = loss.to_scalar::<f32>().unwrap() as f64;
+            assert!(
+                (share.loss - loss).abs() <= 1e-5 * loss,
+                "ρ {rho}: loss {} vs {loss}",
+                share.loss
+            );
+            assert!((share.penalty - penalty).abs() <= 1e-5 * penalty.max(1e-9));
+            assert!(relative_difference(&fused_l_sa, &l_sa.to_vec1::<f32>().unwrap()) < 1e-5);
+            for (i, (got, want)) in fused_flat(&grad).iter().zip(&want).enumerate() {
+                let d = relative_difference(got, want);
+                assert!(
+                    d < 1e-5,
+                    "ρ {rho}: critic parameter {i}: relative difference {d:e}"
+                );
+            }
+
+            // Actor, against the same critic.
+            let multipliers = (0.05, 0.9);
+            let eps = f32_tensor(&eps_actor, 2 * n, 2, &agent.device).unwrap();
+            let obj = actor_objective(
+                &agent.actor,
+                &agent.critic,
+                &cfg,
+                &t,
+                &eps,
+                &l_sa,
+                multipliers,
+            )
+            .unwrap();
+            let want = candle_gradient(&agent.actor, &obj.loss.backward().unwrap());
+            grad.reset(&a);
+            let (mut entropy, mut delta) = (vec![0.0; n], vec![0.0; n]);
+            let share = fused::actor_gradient(
+                &mut ws,
+                nets,
+                rows,
+                (&eps_actor[..2 * n], &eps_actor[2 * n..]),
+                &fused_l_sa,
+                set,
+                (multipliers.0 as f32, multipliers.1 as f32),
+                (&mut entropy, &mut delta),
+                &mut grad,
+            );
+            let loss = obj.loss.to_scalar::<f32>().unwrap() as f64;
+            assert!(
+                (share.loss - loss).abs() <= 1e-5 * loss.abs(),
+                "actor loss {} vs {loss}",
+                share.loss
+            );
+            assert!(
+                relative_difference(&entropy, &obj.entropy_term.to_vec1::<f32>().unwrap()) < 1e-5
+            );
+            assert!(relative_difference(&delta, &obj.delta_l.to_vec1::<f32>().unwrap()) < 1e-5);
+            for (i, (got, want)) in fused_flat(&grad).iter().zip(&want).enumerate() {
+                let d = relative_difference(got, want);
+                assert!(
+                    d < 1e-5,
+                    "ρ {rho}: actor parameter {i}: relative difference {d:e}"
+                );
+            }
+        }
+    }
+
+    /// Whole updates (Adam and Polyak in place, two threads or one) follow the
+    /// candle updates from the same start.
+    #[test]
+    fn fused_updates_follow_candle_updates() {
+        let b = batch(64);
+        let run = |kernel: Kernel, two_threads: bool| {
+            let cfg = TrainConfig {
+                kernel,
+                two_threads,
+                ..Default::default()
+            };
+            let mut agent = Agent::new(&cfg).unwrap();
+            let stats: Vec<UpdateStats> = (0..3).map(|_| agent.update(&b).unwrap()).collect();
+            let params = |net: &Mlp| -> Vec<f32> {
+                net.vars()
+                    .iter()
+                    .flat_map(|v| {
+                        v.as_tensor()
+                            .flatten_all()
+                            .unwrap()
+                            .to_vec1::<f32>()
+                            .unwrap()
+                    })
+                    .collect()
+            };
+            let p = [
+                params(&agent.critic),
+                params(&agent.critic_target),
+                params(&agent.actor),
+                agent
+                    .critic_opt
+                    .v
+                    .iter()
+                    .flat_map(|v| {
+                        v.as_tensor()
+                            .flatten_all()
+                            .unwrap()
+                            .to_vec1::<f32>()
+                            .unwrap()
+                    })
+                    .collect(),
+            ];
+            (stats, p, agent.lambda_l())
+        };
+        let (want_stats, want, want_lambda) = run(Kernel::Candle, false);
+        for two_threads in [false, true] {
+            let (stats, got, lambda) = run(Kernel::Fused, two_threads);
+            for (s, w) in stats.iter().zip(&want_stats) {
+                assert!((s.critic_loss - w.critic_loss).abs() <= 1e-4 * w.critic_loss);
+                assert!((s.actor_loss - w.actor_loss).abs() <= 1e-4 * w.actor_loss.abs());
+            }
+            assert!((lambda - want_lambda).abs() < 1e-9);
+            for (name, (g, w)) in ["critic", "target", "actor", "critic Adam v"]
+                .iter()
+                .zip(got.iter().zip(&want))
+            {
+                // Adam moves each parameter by about lr per step whatever the
+                // gradient's size: compare the moves, not the parameters' size.
+                let diff = g
+                    .iter()
+                    .zip(w)
+                    .map(|(a, b)| (a - b).abs())
+                    .fold(0.0f32, f32::max);
+                let bound = if *name == "critic Adam v" {
+                    1e-4 * w.iter().fold(0.0f32, |m, x| m.max(*x))
+                } else {
+                    1e-6
+                };
+                assert!(
+                    diff <= bound,
+                    "{name} (two threads {two_threads}): differs by {diff:e}"
+                );
+            }
+        }
     }
 
     #[test]

@@ -51,9 +51,11 @@ pub struct TrainConfig {
     pub multiplier_own_goals: bool,
     /// Where an episode ends (`[terminal]`); off by default.
     pub terminal: Termination,
-    /// Run the critic and the actor step of each update on two threads (the
-    /// actor against the critic before the update): one run on both cores.
+    /// Compute each gradient of an update on the two halves of the batch, one
+    /// per thread, and average: the same update on both cores.
     pub two_threads: bool,
+    /// Which implementation computes the updates (the same mathematics).
+    pub kernel: Kernel,
     /// Minutes between checkpoints.
     pub checkpoint_minutes: f64,
     /// Updates between evaluations of the actor on held-out goals.
@@ -61,6 +63,17 @@ pub struct TrainConfig {
     pub eval_goals: usize,
     /// Updates between rows of the CSV log.
     pub log_every: u64,
+}
+
+/// The implementation of an update's gradients.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Kernel {
+    /// Hand-written f32 kernels over reused buffers (`crate::fused`).
+    #[default]
+    Fused,
+    /// The candle autograd graph (`crate::nets`), the reference.
+    Candle,
 }
 
 /// The terminal set of the goal (DESIGN §4's `done`): the machine at rest
@@ -166,6 +179,7 @@ impl Default for TrainConfig {
             multiplier_own_goals: false,
             terminal: Termination::default(),
             two_threads: false,
+            kernel: Kernel::default(),
             checkpoint_minutes: 5.0,
             eval_every: 10_000,
             eval_goals: 64,

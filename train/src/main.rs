@@ -9,7 +9,7 @@ use clap::{Parser, Subcommand};
 
 use control::weights::{self, NetworkRole, NetworkWeights};
 use control::{Actor, Critic};
-use train::config::TrainConfig;
+use train::config::{Kernel, TrainConfig};
 use train::evaluate::VerifySummary;
 use train::run::{self, RunOptions};
 
@@ -70,8 +70,9 @@ enum Cmd {
         #[arg(long)]
         out: Option<PathBuf>,
     },
-    /// Measure gradient updates per second (batch from the config: critic +
-    /// penalty + actor + multipliers + Polyak) and environment steps per second.
+    /// Measure gradient updates per second (batch 256: critic + penalty + actor
+    /// + multipliers + Polyak) of the fused kernels and the candle reference, on
+    /// one thread and on two, in the same run; and environment steps per second.
     Bench {
         #[arg(long, default_value_t = 300)]
         updates: u64,
@@ -635,33 +636,59 @@ fn bench(updates: u64) -> Result<()> {
         "environment: {env_rate:.0} transitions/s (RK4 + clamp + episode bookkeeping, {} envs)",
         cfg.n_envs
     );
-    // Both update schedules in the same run, so their ratio is robust to a shared machine.
-    let mut rates = Vec::new();
-    for two_threads in [false, true] {
-        let cfg = TrainConfig {
-            two_threads,
-            ..cfg.clone()
-        };
-        let mut agent = train::agent::Agent::new(&cfg)?;
-        let mut batch = train::buffer::Batch::default();
-        // Warm-up, then the timed updates.
+    // Both implementations and both schedules in the same run, alternated in
+    // rounds, so their ratios are robust to a shared machine.
+    let variants = [
+        (Kernel::Candle, false),
+        (Kernel::Candle, true),
+        (Kernel::Fused, false),
+        (Kernel::Fused, true),
+    ];
+    let mut agents = variants
+        .iter()
+        .map(|&(kernel, two_threads)| {
+            train::agent::Agent::new(&TrainConfig {
+                kernel,
+                two_threads,
+                ..cfg.clone()
+            })
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    let mut batch = train::buffer::Batch::default();
+    for agent in &mut agents {
         for _ in 0..20 {
             buffer.sample(&cfg, &encoder, cfg.batch_size, &mut rng, &mut batch);
             agent.update(&batch)?;
         }
-        let t = Instant::now();
-        for _ in 0..updates {
-            buffer.sample(&cfg, &encoder, cfg.batch_size, &mut rng, &mut batch);
-            agent.update(&batch)?;
+    }
+    const ROUNDS: u64 = 3;
+    let mut seconds = [0.0f64; 4];
+    for _ in 0..ROUNDS {
+        for (agent, seconds) in agents.iter_mut().zip(&mut seconds) {
+            let t = Instant::now();
+            for _ in 0..updates.div_ceil(ROUNDS) {
+                buffer.sample(&cfg, &encoder, cfg.batch_size, &mut rng, &mut batch);
+                agent.update(&batch)?;
+            }
+            *seconds += t.elapsed().as_secs_f64();
         }
-        let rate = updates as f64 / t.elapsed().as_secs_f64();
+    }
+    let timed = (updates.div_ceil(ROUNDS) * ROUNDS) as f64;
+    let rates: Vec<f64> = seconds.iter().map(|s| timed / s).collect();
+    for ((kernel, two_threads), rate) in variants.iter().zip(&rates) {
         println!(
-            "training: {rate:.1} updates/s with {} (batch {}, critic + gradient penalty + actor + multipliers + Polyak; RAYON_NUM_THREADS={threads})",
-            if two_threads { "two threads (each gradient on half the batch)" } else { "one thread" },
+            "training: {rate:6.1} updates/s  {:<6} {} (batch {}, critic + gradient penalty + actor + multipliers + Polyak; RAYON_NUM_THREADS={threads})",
+            format!("{kernel:?}").to_lowercase(),
+            if *two_threads { "two threads (each gradient on half the batch)" } else { "one thread" },
             cfg.batch_size
         );
-        rates.push(rate);
     }
-    println!("two_threads / one thread: {:.2}", rates[1] / rates[0]);
+    println!(
+        "fused / candle: {:.2} on one thread, {:.2} on two; two threads / one: candle {:.2}, fused {:.2}",
+        rates[2] / rates[0],
+        rates[3] / rates[1],
+        rates[1] / rates[0],
+        rates[3] / rates[2]
+    );
     Ok(())
 }

@@ -19,13 +19,18 @@ struct Softplus;
 /// resolution, and which stays relatively exact as t → 0.
 #[inline(always)]
 pub fn softplus_f32(z: f32) -> f32 {
-    let t = (-z.abs()).exp();
+    z.max(0.0) + ln_1p_unit((-z.abs()).exp())
+}
+
+/// ln(1 + t) for t ∈ (0, 1], the series of [`softplus_f32`].
+#[inline(always)]
+pub fn ln_1p_unit(t: f32) -> f32 {
     let s = t / (2.0 + t);
     let s2 = s * s;
     let poly = 1.0
         + s2 * (1.0 / 3.0
             + s2 * (1.0 / 5.0 + s2 * (1.0 / 7.0 + s2 * (1.0 / 9.0 + s2 * (1.0 / 11.0)))));
-    z.max(0.0) + 2.0 * s * poly
+    2.0 * s * poly
 }
 
 impl CustomOp1 for Softplus {
