@@ -69,6 +69,24 @@ pub struct MachineParams {
     pub a_max: f64,
 }
 
+/// "L_f 0.6 m, L_r 0.6 m, |β| ≤ 40°, …": what a report names the machine by.
+impl std::fmt::Display for MachineParams {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let deg = |rad: f64| rad.to_degrees();
+        write!(
+            f,
+            "L_f {} m, L_r {} m, |β| ≤ {:.0}°, |β̇| ≤ {:.0}°/s, |v| ≤ {} m/s, |β̈| ≤ {:.0}°/s², |a| ≤ {} m/s²",
+            self.l_f,
+            self.l_r,
+            deg(self.beta_max),
+            deg(self.beta_dot_max),
+            self.v_max,
+            deg(self.beta_ddot_max),
+            self.a_max
+        )
+    }
+}
+
 impl Default for MachineParams {
     fn default() -> Self {
         let deg = std::f64::consts::PI / 180.0;
@@ -338,6 +356,24 @@ pub fn converged(x: &State, g: &Goal, tolerance: f64) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_machine_is_named_by_its_parameters_in_the_units_people_use() {
+        let deg = std::f64::consts::PI / 180.0;
+        let large = MachineParams {
+            l_f: 0.9,
+            l_r: 1.1,
+            beta_max: 42.0 * deg,
+            beta_dot_max: 25.0 * deg,
+            v_max: 1.5,
+            beta_ddot_max: 25.0 * deg,
+            a_max: 0.8,
+        };
+        assert_eq!(
+            large.to_string(),
+            "L_f 0.9 m, L_r 1.1 m, |β| ≤ 42°, |β̇| ≤ 25°/s, |v| ≤ 1.5 m/s, |β̈| ≤ 25°/s², |a| ≤ 0.8 m/s²"
+        );
+    }
 
     fn central_diff_jacobians(
         p: &MachineParams,

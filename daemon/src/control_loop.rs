@@ -53,6 +53,10 @@ use crate::pose_gate::{PoseGate, PoseVerdict};
 use crate::safety::{self, Decision, InputFaults, InputHealth, Situation, SolveResult, StopCause};
 use crate::stats::LoopStats;
 
+/// `solve_failures` of a goal the controller refused outright (validated
+/// goals cannot be refused; it stops at once, as after too many failed solves).
+const GOAL_REFUSED: u32 = u32::MAX;
+
 /// Why the loop ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ExitReason {
@@ -373,13 +377,16 @@ impl ControlLoop {
         if cause != StopCause::SolveFailed {
             return flags;
         }
-        let n = self.solve_failures;
-        tracing::error!("solver failed {n} ticks in a row: controlled stop");
+        let what = match self.solve_failures {
+            GOAL_REFUSED => "the controller refused the goal".to_string(),
+            n => format!("solve failed {n} ticks in a row"),
+        };
+        tracing::error!("{what}: controlled stop");
         self.latched |= fault_flags::SOLVE_FAILED;
-        self.ctx.goals.lock().abort_active(Abort::new(
-            AbortReason::Fault,
-            format!("fault: solve failed {n} ticks in a row"),
-        ));
+        self.ctx
+            .goals
+            .lock()
+            .abort_active(Abort::new(AbortReason::Fault, format!("fault: {what}")));
         // This tick stops instead of driving on the fallback plan.
         (flags & !fault_flags::FALLBACK_PLAN) | fault_flags::SOLVE_FAILED
     }
@@ -583,7 +590,7 @@ impl ControlLoop {
             if let Err(e) = self.controller.set_goal(x, g.goal, g.obstacles()) {
                 // Validated goals cannot fail here; stop at once as on a solver failure.
                 tracing::error!("controller refused the goal: {e}");
-                self.solve_failures = u32::MAX;
+                self.solve_failures = GOAL_REFUSED;
                 return failed(None);
             }
             self.engaged_generation = Some(g.generation);

@@ -395,7 +395,7 @@ fn main() -> Result<()> {
             cfg.perturbation = perturbations.options().perturbation()?;
             let ev = eval::evaluate(&cfg, &nets, &set)?;
             let header = format!(
-                "# eval: {}\n\nmethods {methods}, planner {planner}, N = {}, Hessian {:?}, obstacles {:?} with margin {} m, SQP iterations {} × step {}, gain estimation {}, delay estimation {}, delay {delay} s, lag {lag} s, plant perturbation: {}, tolerance {}, networks: {}\n",
+                "# eval: {}\n\nmethods {methods}, planner {planner}, N = {}, Hessian {:?}, obstacles {:?} with margin {} m, SQP iterations {} × step {}, gain estimation {}, delay estimation {}, delay {delay} s, lag {lag} s, plant perturbation: {}, tolerance {}, networks: {}, machine (MPC, plant and min-time bound): {}\n",
                 scenarios.display(),
                 cfg.mpc.horizon,
                 cfg.mpc.hessian,
@@ -407,7 +407,8 @@ fn main() -> Result<()> {
                 cfg.mpc.delay_estimation,
                 robustness::describe(&cfg.perturbation),
                 common.tolerance,
-                nets.source
+                nets.source,
+                cfg.params
             );
             eval::write_outputs(&ev, &out, &header, !no_scenario_plots)?;
             print!("{}", sim::results::summary_markdown(&ev.summaries));

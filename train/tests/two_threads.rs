@@ -1,10 +1,11 @@
 //! The two-thread update (each gradient on two batch halves, averaged) is the
-//! one-thread update: same losses, same parameters after a few updates.
+//! one-thread update: same losses, same parameters after a few updates, with
+//! either kernel.
 
 use rand::{Rng, SeedableRng};
 use train::agent::Agent;
 use train::buffer::Batch;
-use train::config::TrainConfig;
+use train::config::{Kernel, TrainConfig};
 
 fn batch(n: usize, seed: u64) -> Batch {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
@@ -30,10 +31,17 @@ fn params(agent: &Agent) -> Vec<f32> {
 
 #[test]
 fn two_thread_update_equals_the_one_thread_update() {
+    for kernel in [Kernel::Fused, Kernel::Candle] {
+        two_threads_equal_one(kernel);
+    }
+}
+
+fn two_threads_equal_one(kernel: Kernel) {
     let cfg = TrainConfig {
         batch_size: 64,
         hidden: vec![32, 32],
         gradient_penalty: 1e-2,
+        kernel,
         ..TrainConfig::default()
     };
     let mut one = Agent::new(&cfg).unwrap();
@@ -55,7 +63,7 @@ fn two_thread_update_equals_the_one_thread_update() {
         ] {
             assert!(
                 (x - y).abs() <= 1e-5 * (1.0 + x.abs()),
-                "update {k}: {name} {x} vs {y}"
+                "{kernel:?} update {k}: {name} {x} vs {y}"
             );
         }
     }
@@ -70,7 +78,13 @@ fn two_thread_update_equals_the_one_thread_update() {
         .zip(params(&Agent::new(&cfg).unwrap()))
         .map(|(a, b)| (a - b).abs())
         .fold(0.0f32, f32::max);
-    eprintln!("max parameter difference {worst:e}, max move {moved:e}");
-    assert!(moved > 1e-4, "the updates did not move the parameters");
-    assert!(worst < 1e-5, "parameters differ by up to {worst}");
+    eprintln!("{kernel:?}: max parameter difference {worst:e}, max move {moved:e}");
+    assert!(
+        moved > 1e-4,
+        "{kernel:?}: the updates did not move the parameters"
+    );
+    assert!(
+        worst < 1e-5,
+        "{kernel:?}: parameters differ by up to {worst}"
+    );
 }
