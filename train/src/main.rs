@@ -138,6 +138,38 @@ fn git_commit() -> String {
         .unwrap_or_else(|| "unknown".into())
 }
 
+/// Appends `commit<TAB>command` to the run directory's [`run::INVOCATIONS`].
+fn record_invocation(out: &Path, commit: &str, command: &str) -> Result<()> {
+    use std::io::Write;
+    fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let path = out.join(run::INVOCATIONS);
+    fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(&path)
+        .and_then(|mut f| writeln!(f, "{commit}\t{command}"))
+        .with_context(|| format!("appending to {}", path.display()))
+}
+
+/// The run's invocations as a Markdown list (empty if it has none recorded).
+fn invocations_markdown(run_dir: &Path) -> String {
+    let Ok(text) = fs::read_to_string(run_dir.join(run::INVOCATIONS)) else {
+        return String::new();
+    };
+    let lines: Vec<String> = text
+        .lines()
+        .filter_map(|l| l.split_once('\t'))
+        .map(|(commit, command)| format!("- `{command}` (working tree at `{commit}`)\n"))
+        .collect();
+    if lines.is_empty() {
+        return String::new();
+    }
+    format!(
+        "Every invocation on the run directory, in order:\n\n{}\n",
+        lines.concat()
+    )
+}
+
 fn load_config(path: &Path) -> Result<TrainConfig> {
     let text = fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
     TrainConfig::from_toml(&text).with_context(|| format!("in {}", path.display()))
@@ -237,6 +269,8 @@ fn main() -> Result<()> {
                 quiet: false,
             };
             anyhow::ensure!(selection_goals > 0, "--selection-goals must be at least 1");
+            let command = std::env::args().collect::<Vec<_>>().join(" ");
+            record_invocation(&out, &opts.git_commit, &command)?;
             let s = run::train(&cfg, &opts)?;
             println!(
                 "{} updates, {} env steps in {:.0} s; critic loss {:.4e} -> {:.4e}; lambda_l {:.3}; weights in {}",
@@ -263,12 +297,11 @@ fn main() -> Result<()> {
                 )
             })?;
             let best = &scores[0];
-            let command: Vec<String> = std::env::args().collect();
             publish(
                 &out,
                 &best.dir,
                 &out.join("published"),
-                &command.join(" "),
+                &command,
                 Some(&scores),
             )?;
         }
@@ -569,6 +602,7 @@ fn publish(
     let readme = format!(
         "# Trained actor and critic\n\n\
          Produced by `{command}` (config: `train-config.toml`){how}.\n\n\
+         {invocations}\
          | | |\n|---|---|\n\
          | git commit of the training binary | `{commit}` |\n\
          | gradient updates | {steps} |\n\
@@ -593,6 +627,7 @@ fn publish(
          ## Learning curves\n\n![learning curves](learning_curves.svg)\n\n\
          `log.csv` and `eval.csv` are the run's logs.\n{selection_table}",
         out = out.display(),
+        invocations = invocations_markdown(run_dir),
         commit = meta.git_commit,
         steps = meta.steps,
         hours = wall / 3600.0,

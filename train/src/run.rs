@@ -29,6 +29,9 @@ pub const CHECKPOINT: &str = "checkpoint.safetensors";
 /// the better controllers.
 pub const CANDIDATES: &str = "candidates";
 pub const CONFIG: &str = "config.toml";
+/// One line per `wlnav-train train` on the run directory: the git commit of the
+/// working tree and the command (a run resumed by a newer binary says so).
+pub const INVOCATIONS: &str = "invocations.log";
 const LOG_HEADER: &str =
     "updates,env_steps,wall_s,updates_per_s,critic_loss,penalty,actor_loss,lambda_l,lambda_e,entropy,delta_l,mean_l";
 const EVAL_HEADER: &str = "updates,env_steps,wall_s,success_0.1,success_0.3,mean_final_distance";

@@ -62,6 +62,16 @@ fn train_selects_the_best_candidate_in_closed_loop_and_publishes_it() {
     let readme = std::fs::read_to_string(published.join("README.md")).unwrap();
     assert!(readme.contains("wlnav-train train --config"), "{readme}");
     assert!(readme.contains("## Closed-loop selection"), "{readme}");
+    // Both invocations, the first and the resume, are named.
+    let invocations = readme
+        .lines()
+        .filter(|l| l.starts_with("- `") && l.contains("wlnav-train train"))
+        .collect::<Vec<_>>();
+    assert_eq!(invocations.len(), 2, "{readme}");
+    assert!(
+        invocations[0].contains("--max-updates 30") && invocations[1].contains("--resume"),
+        "{readme}"
+    );
     // The published networks are the candidate the README names as chosen.
     let critic = weights::load(&published.join(weights::CRITIC_FILE), NetworkRole::Critic).unwrap();
     assert!(
