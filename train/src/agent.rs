@@ -337,6 +337,7 @@ impl Agent {
         let actor_loss = {
             let read = ReadParams::new(&[&self.critic, &self.actor])?;
             let (c, a) = (read.layers(0)?, read.layers(1)?);
+            // The actor step reads no target critic.
             let nets = fused::Nets {
                 critic: &c,
                 target: &c,
