@@ -490,7 +490,9 @@ pub struct CriticShare {
 }
 
 /// One tanh-Gaussian draw per row of the actor's output [μ₁ μ₂ log σ₁ log σ₂]
-/// (nets::actor_sample): calls `each(row, j, u, clamp-passes)` per component.
+/// (nets::actor_sample): calls `each(row, j, u, log σ_j, passes)` per component,
+/// u = μ_j + σ_j ε_j with log σ clamped to [LOG_STD_MIN, LOG_STD_MAX]; `passes`
+/// says the clamp let the raw value through (else its gradient is 0).
 fn for_each_draw(out: &[f32], eps: &[f32], mut each: impl FnMut(usize, usize, f32, f32, bool)) {
     for (r, (o, e)) in out.chunks_exact(4).zip(eps.chunks_exact(2)).enumerate() {
         for j in 0..2 {
