@@ -121,7 +121,7 @@ fn matmul(
     }
 }
 
-/// eˣ for x ≤ 0, branch-free so that a loop over it vectorises (libm's expf
+/// eˣ for x ≤ 0, branch-free so that a loop over it can vectorise (libm's expf
 /// is a call per element; it was a tenth of the update): x = k ln 2 + r with
 /// |r| ≤ ln 2 / 2, eʳ by its degree-7 Taylor polynomial (truncation below
 /// 0.35⁸/8! ≈ 6e-9, under f32's resolution), 2ᵏ from the exponent bits.
