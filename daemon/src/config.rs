@@ -844,7 +844,9 @@ mod tests {
         assert_eq!(c.machine, w.meta.machine);
         assert_eq!((c.mpc.dt, c.period()), (0.25, 0.25));
         c.validate().unwrap();
-        crate::controller::load_controller(&c).unwrap();
+        // The weights load and the MPC builds for the adopted machine.
+        let build = crate::controller::load_controller(&c).unwrap();
+        build().unwrap();
 
         // A file that gives the machine keeps it, and loading refuses the mismatch.
         std::fs::write(&file, format!("{weights}[machine]\nl_f = 0.6\n")).unwrap();

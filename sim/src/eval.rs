@@ -7,6 +7,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use anyhow::{Context, Result};
+use control::planner::PlanOutcome;
 use control::scenario::Scenario;
 
 use crate::plots::{self, method_color, Track};
@@ -117,10 +118,16 @@ pub fn navigation_text(ev: &Evaluation) -> String {
         .iter()
         .filter(|n| n.routes.iter().any(|r| r.len() > 1))
         .count();
+    let retries = navs
+        .iter()
+        .flat_map(|n| n.plan_outcome.iter())
+        .filter(|&&o| o == PlanOutcome::Retry)
+        .count();
     let replans = navs
         .iter()
         .map(|n| n.plan_ms.len().saturating_sub(1))
-        .sum::<usize>();
+        .sum::<usize>()
+        - retries;
     let aborts =
         |r: control::planner::AbortReason| navs.iter().filter(|n| n.abort == Some(r)).count();
     let stats = |v: &[f64]| {
@@ -136,7 +143,7 @@ pub fn navigation_text(ev: &Evaluation) -> String {
         }
     };
     format!(
-        "navigation: {} runs, {routed} with a route, {replans} replans; aborted no-route {}, no-progress {}\n\
+        "navigation: {} runs, {routed} with a route, {replans} replans, {retries} retries; aborted no-route {}, no-progress {}\n\
          navigation: plan {} ({} plans); update {}\n",
         navs.len(),
         aborts(control::planner::AbortReason::NoRoute),
@@ -151,8 +158,9 @@ pub fn navigation_text(ev: &Evaluation) -> String {
 /// route (`x:y:theta` subgoals separated by `;`, the goal last) and how the
 /// run's navigation ended.
 pub fn navigation_csv(ev: &Evaluation) -> Option<String> {
-    let mut out =
-        String::from("name,method,plan,at,plan_ms,expansions,shots,route,abort,aborted_at\n");
+    let mut out = String::from(
+        "name,method,plan,outcome,at,plan_ms,expansions,shots,route,abort,aborted_at\n",
+    );
     let mut any = false;
     for s in &ev.runs {
         for (m, r) in &s.runs {
@@ -164,9 +172,10 @@ pub fn navigation_csv(ev: &Evaluation) -> Option<String> {
                     .map(|g| format!("{:.3}:{:.3}:{:.3}", g.x, g.y, g.theta))
                     .collect();
                 out.push_str(&format!(
-                    "{},{},{k},{},{:.3},{},{},{},{},{}\n",
+                    "{},{},{k},{},{},{:.3},{},{},{},{},{}\n",
                     s.scenario.name,
                     m.name(),
+                    n.plan_outcome.get(k).map_or("", |o| o.name()),
                     n.plan_at.get(k).copied().unwrap_or(0.0),
                     n.plan_ms.get(k).copied().unwrap_or(0.0),
                     n.plan_work.get(k).map_or(0, |w| w.0),

@@ -26,7 +26,7 @@ use control::model::{
     converged, env_step, ix, Control, Goal, MachineParams, State, REACH_SPEED, SUCCESS_TOLERANCE,
 };
 use control::mpc::{Mpc, MpcSettings};
-use control::planner::{AbortReason, NavStep, Navigator, NavigatorSettings};
+use control::planner::{AbortReason, NavStep, Navigator, NavigatorSettings, PlanOutcome};
 use control::plant::{Plant, PlantConfig, PlantPerturbation};
 use control::scenario::Scenario;
 use control::weights::{self, random_network, NetworkMetadata, NetworkRole};
@@ -288,6 +288,8 @@ pub struct Navigation {
     pub plan_at: Vec<f64>,
     /// Each plan's search: (expansions, shots or edge checks).
     pub plan_work: Vec<(usize, usize)>,
+    /// How each plan ended (direct, route, no route, retry).
+    pub plan_outcome: Vec<PlanOutcome>,
     /// Duration of every `update` [ms] (including the replans in it).
     pub update_ms: Vec<f64>,
     /// Why the navigator ended the run, if it did.
@@ -304,6 +306,7 @@ impl Navigation {
             if let Some(r) = nav.last_plan() {
                 self.plan_ms.push(r.duration.as_secs_f64() * 1e3);
                 self.plan_work.push((r.search.expansions, r.search.shots));
+                self.plan_outcome.push(r.outcome);
             }
             self.plan_at.push(now);
             self.routes.push(nav.route().to_vec());

@@ -36,7 +36,9 @@ pub use world::World;
 
 use crate::actor::{Actor, ActorWorkspace};
 use crate::critic::{Critic, CriticWorkspace};
-use crate::model::{goal_distance, ix, Goal, MachineParams, State, SUCCESS_TOLERANCE};
+use crate::model::{
+    goal_distance, ix, wrap_angle, Goal, MachineParams, State, REACH_SPEED, SUCCESS_TOLERANCE,
+};
 use crate::obstacle::{BadObstacle, Obstacle};
 use crate::progress::{ProgressChecker, ProgressSettings};
 
@@ -79,6 +81,17 @@ pub struct NavigatorSettings {
     pub replan_after: f64,
     /// Replans per goal. Default 3.
     pub max_replans: usize,
+    /// A stall on the goal itself that a replan cannot help (open ground, or
+    /// already inside the search's goal region) is retried: the MPC drives to
+    /// the approach pose, this far behind the goal on its heading (ahead of it
+    /// when that is blocked), then to the goal again, a straight final
+    /// approach [m]. Why: a critic can stop beside its goal with the
+    /// articulation at its limit (the heading error can then only shrink by
+    /// driving, which moves the position; the large loader, `docs/training.md`).
+    /// Default 3 (beyond `subgoal_radius`, about a turning radius).
+    pub approach_distance: f64,
+    /// Retries per goal. Default 2.
+    pub max_retries: usize,
     /// Within this pose error of the goal the machine is holding it, not
     /// stalled. Default [`SUCCESS_TOLERANCE`].
     pub reached_tolerance: f64,
@@ -153,6 +166,8 @@ impl Default for NavigatorSettings {
             progress: ProgressSettings::default(),
             replan_after: 4.0,
             max_replans: 3,
+            approach_distance: 3.0,
+            max_retries: 2,
             reached_tolerance: SUCCESS_TOLERANCE,
             clearance_margin: 0.15,
             direct_margin: 0.3,
@@ -198,6 +213,7 @@ impl NavigatorSettings {
             ("subgoal_spacing", self.subgoal_spacing),
             ("progress.timeout", self.progress.timeout),
             ("replan_after", self.replan_after),
+            ("approach_distance", self.approach_distance),
             ("reached_tolerance", self.reached_tolerance),
             ("workspace_half_size", self.workspace_half_size),
             ("grid_resolution", self.grid_resolution),
@@ -229,6 +245,13 @@ impl NavigatorSettings {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(bad(name, "must be finite and >= 0", v));
             }
+        }
+        if self.approach_distance <= self.subgoal_radius {
+            return Err(bad(
+                "approach_distance",
+                "must exceed subgoal_radius (or the approach pose is passed at once)",
+                self.approach_distance,
+            ));
         }
         if self.replan_after >= self.progress.timeout {
             return Err(bad(
@@ -358,6 +381,21 @@ pub enum PlanOutcome {
     Route,
     /// The planner found none.
     NoRoute,
+    /// A retry after a stall near the goal: the route is the approach pose,
+    /// then the goal (`NavigatorSettings::approach_distance`).
+    Retry,
+}
+
+impl PlanOutcome {
+    /// The name in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            PlanOutcome::Direct => "direct",
+            PlanOutcome::Route => "route",
+            PlanOutcome::NoRoute => "no-route",
+            PlanOutcome::Retry => "retry",
+        }
+    }
 }
 
 /// What the last plan did and how long it took.
@@ -409,6 +447,7 @@ pub struct Navigator {
     last_progress: f64,
     last_replan: f64,
     replans: usize,
+    retries: usize,
     pending_no_route: bool,
     aborted: Option<AbortReason>,
     last_plan: Option<PlanReport>,
@@ -475,6 +514,7 @@ impl Navigator {
             last_progress: 0.0,
             last_replan: 0.0,
             replans: 0,
+            retries: 0,
             pending_no_route: false,
             aborted: None,
             last_plan: None,
@@ -553,12 +593,19 @@ impl Navigator {
             self.aborted = Some(AbortReason::NoProgress);
             return NavStep::Abort(AbortReason::NoProgress);
         }
-        if !self.world.is_empty()
-            && !holding
+        let stalled = !holding
             && stalled_for >= self.settings.replan_after
-            && now - self.last_replan >= self.settings.replan_after
-            && self.replans < self.settings.max_replans
+            && now - self.last_replan >= self.settings.replan_after;
+        if stalled
+            && final_target
+            && self.retries < self.settings.max_retries
+            && self.stuck_near(x, &goal)
+            && (self.world.is_empty() || self.in_search_goal_region(x, &goal))
         {
+            self.retries += 1;
+            self.last_replan = now;
+            self.retry(x, &goal);
+        } else if stalled && !self.world.is_empty() && self.replans < self.settings.max_replans {
             self.replans += 1;
             self.last_replan = now;
             self.plan(x, true);
@@ -613,6 +660,7 @@ impl Navigator {
         self.window_target = None;
         self.clocks_pending = false;
         self.replans = 0;
+        self.retries = 0;
         self.pending_no_route = false;
         self.aborted = None;
     }
@@ -714,6 +762,59 @@ impl Navigator {
         }
         report.duration = t0.elapsed();
         self.last_plan = Some(report);
+        self.plans += 1;
+    }
+
+    /// At rest within `approach_distance` of the goal: stopped short of it,
+    /// not manoeuvring towards it (a turn that first raises the pose error
+    /// moves).
+    fn stuck_near(&self, x: &State, goal: &Goal) -> bool {
+        x[ix::V].abs() < REACH_SPEED
+            && (x[ix::X] - goal.x).hypot(x[ix::Y] - goal.y) <= self.settings.approach_distance
+    }
+
+    /// Whether `x` is inside the goal region of the planners' search, where a
+    /// replan has nothing left to plan.
+    fn in_search_goal_region(&self, x: &State, goal: &Goal) -> bool {
+        let s = &self.settings;
+        (x[ix::X] - goal.x).hypot(x[ix::Y] - goal.y) <= s.goal_position_tolerance
+            && wrap_angle(x[ix::THETA] - goal.theta).abs() <= s.goal_heading_tolerance
+    }
+
+    /// The retry after a stall on the goal: route [approach pose, goal], the
+    /// approach pose `approach_distance` behind the goal on its heading (a
+    /// forward final approach), or ahead of it (a reversing one) when the one
+    /// behind or the way to it is blocked. With both blocked the route stays:
+    /// the abort window decides.
+    fn retry(&mut self, x: &State, goal: &Goal) {
+        let t0 = Instant::now();
+        let d = self.settings.approach_distance;
+        let (sin, cos) = goal.theta.sin_cos();
+        let approach = [-1.0, 1.0]
+            .into_iter()
+            .map(|side| Goal::new(goal.x + side * d * cos, goal.y + side * d * sin, goal.theta))
+            .find(|a| {
+                self.world.is_empty()
+                    || (self.world.pose_free(a.x, a.y, a.theta, 0.0)
+                        && self.nothing_in_the_way(x, a))
+            });
+        let outcome = match approach {
+            Some(a) => {
+                self.path.clear();
+                self.route.clear();
+                self.route.push(a);
+                self.route.push(*goal);
+                self.route_index = 0;
+                PlanOutcome::Retry
+            }
+            None => PlanOutcome::NoRoute,
+        };
+        self.last_plan = Some(PlanReport {
+            outcome,
+            duration: t0.elapsed(),
+            search: SearchStats::default(),
+            replan: true,
+        });
         self.plans += 1;
     }
 

@@ -442,4 +442,139 @@ fn settings_are_validated_by_name() {
     };
     let e = Navigator::new(params(), s, None).err().unwrap();
     assert!(e.to_string().contains("primitive_length"), "{e}");
+    let s = NavigatorSettings {
+        approach_distance: 0.8,
+        ..NavigatorSettings::default()
+    };
+    let e = Navigator::new(params(), s, None).err().unwrap();
+    assert!(e.to_string().contains("approach_distance"), "{e}");
+}
+
+/// Beside the goal, at rest, articulated to the limit: the stall of the
+/// large loader's critic (`docs/training.md`), d = 0.11 > 0.1.
+fn stopped_beside(goal: &Goal) -> State {
+    State::new(
+        goal.x + 0.03,
+        goal.y + 0.02,
+        goal.theta + 0.1,
+        0.7,
+        0.0,
+        0.0,
+    )
+}
+
+fn drive(target: Goal, final_target: bool) -> NavStep {
+    NavStep::Drive {
+        target,
+        final_target,
+    }
+}
+
+#[test]
+fn a_stop_beside_the_goal_is_retried_from_the_approach_pose_behind_it() {
+    let mut nav = navigator(PlannerKind::HybridAStar, false);
+    let s = nav.settings().clone();
+    let goal = Goal::new(5.0, 0.0, 0.0);
+    let behind = Goal::new(5.0 - s.approach_distance, 0.0, 0.0);
+    nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &[]).unwrap();
+    let stuck = stopped_beside(&goal);
+    assert!(goal_distance(&stuck, &goal) > s.reached_tolerance);
+    let dt = 0.2;
+    let mut t = 0.0;
+    // Stopped there: the goal until `replan_after`, then the approach pose.
+    while t < s.replan_after - 1e-9 {
+        assert_eq!(nav.update(&stuck, t), drive(goal, true), "t {t}");
+        t += dt;
+    }
+    assert_eq!(nav.update(&stuck, t), drive(behind, false));
+    let r = nav.last_plan().unwrap();
+    assert_eq!((r.outcome, r.replan), (PlanOutcome::Retry, true));
+    assert_eq!(nav.route(), &[behind, goal]);
+    // Within the subgoal radius of it (driving back): the goal again.
+    t += dt;
+    let passing = State::new(behind.x + 0.9 * s.subgoal_radius, 0.0, 0.0, 0.0, 0.0, -0.5);
+    assert_eq!(nav.update(&passing, t), drive(goal, true));
+    // Stopped beside it once more: the second and last retry; the third
+    // stall waits for the abort window.
+    let mut retries_at = Vec::new();
+    let aborted_at = loop {
+        t += dt;
+        let plans = nav.plans();
+        match nav.update(&stuck, t) {
+            NavStep::Abort(r) => {
+                assert_eq!(r, AbortReason::NoProgress);
+                break t;
+            }
+            NavStep::Drive { target, .. } if nav.plans() > plans => {
+                assert_eq!(target, behind);
+                retries_at.push(t);
+                // Back past the approach pose and to the goal again.
+                t += dt;
+                nav.update(&passing, t);
+            }
+            NavStep::Drive { .. } => {}
+        }
+        assert!(t < 100.0);
+    };
+    assert_eq!(retries_at.len(), s.max_retries - 1, "{retries_at:?}");
+    assert_eq!(nav.plans() as usize, 1 + s.max_retries);
+    // Stopped after the last pass, the window runs out: retries are no progress.
+    let last_progress = retries_at[0] + 2.0 * dt;
+    assert!(
+        (aborted_at - last_progress - s.progress.timeout).abs() < dt + 1e-9,
+        "aborted at {aborted_at}, last progress {last_progress}"
+    );
+}
+
+#[test]
+fn no_retry_while_moving_or_far_from_the_goal() {
+    let goal = Goal::new(5.0, 0.0, 0.0);
+    let mut moving = stopped_beside(&goal);
+    moving[ix::V] = 0.3;
+    let s = NavigatorSettings::default();
+    let far = at_rest(goal.x - s.approach_distance - 0.1, 0.0, 0.0);
+    for x in [moving, far] {
+        let mut nav = navigator(PlannerKind::HybridAStar, false);
+        nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &[]).unwrap();
+        for k in 0..45 {
+            assert_eq!(nav.update(&x, k as f64 * 0.2), drive(goal, true));
+        }
+        assert_eq!(nav.plans(), 1);
+    }
+}
+
+#[test]
+fn a_retry_approaches_from_ahead_when_behind_is_blocked_and_not_at_all_when_both_are() {
+    let s = NavigatorSettings::default();
+    let goal = Goal::new(5.0, 0.0, 0.0);
+    let behind = Obstacle::new(goal.x - s.approach_distance, 0.0, 0.5);
+    let ahead = Obstacle::new(goal.x + s.approach_distance, 0.0, 0.5);
+    let stuck = stopped_beside(&goal);
+    for (obstacles, expected) in [
+        (
+            vec![behind],
+            Some(Goal::new(goal.x + s.approach_distance, 0.0, 0.0)),
+        ),
+        (vec![behind, ahead], None),
+    ] {
+        let mut nav = navigator(PlannerKind::HybridAStar, false);
+        nav.set_goal(&stuck, goal, &obstacles).unwrap();
+        let mut t = 0.0;
+        while nav.plans() == 1 {
+            nav.update(&stuck, t);
+            t += 0.2;
+            assert!(t < s.progress.timeout);
+        }
+        let r = nav.last_plan().unwrap();
+        match expected {
+            Some(approach) => {
+                assert_eq!(r.outcome, PlanOutcome::Retry);
+                assert_eq!(nav.route(), &[approach, goal]);
+            }
+            None => {
+                assert_eq!(r.outcome, PlanOutcome::NoRoute);
+                assert_eq!(nav.route(), &[goal]);
+            }
+        }
+    }
 }
