@@ -604,6 +604,9 @@ impl Navigator {
         {
             self.retries += 1;
             self.last_replan = now;
+            // A new manoeuvre that may first lead away (to straighten the
+            // machine out): its own window, bounded by `max_retries`.
+            self.last_progress = now;
             self.retry(x, &goal);
         } else if stalled && !self.world.is_empty() && self.replans < self.settings.max_replans {
             self.replans += 1;

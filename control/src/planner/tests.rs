@@ -578,3 +578,38 @@ fn a_retry_approaches_from_ahead_when_behind_is_blocked_and_not_at_all_when_both
         }
     }
 }
+
+#[test]
+fn a_retry_opens_its_own_abort_window() {
+    // Stopped beside the goal and never moving again: the retry at
+    // `replan_after`, the abort a whole window after it (the way to the
+    // approach pose may first lead away), no second retry (the approach pose
+    // is the target, not the goal).
+    let mut nav = navigator(PlannerKind::HybridAStar, false);
+    let s = nav.settings().clone();
+    let goal = Goal::new(5.0, 0.0, 0.0);
+    nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &[]).unwrap();
+    let stuck = stopped_beside(&goal);
+    let dt = 0.2;
+    let (mut retry_at, mut k) = (None, 0);
+    let aborted_at = loop {
+        let t = k as f64 * dt;
+        let step = nav.update(&stuck, t);
+        if retry_at.is_none() && nav.plans() == 2 {
+            retry_at = Some(t);
+        }
+        if let NavStep::Abort(r) = step {
+            assert_eq!(r, AbortReason::NoProgress);
+            break t;
+        }
+        k += 1;
+        assert!(k < 1000);
+    };
+    let retry_at = retry_at.expect("a retry");
+    assert!((retry_at - s.replan_after).abs() < dt + 1e-9, "{retry_at}");
+    assert!(
+        (aborted_at - retry_at - s.progress.timeout).abs() < dt + 1e-9,
+        "retry at {retry_at}, aborted at {aborted_at}"
+    );
+    assert_eq!(nav.plans(), 2);
+}
