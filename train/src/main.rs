@@ -77,9 +77,11 @@ enum Cmd {
         #[arg(long, default_value_t = 300)]
         updates: u64,
     },
-    /// Copy a run's exported weights, config and learning curves to a machine's
-    /// directory (e.g. critic-weights/avant635/) and write its README with the
-    /// figures. Refuses weights whose machine or Δt is not the run config's.
+    /// Copy a run's weights, config and learning curves to a machine's directory
+    /// (e.g. critic-weights/avant635/) and write its README with the figures: the
+    /// candidate its closed-loop selection chose (`selection.csv`), or without one
+    /// the run's last export. Refuses weights whose machine or Δt is not the run
+    /// config's.
     Publish {
         #[arg(long)]
         run: PathBuf,
@@ -354,7 +356,11 @@ fn main() -> Result<()> {
             run: run_dir,
             out,
             command,
-        } => publish(&run_dir, &run_dir, &out, &command, None)?,
+        } => match train::select::read_selection(&run_dir)? {
+            // The selection's choice, as `train` publishes it.
+            Some(scores) => publish(&run_dir, &scores[0].dir, &out, &command, Some(&scores))?,
+            None => publish(&run_dir, &run_dir, &out, &command, None)?,
+        },
         Cmd::Bench { updates } => bench(updates)?,
         Cmd::Stalls {
             actor,

@@ -205,8 +205,17 @@ pub fn select(
             s.updates, s.reached, s.goals, s.mean_time
         ));
     }
-    let path = run_dir.join("selection.csv");
+    let path = run_dir.join(SELECTION_FILE);
     fs::write(&path, csv).with_context(|| format!("writing {}", path.display()))?;
+    rank(&mut scores);
+    Ok(scores)
+}
+
+/// The table [`select`] writes into the run directory.
+pub const SELECTION_FILE: &str = "selection.csv";
+
+/// Best first.
+fn rank(scores: &mut [CandidateScore]) {
     scores.sort_by(|a, b| {
         if a.better_than(b) {
             std::cmp::Ordering::Less
@@ -216,7 +225,46 @@ pub fn select(
             std::cmp::Ordering::Equal
         }
     });
-    Ok(scores)
+}
+
+/// The scores of a finished selection (`selection.csv` of the run), the best
+/// first; `None` when the run has none yet.
+pub fn read_selection(run_dir: &Path) -> Result<Option<Vec<CandidateScore>>> {
+    let path = run_dir.join(SELECTION_FILE);
+    if !path.exists() {
+        return Ok(None);
+    }
+    let text = fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+    let mut scores = Vec::new();
+    for (i, line) in text.lines().enumerate().skip(1) {
+        let fields: Vec<&str> = line.split(',').collect();
+        let parsed = match fields[..] {
+            [u, r, g, t] => u
+                .parse::<u64>()
+                .ok()
+                .zip(r.parse::<usize>().ok())
+                .zip(g.parse::<usize>().ok())
+                .zip(t.parse::<f64>().ok()),
+            _ => None,
+        };
+        let Some((((updates, reached), goals), mean_time)) = parsed else {
+            anyhow::bail!(
+                "{} line {}: expected `updates,reached,goals,mean_time_s`, got `{line}`",
+                path.display(),
+                i + 1
+            );
+        };
+        scores.push(CandidateScore {
+            updates,
+            dir: crate::run::candidate_dir(run_dir, updates),
+            reached,
+            goals,
+            mean_time,
+        });
+    }
+    anyhow::ensure!(!scores.is_empty(), "{}: no candidates", path.display());
+    rank(&mut scores);
+    Ok(Some(scores))
 }
 
 #[cfg(test)]

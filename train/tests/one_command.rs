@@ -96,4 +96,46 @@ fn train_selects_the_best_candidate_in_closed_loop_and_publishes_it() {
     ] {
         assert!(published.join(f).exists(), "{f}");
     }
+
+    // `publish` on the finished run takes the selection's choice, not the last
+    // export (update 60): with the table saying update 30 reached more goals,
+    // update 30's networks.
+    let publish = |out_dir: &std::path::Path| {
+        Command::new(BIN)
+            .args(["publish", "--run"])
+            .arg(&out)
+            .arg("--out")
+            .arg(out_dir)
+            .args(["--command", "by hand"])
+            .output()
+            .unwrap()
+    };
+    std::fs::write(
+        out.join("selection.csv"),
+        "updates,reached,goals,mean_time_s\n30,2,2,9.000\n60,1,2,8.000\n",
+    )
+    .unwrap();
+    let again = dir.path().join("again");
+    let o = publish(&again);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let actor_of = |d: &std::path::Path| std::fs::read(d.join(weights::ACTOR_FILE)).unwrap();
+    let u30 = out.join("candidates").join(format!("u{:09}", 30));
+    assert_eq!(actor_of(&again), actor_of(&u30));
+    assert_ne!(
+        actor_of(&again),
+        actor_of(&out),
+        "the last export is update 60"
+    );
+    let readme = std::fs::read_to_string(again.join("README.md")).unwrap();
+    assert!(readme.contains("the checkpoint at update 30"), "{readme}");
+    // A damaged table is refused by file and line.
+    std::fs::write(
+        out.join("selection.csv"),
+        "updates,reached,goals,mean_time_s\n30,2,x,9\n",
+    )
+    .unwrap();
+    let o = publish(&dir.path().join("damaged"));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(err.contains("selection.csv line 2"), "{err}");
 }
