@@ -72,6 +72,8 @@ for f in /usr/bin/wlnavd /usr/bin/wlnav /lib/systemd/system/wlnavd.service \
   /etc/wlnav/wlnavd.toml /usr/lib/sysusers.d/wlnavd.conf \
   /usr/share/wlnav/critic-weights/avant635/critic.safetensors \
   /usr/share/wlnav/critic-weights/avant635/actor.safetensors \
+  /usr/share/wlnav/critic-weights/large-loader/critic.safetensors \
+  /usr/share/wlnav/critic-weights/large-loader/actor.safetensors \
   /usr/share/doc/wlnavd/examples/wlnavd.service.d/realtime.conf; do
   [ -e "$f" ] || fail "not installed: $f"
 done
@@ -95,6 +97,16 @@ fi
 # As the unit's ExecStartPre does: the service user reads the configuration and weights.
 runuser -u wlnav -- /usr/bin/wlnavd --config /etc/wlnav/wlnavd.toml --check-config ||
   fail "wlnavd --check-config of the installed configuration and weights (as user wlnav)"
+# Another machine installed as the configuration's comment says: its weights, no [machine].
+other=$(mktemp --suffix=.toml)
+sed -e '/^\[machine\]/,/^$/d' -e 's#critic-weights/avant635/#critic-weights/large-loader/#' \
+  /etc/wlnav/wlnavd.toml > "$other"
+chmod 644 "$other"
+runuser -u wlnav -- /usr/bin/wlnavd --config "$other" --print-config | grep -q '^l_f = 0.9$' ||
+  fail "with the large loader's weights and no [machine], wlnavd does not take L_f 0.9 from them"
+runuser -u wlnav -- /usr/bin/wlnavd --config "$other" --check-config ||
+  fail "wlnavd --check-config with the large loader's installed weights (as user wlnav)"
+rm -f "$other"
 /usr/bin/wlnav --help >/dev/null || fail "/usr/bin/wlnav --help"
 
 dpkg -r "$PKG" || fail "dpkg -r $PKG"
