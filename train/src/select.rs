@@ -198,7 +198,7 @@ pub fn select(
         progress(&s);
         scores.push(s);
     }
-    let mut csv = String::from("updates,reached,goals,mean_time_s\n");
+    let mut csv = format!("{SELECTION_HEADER}\n");
     for s in &scores {
         csv.push_str(&format!(
             "{},{},{},{:.3}\n",
@@ -211,8 +211,9 @@ pub fn select(
     Ok(scores)
 }
 
-/// The table [`select`] writes into the run directory.
+/// The table [`select`] writes into the run directory, and its header.
 pub const SELECTION_FILE: &str = "selection.csv";
+const SELECTION_HEADER: &str = "updates,reached,goals,mean_time_s";
 
 /// Best first.
 fn rank(scores: &mut [CandidateScore]) {
@@ -249,7 +250,7 @@ pub fn read_selection(run_dir: &Path) -> Result<Option<Vec<CandidateScore>>> {
         };
         let Some((((updates, reached), goals), mean_time)) = parsed else {
             anyhow::bail!(
-                "{} line {}: expected `updates,reached,goals,mean_time_s`, got `{line}`",
+                "{} line {}: expected `{SELECTION_HEADER}`, got `{line}`",
                 path.display(),
                 i + 1
             );
