@@ -215,6 +215,19 @@ fn service_holders(name: &ServiceName, pattern: MessagingPattern) -> String {
     holders.join(", ")
 }
 
+/// Opening `name` failed because its node limit is reached: who is attached.
+fn nodes_exhausted(name: &str, messaging: MessagingPattern) -> IpcError {
+    let holders = ServiceName::new(name)
+        .map(|n| service_holders(&n, messaging))
+        .unwrap_or_else(|_| "the holder could not be found (invalid service name)".into());
+    IpcError::PortsExhausted {
+        port: "node",
+        service: name.to_owned(),
+        limit: qos::MAX_NODES,
+        holders: format!("attached: {holders}"),
+    }
+}
+
 /// The error for a service the daemon could not open or create with its settings: if the
 /// service exists, who holds it ([`IpcError::ServiceHeld`]); else iceoryx2's reason.
 fn create_error<E: std::error::Error + Send + Sync + 'static>(
@@ -284,10 +297,13 @@ fn pubsub<T: std::fmt::Debug + ZeroCopySend>(
         .publish_subscribe::<T>();
     match access {
         Access::Open => builder.open().map_err(|e| {
-            if e == iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenError::DoesNotExist {
+            use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenError as E;
+            if e == E::DoesNotExist {
                 IpcError::NotServed {
                     service: name.to_owned(),
                 }
+            } else if e == E::ExceedsMaxNumberOfNodes {
+                nodes_exhausted(name, MessagingPattern::PublishSubscribe)
             } else {
                 IpcError::Service {
                     service: name.to_owned(),
@@ -335,10 +351,13 @@ fn goal_service(
         .request_response::<GoalRequest, GoalReply>();
     match access {
         Access::Open => builder.open().map_err(|e| {
-            if e == iceoryx2::service::builder::request_response::RequestResponseOpenError::DoesNotExist {
+            use iceoryx2::service::builder::request_response::RequestResponseOpenError as E;
+            if e == E::DoesNotExist {
                 IpcError::NotServed {
                     service: name.to_owned(),
                 }
+            } else if e == E::ExceedsMaxNumberOfNodes {
+                nodes_exhausted(name, MessagingPattern::RequestResponse)
             } else {
                 IpcError::Service {
                     service: name.to_owned(),
@@ -379,10 +398,13 @@ fn event_service(
     let builder = node.service_builder(&service_name(name)?).event();
     match access {
         Access::Open => builder.open().map_err(|e| {
-            if e == iceoryx2::service::builder::event::EventOpenError::DoesNotExist {
+            use iceoryx2::service::builder::event::EventOpenError as E;
+            if e == E::DoesNotExist {
                 IpcError::NotServed {
                     service: name.to_owned(),
                 }
+            } else if e == E::ExceedsMaxNumberOfNodes {
+                nodes_exhausted(name, MessagingPattern::Event)
             } else {
                 IpcError::Service {
                     service: name.to_owned(),
@@ -466,29 +488,71 @@ impl Connection {
         factory: &event::PortFactory<IpcService>,
         service: &str,
     ) -> Result<Notifier<IpcService>, IpcError> {
-        factory
-            .notifier_builder()
-            .create()
-            .map_err(|e| IpcError::Port {
-                port: "notifier",
-                service: service.to_owned(),
-                source: boxed(e),
-            })
+        use iceoryx2::port::notifier::NotifierCreateError as E;
+        use iceoryx2::service::port_factory::PortFactory as _;
+        factory.notifier_builder().create().map_err(|e| {
+            if e == E::ExceedsMaxSupportedNotifiers {
+                IpcError::PortsExhausted {
+                    port: "notifier",
+                    service: service.to_owned(),
+                    limit: factory.static_config().max_notifiers(),
+                    holders: crate::holders::notifier_holders(factory),
+                }
+            } else {
+                IpcError::Port {
+                    port: "notifier",
+                    service: service.to_owned(),
+                    source: boxed(e),
+                }
+            }
+        })
     }
 
     fn listener(
         factory: &event::PortFactory<IpcService>,
         service: &str,
     ) -> Result<Listener<IpcService>, IpcError> {
-        factory
-            .listener_builder()
-            .create()
-            .map_err(|e| IpcError::Port {
-                port: "listener",
+        use iceoryx2::port::listener::ListenerCreateError as E;
+        use iceoryx2::service::port_factory::PortFactory as _;
+        factory.listener_builder().create().map_err(|e| {
+            if e == E::ExceedsMaxSupportedListeners {
+                IpcError::PortsExhausted {
+                    port: "listener",
+                    service: service.to_owned(),
+                    limit: factory.static_config().max_listeners(),
+                    holders: crate::holders::listener_holders(factory),
+                }
+            } else {
+                IpcError::Port {
+                    port: "listener",
+                    service: service.to_owned(),
+                    source: boxed(e),
+                }
+            }
+        })
+    }
+}
+
+/// A client port on a request-response service of [`GoalRequest`] → [`GoalReply`]; every
+/// slot taken is [`IpcError::PortsExhausted`], naming the holders.
+fn client_port(factory: &GoalFactory, service: &str) -> Result<GoalClient, IpcError> {
+    factory.client_builder().create().map_err(|e| {
+        if e == iceoryx2::service::port_factory::client::ClientCreateError::ExceedsMaxSupportedClients {
+            use iceoryx2::service::port_factory::PortFactory as _;
+            IpcError::PortsExhausted {
+                port: "client",
+                service: service.to_owned(),
+                limit: factory.static_config().max_clients(),
+                holders: crate::holders::client_holders(factory),
+            }
+        } else {
+            IpcError::Port {
+                port: "client",
                 service: service.to_owned(),
                 source: boxed(e),
-            })
-    }
+            }
+        }
+    })
 }
 
 /// Removes the resources of iceoryx2 nodes whose process died (crash, `kill -9`). Without
@@ -659,6 +723,7 @@ impl DaemonEndpoint {
                 {
                     IpcError::AlreadyServed {
                         service: service.to_owned(),
+                        holders: crate::holders::server_holders(factory),
                     }
                 } else {
                     IpcError::Port {
@@ -983,15 +1048,7 @@ impl Client {
     pub fn new(config: &IpcConfig) -> Result<Self, IpcError> {
         let conn = Connection::open(config, "wlnav-client", Access::Open)?;
         let names = &conn.names;
-        let client = conn
-            .goal
-            .client_builder()
-            .create()
-            .map_err(|e| IpcError::Port {
-                port: "client",
-                service: names.goal.clone(),
-                source: boxed(e),
-            })?;
+        let client = client_port(&conn.goal, &names.goal)?;
         let goal_notifier = Connection::notifier(&conn.goal_event, &names.goal)?;
         let goal_listener = Connection::listener(&conn.goal_event, &names.goal)?;
         // Ids start at the monotonic clock so two clients (or two runs) are unlikely to
@@ -1097,10 +1154,45 @@ impl Client {
     }
 
     /// Asks the daemon for a controlled stop through the reserved stop service (see
-    /// [`StopClient`]): it gets through even when every goal client slot is taken. The stop
-    /// latches: goals are rejected until [`Client::resume`].
+    /// [`StopClient`]): it gets through even when every goal client slot is taken, and
+    /// when the stop service has no free slot it goes on this client's own goal port
+    /// (kind 3). The stop latches: goals are rejected until [`Client::resume`].
     pub fn stop(&self, timeout: Duration) -> Result<GoalReply, ClientError> {
-        StopClient::new(&self.config)?.stop_with_id(self.next_request_id(), timeout)
+        self.stop_report(timeout).map(|r| r.reply)
+    }
+
+    /// [`Client::stop`], saying which path the stop took and what failed on the way.
+    pub fn stop_report(&self, timeout: Duration) -> Result<StopReport, ClientError> {
+        let request_id = self.next_request_id();
+        let deadline = Instant::now() + timeout;
+        let mut detours = Vec::new();
+        let stop_error = match StopClient::new(&self.config) {
+            Ok(sc) => match sc.via_stop_service(request_id, deadline, &mut detours) {
+                Ok(report) => return Ok(report),
+                Err(Attempt::Sent(e)) => return Err(e),
+                Err(Attempt::NotSent(e)) => e,
+            },
+            Err(e) => e.into(),
+        };
+        detours.push(format!(
+            "stop service {:?}: {stop_error}; sending the stop on this client's goal port",
+            self.conn.names.stop
+        ));
+        // This client already holds a goal port, its notifier and its listener.
+        let pending = self
+            .submit(&GoalRequest::stop(request_id))
+            .map_err(|goal| ClientError::StopNotSent {
+                stop: Box::new(stop_error),
+                goal: Box::new(goal),
+            })?;
+        let reply = pending.wait(deadline.saturating_duration_since(Instant::now()))?;
+        Ok(StopReport {
+            reply,
+            path: StopPath::GoalService,
+            notified: true,
+            listened: true,
+            detours,
+        })
     }
 
     /// Releases an operator stop: goals are accepted again.
@@ -1122,6 +1214,7 @@ impl Client {
                 if e == iceoryx2::port::publisher::PublisherCreateError::ExceedsMaxSupportedPublishers {
                     IpcError::PoseSourceTaken {
                         service: service.clone(),
+                        holders: crate::holders::publisher_holders(&self.conn.pose),
                     }
                 } else {
                     IpcError::Port {
@@ -1154,10 +1247,22 @@ impl Client {
             .subscriber_builder()
             .buffer_size(qos::SUBSCRIBER_BUFFER)
             .create()
-            .map_err(|e| IpcError::Port {
-                port: "subscriber",
-                service: service.clone(),
-                source: boxed(e),
+            .map_err(|e| {
+                if e == iceoryx2::port::subscriber::SubscriberCreateError::ExceedsMaxSupportedSubscribers {
+                    use iceoryx2::service::port_factory::PortFactory as _;
+                    IpcError::PortsExhausted {
+                        port: "subscriber",
+                        service: service.clone(),
+                        limit: self.conn.telemetry.static_config().max_subscribers(),
+                        holders: crate::holders::subscriber_holders(&self.conn.telemetry),
+                    }
+                } else {
+                    IpcError::Port {
+                        port: "subscriber",
+                        service: service.clone(),
+                        source: boxed(e),
+                    }
+                }
             })?;
         let listener = Connection::listener(&self.conn.telemetry_event, &service)?;
         Ok(TelemetrySubscriber {
@@ -1279,47 +1384,139 @@ fn wait_reply(
     }
 }
 
-/// The reserved stop path (DESIGN §11: "a stop must get through even when a misbehaving
-/// local process holds every ordinary client slot").
+/// Which service carried a stop ([`StopReport::path`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum StopPath {
+    /// The reserved stop service `{prefix}/v2/stop` (the normal path).
+    StopService,
+    /// The goal service `{prefix}/v2/goal` (request kind 3): the fallback when the stop
+    /// service has no free client slot (or cannot be opened at all).
+    GoalService,
+}
+
+/// How a stop was sent and answered ([`StopClient::stop_report`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct StopReport {
+    /// The daemon's reply.
+    pub reply: GoalReply,
+    /// The service that carried it.
+    pub path: StopPath,
+    /// True if the daemon was woken by a notification; false if the request went without
+    /// one (no free notifier anywhere), to be picked up by the daemon's periodic pass
+    /// (every 50 ms).
+    pub notified: bool,
+    /// True if the reply was awaited on a listener; false if it was polled for (every
+    /// 2 ms) because no listener was free.
+    pub listened: bool,
+    /// What did not work on the way, in order (the stop service's slots taken, no free
+    /// notifier, …), each naming the holders; empty when the first path worked.
+    pub detours: Vec<String>,
+}
+
+/// A stop attempt on one service that failed: before the request left (try the next
+/// path) or after (it may have arrived; report).
+enum Attempt {
+    NotSent(ClientError),
+    Sent(ClientError),
+}
+
+/// How often a reply is polled for when no listener could be created.
+const REPLY_POLL: Duration = Duration::from_millis(2);
+
+/// The reserved stop path (DESIGN §11, §14: "a stop must get through whatever other local
+/// processes hold").
 ///
 /// Stops travel on their own request-response service, `{prefix}/v2/stop` (payloads as on
 /// the goal service; only kind 3 is accepted there), with its own client slots and paired
 /// event service. Neither [`Client::new`] nor anything else holds a port there: a
 /// `StopClient` opens only the stop services (not the goal, pose or telemetry ones, whose
-/// node and client limits another process may exhaust) and creates its client port per
-/// [`StopClient::stop`] call, releasing it with the reply. So a process that leaks
-/// `Client`s, or holds every goal client slot, cannot keep a stop out; only one that
-/// deliberately sits on all 16 stop slots could, which is why the daemon also honours a
-/// stop (kind 3) on the goal service. A stop on either service latches the same way:
-/// set-goals are rejected until a resume ([`Client::resume`], on the goal service).
+/// node and client limits another process may exhaust) and creates its ports per
+/// [`StopClient::stop`] call, releasing them with the reply.
+///
+/// What another local process can hold, and what a stop then does:
+///
+/// * **All 16 client slots of the stop service** (or its 64 node slots): the stop goes
+///   to the goal service instead, as request kind 3 (the daemon handles a stop there
+///   the same way). Only a process that holds every client slot of *both* services
+///   (16 + 32) keeps it out; the error then names the holders of both.
+/// * **All 64 notifiers of the stop event service**: the request is sent anyway, and
+///   the daemon is woken through the goal event service's notifier (its request loop
+///   serves stops first, whatever woke it); with no notifier free there either, the
+///   request goes without a notification and the daemon's periodic pass (every 50 ms)
+///   picks it up.
+/// * **All 64 listeners**: the reply is polled for every 2 ms instead of awaited.
+///
+/// [`StopClient::stop_report`] says which path was taken and why. A stop on either
+/// service latches the same way: set-goals are rejected until a resume
+/// ([`Client::resume`], on the goal service).
 pub struct StopClient {
-    _node: Node<IpcService>,
+    node: Node<IpcService>,
+    names: ServiceNames,
     service: String,
-    factory: GoalFactory,
-    event: event::PortFactory<IpcService>,
+    /// The stop service and its event service; the reason when they could not be opened
+    /// (then every stop takes the goal service).
+    stop: Result<(GoalFactory, event::PortFactory<IpcService>), StopUnavailable>,
+}
+
+/// Why [`StopClient::new`] could not open the stop service (kept to report it per stop).
+#[derive(Debug, Clone)]
+enum StopUnavailable {
+    /// It does not exist (a daemon without it, or one that has gone).
+    NotServed,
+    /// Anything else (e.g. its node limit), as text.
+    Other(String),
+}
+
+impl StopUnavailable {
+    fn error(&self, service: &str, pattern: &'static str) -> IpcError {
+        match self {
+            Self::NotServed => IpcError::NotServed {
+                service: service.to_owned(),
+            },
+            Self::Other(why) => IpcError::Service {
+                service: service.to_owned(),
+                pattern,
+                source: why.clone().into(),
+            },
+        }
+    }
 }
 
 impl core::fmt::Debug for StopClient {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         f.debug_struct("StopClient")
             .field("service", &self.service)
+            .field("stop_service_open", &self.stop.is_ok())
             .finish_non_exhaustive()
     }
 }
 
 impl StopClient {
     /// Opens the stop service of `config.prefix` (never creates it): [`IpcError::NotServed`]
-    /// without a daemon.
+    /// without a daemon. If the stop service cannot be opened (its node limit reached) but
+    /// the goal service can, the client is created and stops take the goal service.
     pub fn new(config: &IpcConfig) -> Result<Self, IpcError> {
         let names = config.service_names()?;
         let (node, _) = make_node(config, "wlnav-stop")?;
-        let factory = goal_service(&node, &names.stop, 0, 0, Access::Open)?;
-        let event = event_service(&node, &names.stop, Access::Open)?;
+        let stop = goal_service(&node, &names.stop, 0, 0, Access::Open).and_then(|factory| {
+            event_service(&node, &names.stop, Access::Open).map(|event| (factory, event))
+        });
+        let stop = match stop {
+            Ok(s) => Ok(s),
+            Err(e) => {
+                // Without a daemon the goal service is missing too: NotServed, as before.
+                goal_service(&node, &names.goal, 0, 0, Access::Open)?;
+                Err(match e {
+                    IpcError::NotServed { .. } => StopUnavailable::NotServed,
+                    other => StopUnavailable::Other(other.to_string()),
+                })
+            }
+        };
         Ok(Self {
-            _node: node,
-            service: names.stop,
-            factory,
-            event,
+            node,
+            service: names.stop.clone(),
+            names,
+            stop,
         })
     }
 
@@ -1334,32 +1531,223 @@ impl StopClient {
         request_id: u64,
         timeout: Duration,
     ) -> Result<GoalReply, ClientError> {
-        let service = &self.service;
-        // Ports for this request only: nothing stays attached after the reply.
-        let client = self
-            .factory
-            .client_builder()
-            .create()
-            .map_err(|e| IpcError::Port {
-                port: "client",
-                service: service.clone(),
-                source: boxed(e),
-            })?;
-        let notifier = Connection::notifier(&self.event, service)?;
-        let listener = Connection::listener(&self.event, service)?;
-        let pending = client
-            .send_copy(GoalRequest::stop(request_id))
-            .map_err(|e| IpcError::Send {
-                service: service.clone(),
-                source: boxed(e),
-            })?;
-        if pending.number_of_server_connections() == 0 {
-            return Err(ClientError::NoDaemon {
-                service: service.clone(),
+        self.stop_report(request_id, timeout).map(|r| r.reply)
+    }
+
+    /// [`StopClient::stop_with_id`], saying which path the stop took and what failed on
+    /// the way (see the type's docs).
+    pub fn stop_report(
+        &self,
+        request_id: u64,
+        timeout: Duration,
+    ) -> Result<StopReport, ClientError> {
+        let deadline = Instant::now() + timeout;
+        let mut detours = Vec::new();
+        let stop_error = match self.via_stop_service(request_id, deadline, &mut detours) {
+            Ok(report) => return Ok(report),
+            Err(Attempt::Sent(e)) => return Err(e),
+            Err(Attempt::NotSent(e)) => e,
+        };
+        detours.push(format!(
+            "stop service {:?}: {stop_error}; sending the stop on the goal service {:?}",
+            self.names.stop, self.names.goal
+        ));
+        match self.via_goal_service(request_id, deadline, &mut detours) {
+            Ok(report) => Ok(report),
+            Err(Attempt::Sent(e)) => Err(e),
+            Err(Attempt::NotSent(goal)) => Err(ClientError::StopNotSent {
+                stop: Box::new(stop_error),
+                goal: Box::new(goal),
+            }),
+        }
+    }
+
+    /// The stop on the reserved stop service (woken through the goal event service when
+    /// the stop event service has no free notifier).
+    fn via_stop_service(
+        &self,
+        request_id: u64,
+        deadline: Instant,
+        detours: &mut Vec<String>,
+    ) -> Result<StopReport, Attempt> {
+        let (factory, event) = match &self.stop {
+            Ok(s) => s,
+            Err(why) => {
+                return Err(Attempt::NotSent(
+                    why.error(&self.names.stop, "request-response").into(),
+                ))
+            }
+        };
+        let alt = || {
+            event_service(&self.node, &self.names.goal, Access::Open)
+                .and_then(|e| Connection::notifier(&e, &self.names.goal))
+                .map(|n| (n, self.names.goal.clone()))
+        };
+        send_stop(
+            factory,
+            event,
+            &self.names.stop,
+            event_ids::STOP_REQUEST,
+            &alt,
+            request_id,
+            deadline,
+            detours,
+        )
+        .map(|(reply, notified, listened)| StopReport {
+            reply,
+            path: StopPath::StopService,
+            notified,
+            listened,
+            detours: std::mem::take(detours),
+        })
+    }
+
+    /// The fallback: the stop (kind 3) on the goal service (woken through the stop event
+    /// service when the goal event service has no free notifier).
+    fn via_goal_service(
+        &self,
+        request_id: u64,
+        deadline: Instant,
+        detours: &mut Vec<String>,
+    ) -> Result<StopReport, Attempt> {
+        let goal = &self.names.goal;
+        let factory = goal_service(&self.node, goal, 0, 0, Access::Open)
+            .map_err(|e| Attempt::NotSent(e.into()))?;
+        let event = event_service(&self.node, goal, Access::Open)
+            .map_err(|e| Attempt::NotSent(e.into()))?;
+        let alt = || match &self.stop {
+            Ok((_, e)) => {
+                Connection::notifier(e, &self.names.stop).map(|n| (n, self.names.stop.clone()))
+            }
+            Err(why) => Err(why.error(&self.names.stop, "event")),
+        };
+        send_stop(
+            &factory,
+            &event,
+            goal,
+            event_ids::GOAL_REQUEST,
+            &alt,
+            request_id,
+            deadline,
+            detours,
+        )
+        .map(|(reply, notified, listened)| StopReport {
+            reply,
+            path: StopPath::GoalService,
+            notified,
+            listened,
+            detours: std::mem::take(detours),
+        })
+    }
+}
+
+/// Sends a stop request on `factory` (service `service`) with ports made for this request
+/// only, wakes the daemon (on `event`, else through `alt`'s notifier, else not at all) and
+/// waits until `deadline` for the reply (on a listener, else polling). Returns the reply,
+/// whether the daemon was notified and whether a listener was used.
+#[allow(clippy::too_many_arguments)]
+fn send_stop(
+    factory: &GoalFactory,
+    event: &event::PortFactory<IpcService>,
+    service: &str,
+    event_id: usize,
+    alt: &dyn Fn() -> Result<(Notifier<IpcService>, String), IpcError>,
+    request_id: u64,
+    deadline: Instant,
+    detours: &mut Vec<String>,
+) -> Result<(GoalReply, bool, bool), Attempt> {
+    let client = client_port(factory, service).map_err(|e| Attempt::NotSent(e.into()))?;
+    // The listener before sending, so the reply's notification cannot be missed.
+    let listener = match Connection::listener(event, service) {
+        Ok(l) => Some(l),
+        Err(e) => {
+            detours.push(format!("{e}; polling for the reply"));
+            None
+        }
+    };
+    let pending = client
+        .send_copy(GoalRequest::stop(request_id))
+        .map_err(|e| {
+            Attempt::NotSent(
+                IpcError::Send {
+                    service: service.to_owned(),
+                    source: boxed(e),
+                }
+                .into(),
+            )
+        })?;
+    if pending.number_of_server_connections() == 0 {
+        return Err(Attempt::NotSent(ClientError::NoDaemon {
+            service: service.to_owned(),
+        }));
+    }
+    // A notification is only a wake-up: without one the daemon still finds the request.
+    let notified =
+        match Connection::notifier(event, service).and_then(|n| notify(&n, event_id, service)) {
+            Ok(()) => true,
+            Err(e) => match alt().and_then(|(n, alt_service)| {
+                notify(&n, event_id, &alt_service).map(|()| alt_service)
+            }) {
+                Ok(alt_service) => {
+                    detours.push(format!("{e}; woke the daemon through {alt_service:?}"));
+                    true
+                }
+                Err(e2) => {
+                    detours.push(format!(
+                        "{e}; {e2}; sent without a notification (the daemon's periodic pass \
+                     picks it up)"
+                    ));
+                    false
+                }
+            },
+        };
+    let service_name = service.to_owned();
+    let reply = match &listener {
+        Some(l) => wait_reply(
+            &pending,
+            request_id,
+            l,
+            &service_name,
+            deadline.saturating_duration_since(Instant::now()),
+        ),
+        None => poll_reply(&pending, request_id, &service_name, deadline),
+    };
+    match reply {
+        Ok(r) => Ok((r, notified, listener.is_some())),
+        // Dropped unanswered (e.g. the daemon's request buffer overflowed): a repeated
+        // stop is harmless, so the next path may try.
+        Err(e @ ClientError::Dropped { .. }) => Err(Attempt::NotSent(e)),
+        Err(e) => Err(Attempt::Sent(e)),
+    }
+}
+
+/// Waits until `deadline` for the reply to `pending` without a listener: polls every
+/// [`REPLY_POLL`] (only when no listener slot is free).
+fn poll_reply(
+    pending: &GoalPending,
+    request_id: u64,
+    service: &str,
+    deadline: Instant,
+) -> Result<GoalReply, ClientError> {
+    let start = Instant::now();
+    loop {
+        if let Some(reply) = try_reply(pending, request_id, service)? {
+            return Ok(reply);
+        }
+        if !pending.is_connected() {
+            return match try_reply(pending, request_id, service)? {
+                Some(reply) => Ok(reply),
+                None => Err(ClientError::Dropped { request_id }),
+            };
+        }
+        let now = Instant::now();
+        if now >= deadline {
+            return Err(ClientError::Timeout {
+                request_id,
+                timeout: deadline.saturating_duration_since(start),
             });
         }
-        notify(&notifier, event_ids::STOP_REQUEST, service)?;
-        wait_reply(&pending, request_id, &listener, service, timeout)
+        std::thread::sleep(REPLY_POLL.min(deadline - now));
     }
 }
 

@@ -65,16 +65,43 @@ pub enum IpcError {
         holders: String,
     },
     /// Another process already publishes poses: the pose service admits one publisher.
-    #[error("another process already publishes poses on {service:?} (one pose source only)")]
+    #[error(
+        "another process already publishes poses on {service:?} (one pose source only): \
+         {holders}"
+    )]
     PoseSourceTaken {
         /// Service name
         service: String,
+        /// The process holding the publisher (node name, pid, executable), or "the holder
+        /// could not be found …"
+        holders: String,
     },
     /// Another process already serves goals under this prefix.
-    #[error("another daemon already serves {service:?}; use a different prefix")]
+    #[error(
+        "another daemon already serves {service:?} (its server port: {holders}); stop it or \
+         use a different prefix"
+    )]
     AlreadyServed {
         /// Service name
         service: String,
+        /// The process holding the server port (node name, pid, executable), or "the
+        /// holder could not be found …"
+        holders: String,
+    },
+    /// Every slot of one port kind on a service is taken (a squatting or leaking process).
+    /// Names the processes holding them.
+    #[error("cannot create {port} on {service:?}: all {limit} {port} slots are taken ({holders})")]
+    PortsExhausted {
+        /// Port kind: `client`, `notifier`, `listener`, `subscriber`, `publisher`, `server`,
+        /// or `node` (the service's node limit)
+        port: &'static str,
+        /// Service name
+        service: String,
+        /// The service's limit for this port kind
+        limit: usize,
+        /// Who holds them: "N held by node "x" (pid P, /path/exe)", …, or "the holder could
+        /// not be found …"
+        holders: String,
     },
     /// Creating a port (publisher, subscriber, client, server, notifier, listener) failed,
     /// most often because the service's port limit is reached.
@@ -153,6 +180,17 @@ pub enum ClientError {
         expected: u64,
         /// The id received
         got: u64,
+    },
+    /// A stop could be sent neither on the stop service nor on the goal service (the
+    /// fallback). Both reasons are given.
+    #[error(
+        "the stop could not be sent: on the stop service: {stop}; on the goal service: {goal}"
+    )]
+    StopNotSent {
+        /// Why the stop service failed
+        stop: Box<ClientError>,
+        /// Why the goal service failed
+        goal: Box<ClientError>,
     },
     /// More than [`crate::MAX_OBSTACLES`] obstacles were given.
     #[error("{0} obstacles given, at most {max} fit in a request", max = crate::MAX_OBSTACLES)]

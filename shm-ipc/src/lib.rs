@@ -11,7 +11,9 @@
 //!   services the daemon created ([`IpcError::NotServed`] without a daemon;
 //!   [`Client::connect`] waits for one).
 //! * [`StopClient`]: the reserved stop path; gets through when every goal client slot is
-//!   taken. A stop on it latches like one on the goal service.
+//!   taken, falls back to the goal service when every stop slot is, and sends without a
+//!   notification when no notifier is free ([`StopClient::stop_report`] says which way it
+//!   went). A stop on it latches like one on the goal service.
 //! * [`GoalValidator`]: finite numbers, inside the workspace, heading not absurd, ≤ 8
 //!   obstacles with positive radius; rejections carry a [`RejectReason`]; accepted headings
 //!   are normalised to (−π, π]. (The footprint checks against the obstacles need the
@@ -60,8 +62,10 @@
 //! * **Replies and wake-ups.** After sending a request, notify the paired event service
 //!   with event id 1 (goal) or 5 (stop); the daemon notifies id 2 / 6 after each reply, so
 //!   a client sleeps on a listener of the same event service and then reads its pending
-//!   response. The daemon's goal server also wakes every **200 ms** by itself, so a
-//!   request sent without a notification is answered within about 200 ms. Telemetry is
+//!   response. The daemon's request loop also wakes every **50 ms** by itself, so a
+//!   request sent without a notification is answered within about 50 ms; and whatever
+//!   wakes it (a notification on the goal or the stop event service, or the period), it
+//!   serves the stop service first, then the goal service. Telemetry is
 //!   published once per control tick (5 Hz) followed by event id 4. A localization that
 //!   publishes poses should notify id 3 (the control loop reads poses once per tick
 //!   anyway).
@@ -85,7 +89,9 @@
 //!   judged on accepted samples only.
 //! * **The stop path.** `P/v2/stop` has its own 16 client slots; the `wlnav` CLI and
 //!   [`StopClient`] hold a port there only while a stop is in flight, so a process that
-//!   holds all 32 goal client slots cannot keep a stop out.
+//!   holds all 32 goal client slots cannot keep a stop out. One that holds all 16 stop
+//!   slots cannot either: the stop then goes to `P/v2/goal` as kind 3. See "The stop
+//!   service" below.
 //!
 //! iceoryx2 has no async API, so every data service has an event service of the **same
 //! name** (iceoryx2 distinguishes services by name and messaging pattern). A sender
@@ -101,7 +107,138 @@
 //! telemetry: 2 publishers, 16 subscribers; both: subscriber buffer 16, history 1, safe
 //! overflow on, 64 nodes; events: 64 listeners, 64 notifiers, 64 nodes. User headers are
 //! empty (`()`, size 0). Each payload is registered under the type name given below (the
-//! `type_name` iceoryx2 compares when opening; in C++ set `IOX2_TYPE_NAME` to it).
+//! `type_name` iceoryx2 compares when opening; in C++ set `IOX2_TYPE_NAME` to it; in
+//! Python see "Type names from Python" below).
+//!
+//! ## Answers for client writers
+//!
+//! ### Type names from Python
+//!
+//! iceoryx2 refuses to open a service whose payload type name differs from the
+//! creator's. In Python (iceoryx2's `iceoryx2` package, 0.10.0) each payload is a
+//! `ctypes.Structure` with the fields of the tables below, in that order, and a static
+//! method `type_name()` returning the name in the tables, as iceoryx2's own
+//! cross-language Python examples do:
+//!
+//! ```python
+//! import ctypes
+//! class Pose2(ctypes.Structure):
+//!     _fields_ = [("x", ctypes.c_double), ("y", ctypes.c_double), ("heading", ctypes.c_double)]
+//!     @staticmethod
+//!     def type_name() -> str:
+//!         return "wlnav::v2::Pose2"
+//! # GoalRequest: request_id c_uint64, kind c_uint32, obstacle_count c_uint32,
+//! # goal Pose2, obstacles Obstacle * 8; type_name() -> "wlnav::v2::GoalRequest"
+//! ```
+//!
+//! Nested structs need their own `type_name()` too. `ctypes` aligns `c_double` and
+//! `c_uint64` to 8 bytes like the C declaration below, so `ctypes.sizeof` must give the
+//! sizes in the tables (232 for `GoalRequest`, 152 for `GoalReply`, …); check that first.
+//! Open with `iox2.ServiceType.Ipc`; the request-response service is
+//! `request_response(GoalRequest, GoalReply)` with no user header.
+//!
+//! ### Goals: workspace, footprint, and which reject code wins
+//!
+//! * **Workspace**: goals must lie in the daemon's `[ipc] workspace`, default x and y in
+//!   [−50, 50] m, bounds inclusive. The daemon logs the configured workspace at start-up
+//!   ("goal checks: …").
+//! * **Footprint** (`goal-in-collision`, `machine-in-collision`): both axle points
+//!   against every obstacle, a point exactly on a circle counting as outside. At the
+//!   goal (β = 0) the front axle is the goal's (x, y) and the rear axle lies
+//!   L_f + L_r behind it along the heading: (x − (L_f + L_r) cos θ, y − (L_f + L_r) sin θ).
+//!   The current footprint is the machine's state in telemetry: front axle
+//!   (`x_f`, `y_f`), rear axle at (x_f − L_f cos θ_f − L_r cos(θ_f − β),
+//!   y_f − L_f sin θ_f − L_r sin(θ_f − β)). The axle lengths are the daemon's `[machine]`
+//!   `l_f` and `l_r` (the Avant 635 of the default config: 0.6 m and 0.6 m; other
+//!   machines take theirs from their weights' metadata). They are not on the wire: the
+//!   daemon writes them to its start-up log ("goal checks: …, L_f … m, L_r … m") and
+//!   `wlnavd --print-config` lists them. A client that cannot know them can send the
+//!   goal and read the reply: the check costs nothing and the text names the axle and
+//!   the obstacle.
+//! * **Which code wins**: the checks run in this order and the first that fails is
+//!   answered: unknown kind (6) → more than 8 obstacles (3) → a non-finite goal number,
+//!   x, y, then heading (1) → a non-finite obstacle centre, by index (1) → goal outside
+//!   the workspace (2) → |heading| > 1e4 rad (2) → per obstacle, by index: radius not
+//!   positive and finite (4; a NaN radius is 4, not 1), then |x|, |y| or r beyond 1e6 m
+//!   (4) → not ready (7: shutting down, stopped by an operator, or a blocking fault) →
+//!   goal in collision (5, the obstacle the footprint enters deepest) → machine in
+//!   collision (9). Cancel, stop and resume are never rejected on the goal service.
+//!
+//! ### The pose gate's margins
+//!
+//! With the default `[loop]` and `[machine]` settings a pose sample is rejected (and
+//! counted) when it is stamped more than `pose_max_future` = 0.05 s ahead of the
+//! daemon's `CLOCK_MONOTONIC`; when it lies outside the workspace grown by
+//! `pose_workspace_margin` = 10 m on every side; when it is farther from the last accepted
+//! pose than v_max · (1 + `plausibility_margin`) · Δt + `pose_jump_tolerance` = 1.0 m/s ·
+//! 1.2 · Δt + 0.5 m (Δt the time between the two stamps); or when its heading differs by
+//! more than the model's largest yaw rate · 1.2 · Δt + `pose_heading_tolerance` = 0.3 rad.
+//! `pose_reject_stop` = 5 rejects in a row are a pose fault (controlled stop); an
+//! accepted pose older than `pose_timeout` = 0.5 s is stale (controlled stop).
+//!
+//! ### Overflow, per direction
+//!
+//! * **Requests, client → daemon** (goal and stop services): iceoryx2's defaults, safe
+//!   overflow on; a client may have 16 requests in flight on the goal service (2 on the
+//!   stop service); a further send fails on the client side
+//!   (`ExceedsMaxActiveRequests`) until a reply is read or a pending request dropped.
+//!   A request the daemon drops unanswered reaches the client as
+//!   [`ClientError::Dropped`].
+//! * **Replies, daemon → client**: one reply per request, response buffer 2 (iceoryx2's
+//!   default), safe overflow on: nothing is lost, a reply waits until read.
+//! * **Poses, localization → daemon**: the daemon's subscriber buffer holds 16 samples,
+//!   safe overflow on (the oldest unread sample is overwritten; the publisher never
+//!   blocks); the daemon reads them all every tick.
+//! * **Telemetry, daemon → subscribers**: 16 samples per subscriber, safe overflow on
+//!   (a slow reader loses the oldest, `tick` and `outcome_seq` show the gap); history 1
+//!   (a new subscriber gets the latest sample at once).
+//! * **Events**: notifications are wake-ups only and never queue data; several
+//!   notifications before a wait coalesce.
+//!
+//! ### Slots, nodes and request ids
+//!
+//! * **Goal service**: 32 client slots. `wlnavd` itself holds none (it holds the one
+//!   server); `wlnavd --sim` takes one for its simulated localization (a [`Client`] that
+//!   publishes poses), leaving **31**. Every [`Client`] (and `wlnav goal`, `cancel`,
+//!   `resume`, `watch`, `record`, while running) holds one for its lifetime.
+//! * **Nodes**: each process that opens a service is one of its 64 nodes (a [`Client`]
+//!   opens all four data services and their event services; a [`StopClient`] only the
+//!   stop service, and the goal service when it falls back).
+//! * **Event ports**: 64 notifiers and 64 listeners per event service. The daemon holds
+//!   one notifier and one listener on the goal and on the stop event service, one
+//!   listener on the pose event service and one notifier on the telemetry event service;
+//!   a [`Client`] one notifier and one listener on the goal event service, one notifier
+//!   on the pose event service once it publishes, and one listener per telemetry
+//!   subscription.
+//! * **Request ids** need not be unique across clients for the replies: iceoryx2 routes
+//!   each reply to the client connection that sent the request. They should be unique
+//!   for telemetry: `goal_request_id` and `outcome_request_id` are how a client finds its
+//!   goal there. This library starts each [`Client`]'s ids at `CLOCK_MONOTONIC` in
+//!   nanoseconds and counts up, and [`StopClient::stop`] uses the clock; do the same
+//!   (Python: `time.monotonic_ns()`) and never send 0 (telemetry's "none").
+//!
+//! ### The stop service
+//!
+//! `P/v2/stop` takes **stop requests (kind 3) only**. Any other kind, resume included,
+//! is answered `accepted = 0`, code 6 (unknown kind), "the stop service takes only stop
+//! requests (kind 3), got kind N", and changes nothing; send resume on `P/v2/goal`. Its
+//! limits: 1 server (the daemon), **16 client slots**, 2 requests in flight per client,
+//! 64 nodes; its event service: **64 notifiers and 64 listeners**, of which the daemon
+//! holds one each (63 free). [`StopClient`] takes a client, a notifier and a listener
+//! per stop and releases them with the reply. When another process holds:
+//!
+//! * every stop client slot (or the stop service's nodes): the stop goes on `P/v2/goal`
+//!   as kind 3 (handled and latched the same way);
+//! * every notifier of the stop event service: the request goes anyway and the daemon is
+//!   woken through the goal event service (id 5); with no notifier free there either, it
+//!   goes without a notification and the daemon's 50 ms pass answers it;
+//! * every listener: the reply is polled for every 2 ms.
+//!
+//! A peer in another language should do the same: a stop needs only a client port; a
+//! notifier and a listener are optional. Every "slots taken" error
+//! ([`IpcError::PortsExhausted`], [`IpcError::AlreadyServed`],
+//! [`IpcError::PoseSourceTaken`]) names the processes holding the ports (node name, pid,
+//! executable), or says that the holder could not be found.
 //!
 //! ## Payload layout (wire format v2)
 //!
@@ -254,6 +391,7 @@
 mod config;
 mod endpoint;
 mod error;
+mod holders;
 mod msg;
 mod validate;
 
@@ -266,7 +404,7 @@ pub use config::{
 };
 pub use endpoint::{
     cleanup_stale_nodes, event_ids, qos, CleanupReport, Client, DaemonEndpoint, IncomingGoal,
-    IpcService, PendingGoal, StopClient, TelemetrySubscriber, Wakeup,
+    IpcService, PendingGoal, StopClient, StopPath, StopReport, TelemetrySubscriber, Wakeup,
 };
 pub use error::{BoxedSource, ClientError, IpcError};
 pub use msg::{

@@ -168,11 +168,21 @@ fn no_daemon_is_reported_not_hung() {
         Err(ClientError::NoDaemon { service }) => assert!(service.ends_with("/v2/goal")),
         other => panic!("expected NoDaemon, got {other:?}"),
     }
-    // The stop service went with the daemon (no client holds it).
+    // The stop service went with the daemon (no client holds it); the fallback on the
+    // goal service finds no server either: both reasons are reported.
     match client.stop(TIMEOUT) {
-        Err(ClientError::Ipc(shm_ipc::IpcError::NotServed { service }))
-        | Err(ClientError::NoDaemon { service }) => assert!(service.ends_with("/v2/stop")),
-        other => panic!("expected NotServed or NoDaemon, got {other:?}"),
+        Err(ClientError::StopNotSent { stop, goal }) => {
+            match *stop {
+                ClientError::Ipc(shm_ipc::IpcError::NotServed { service })
+                | ClientError::NoDaemon { service } => assert!(service.ends_with("/v2/stop")),
+                other => panic!("expected NotServed or NoDaemon, got {other:?}"),
+            }
+            match *goal {
+                ClientError::NoDaemon { service } => assert!(service.ends_with("/v2/goal")),
+                other => panic!("expected NoDaemon, got {other:?}"),
+            }
+        }
+        other => panic!("expected StopNotSent, got {other:?}"),
     }
 }
 
@@ -184,7 +194,11 @@ fn a_stop_gets_through_when_every_goal_client_slot_is_taken() {
     for _ in 0..40 {
         match Client::new(&config) {
             Ok(c) => held.push(c),
-            Err(shm_ipc::IpcError::Port { port: "client", .. }) => {}
+            Err(shm_ipc::IpcError::PortsExhausted {
+                port: "client",
+                limit: 32,
+                ..
+            }) => {}
             Err(e) => panic!("unexpected {e}"),
         }
     }
@@ -209,7 +223,11 @@ fn second_daemon_on_same_prefix_is_refused() {
     let config = unique_config("second_daemon");
     let first = DaemonEndpoint::new(&config).expect("first daemon");
     match DaemonEndpoint::new(&config) {
-        Err(IpcError::AlreadyServed { .. }) => {}
+        // The refusal names the process serving already (README fault table, row 8).
+        Err(IpcError::AlreadyServed { holders, .. }) => {
+            let pid = format!("node \"wlnavd\" (pid {}", std::process::id());
+            assert!(holders.contains(&pid), "{pid:?} missing in {holders:?}");
+        }
         other => panic!("expected AlreadyServed, got {other:?}"),
     }
     drop(first);
@@ -381,4 +399,134 @@ fn two_prefixes_in_parallel_do_not_interfere() {
     assert_eq!(seen_b, (2_001..=2_004).collect::<Vec<_>>());
     assert_eq!(server_a.finish(), 7);
     assert_eq!(server_b.finish(), 4);
+}
+
+/// A squatter in this process: a plain iceoryx2 node (as a third-party client would use)
+/// that holds ports on the services of `config`.
+fn squatter() -> shm_ipc::iceoryx2::node::Node<shm_ipc::iceoryx2::prelude::ipc::Service> {
+    use shm_ipc::iceoryx2::prelude::*;
+    NodeBuilder::new()
+        .name(&NodeName::new("squatter").unwrap())
+        .create::<ipc::Service>()
+        .unwrap()
+}
+
+fn service_name(name: &str) -> shm_ipc::iceoryx2::prelude::ServiceName {
+    shm_ipc::iceoryx2::prelude::ServiceName::new(name).unwrap()
+}
+
+#[test]
+fn a_stop_falls_back_to_the_goal_service_when_every_stop_slot_is_taken() {
+    let config = unique_config("stop_fallback");
+    let server = TestServer::start(config.clone());
+    let names = config.service_names().unwrap();
+    let node = squatter();
+    let stop_service = node
+        .service_builder(&service_name(&names.stop))
+        .request_response::<GoalRequest, shm_ipc::GoalReply>()
+        .open()
+        .unwrap();
+    let held: Vec<_> = (0..20)
+        .filter_map(|_| stop_service.client_builder().create().ok())
+        .collect();
+    assert_eq!(held.len(), shm_ipc::qos::STOP_MAX_CLIENTS);
+    let stop = shm_ipc::StopClient::new(&config).expect("stop client");
+    let report = stop.stop_report(7, TIMEOUT).expect("the stop gets through");
+    assert!(report.reply.is_accepted(), "{report:?}");
+    assert_eq!(report.reply.request_id, 7);
+    assert_eq!(report.path, shm_ipc::StopPath::GoalService);
+    assert!(report.notified && report.listened, "{report:?}");
+    let detours = report.detours.join("\n");
+    for needle in [
+        "all 16 client slots are taken".to_owned(),
+        format!("16 held by node \"squatter\" (pid {}", std::process::id()),
+    ] {
+        assert!(detours.contains(&needle), "{needle:?} missing in {detours}");
+    }
+    // `Client::stop` falls back onto its own goal port.
+    let client = Client::new(&config).expect("client");
+    let report = client.stop_report(TIMEOUT).expect("the stop gets through");
+    assert!(report.reply.is_accepted());
+    assert_eq!(report.path, shm_ipc::StopPath::GoalService);
+    // Slots free again: the reserved path.
+    drop(held);
+    let report = stop.stop_report(8, TIMEOUT).expect("stop");
+    assert_eq!(report.path, shm_ipc::StopPath::StopService);
+    assert!(report.detours.is_empty(), "{report:?}");
+    drop(client);
+    assert_eq!(server.finish(), 3);
+}
+
+#[test]
+fn a_stop_goes_without_notifier_and_listener_when_none_is_free() {
+    let config = unique_config("stop_no_notifier");
+    let server = TestServer::start(config.clone());
+    let names = config.service_names().unwrap();
+    let node = squatter();
+    let mut notifiers = Vec::new();
+    let mut listeners = Vec::new();
+    let mut events = Vec::new();
+    // Every notifier and listener of both event services a stop could use.
+    for name in [&names.stop, &names.goal] {
+        let event = node
+            .service_builder(&service_name(name))
+            .event()
+            .open()
+            .unwrap();
+        notifiers.extend((0..80).filter_map(|_| event.notifier_builder().create().ok()));
+        listeners.extend((0..80).filter_map(|_| event.listener_builder().create().ok()));
+        events.push(event);
+    }
+    // The daemon holds one notifier and one listener on each.
+    assert_eq!(notifiers.len(), 2 * (shm_ipc::qos::EVENT_MAX_PORTS - 1));
+    assert_eq!(listeners.len(), 2 * (shm_ipc::qos::EVENT_MAX_PORTS - 1));
+    let stop = shm_ipc::StopClient::new(&config).expect("stop client");
+    let start = Instant::now();
+    let report = stop.stop_report(9, TIMEOUT).expect("the stop gets through");
+    let took = start.elapsed();
+    assert!(report.reply.is_accepted(), "{report:?}");
+    assert_eq!(report.path, shm_ipc::StopPath::StopService);
+    assert!(!report.notified && !report.listened, "{report:?}");
+    // The test server wakes every 50 ms by itself, as the daemon does.
+    assert!(took < Duration::from_secs(1), "took {took:?}");
+    let detours = report.detours.join("\n");
+    for needle in [
+        "all 64 notifier slots are taken".to_owned(),
+        "all 64 listener slots are taken".to_owned(),
+        "sent without a notification".to_owned(),
+        format!("63 held by node \"squatter\" (pid {}", std::process::id()),
+    ] {
+        assert!(detours.contains(&needle), "{needle:?} missing in {detours}");
+    }
+    // The stop event's notifiers alone: the daemon is woken through the goal event service.
+    notifiers.truncate(shm_ipc::qos::EVENT_MAX_PORTS - 1);
+    listeners.clear();
+    let report = stop.stop_report(10, TIMEOUT).expect("stop");
+    assert!(report.notified && report.listened, "{report:?}");
+    assert!(
+        report
+            .detours
+            .join("\n")
+            .contains("woke the daemon through"),
+        "{report:?}"
+    );
+    drop(notifiers);
+    assert_eq!(server.finish(), 2);
+}
+
+#[test]
+fn a_second_pose_source_is_named() {
+    let config = unique_config("pose_source_named");
+    let _ep = DaemonEndpoint::new(&config).expect("daemon");
+    let first = Client::new(&config).expect("client");
+    let pose = PoseEstimate::new(shm_ipc::monotonic_now_ns(), 1, Pose2::new(0.0, 0.0, 0.0));
+    first.publish_pose(&pose).expect("first source");
+    let second = Client::new(&config).expect("client");
+    match second.publish_pose(&pose) {
+        Err(IpcError::PoseSourceTaken { holders, .. }) => {
+            let pid = format!("node \"wlnav-client\" (pid {}", std::process::id());
+            assert!(holders.contains(&pid), "{pid:?} missing in {holders:?}");
+        }
+        other => panic!("expected PoseSourceTaken, got {other:?}"),
+    }
 }
