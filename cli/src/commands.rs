@@ -6,7 +6,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context;
 
-use shm_ipc::{Client, StopClient, TelemetrySubscriber};
+use shm_ipc::{Client, StopClient, StopPath, TelemetrySubscriber};
 use shm_ipc::{ClientError, IpcError};
 use shm_ipc::{GoalReply, GoalRequest, Pose2, RejectCode, Telemetry};
 
@@ -352,7 +352,10 @@ pub fn follow(
 
 /// `wlnav cancel`, `wlnav stop`, `wlnav resume`. A stop goes through the reserved stop
 /// service ([`StopClient`]): it needs none of the goal service's client slots, and it
-/// latches like a stop on the goal service (`wlnav resume` releases it).
+/// latches like a stop on the goal service (`wlnav resume` releases it). When another
+/// process holds the stop service's slots it falls back to the goal service, and when no
+/// notifier is free it is sent without one; the detours are printed on stderr, naming
+/// the holders, and the exit code is the reply's (0 accepted).
 pub fn simple_request(cli: &Cli, a: &RequestArgs, what: SimpleRequest) -> anyhow::Result<u8> {
     let timeout = Duration::from_secs_f64(a.reply_timeout);
     let result = match what {
@@ -361,7 +364,19 @@ pub fn simple_request(cli: &Cli, a: &RequestArgs, what: SimpleRequest) -> anyhow
             let client = StopClient::new(&config).with_context(|| {
                 format!("cannot open the stop service of prefix {:?}", config.prefix)
             })?;
-            client.stop(timeout)
+            // The request id is the monotonic clock: unique across processes in practice.
+            let id = shm_ipc::monotonic_now_ns().max(1);
+            client.stop_report(id, timeout).map(|report| {
+                // What another process held and which way the stop went instead: the
+                // operator learns whom to stop, the stop itself still counts.
+                for detour in &report.detours {
+                    eprintln!("wlnav: {detour}");
+                }
+                if report.path == StopPath::GoalService {
+                    eprintln!("wlnav: the stop went on the goal service (kind 3)");
+                }
+                report.reply
+            })
         }
         SimpleRequest::Cancel => connect(cli)?.cancel(timeout),
         SimpleRequest::Resume => connect(cli)?.resume(timeout),

@@ -173,12 +173,37 @@ async fn run_async(
     let endpoint = Arc::new(DaemonEndpoint::new(&IpcConfig::new(
         config.ipc.prefix.clone(),
     ))?);
-    tracing::info!(
-        "iceoryx2 services: {}, {}, {}",
-        endpoint.service_names().goal,
-        endpoint.service_names().pose,
-        endpoint.service_names().telemetry
-    );
+    {
+        use shm_ipc::qos;
+        let names = endpoint.service_names();
+        tracing::info!(
+            "iceoryx2 services (each with an event service of the same name): {} \
+             (request-response, {} clients), {} (the reserved stop path, request-response, \
+             {} clients), {} (publish-subscribe, {} publisher), {} (publish-subscribe, {} \
+             subscribers)",
+            names.goal,
+            qos::GOAL_MAX_CLIENTS,
+            names.stop,
+            qos::STOP_MAX_CLIENTS,
+            names.pose,
+            qos::POSE_MAX_PUBLISHERS,
+            names.telemetry,
+            qos::TELEMETRY_MAX_SUBSCRIBERS
+        );
+        // What a client needs to pre-check a goal (shm-ipc docs, "Goals").
+        let w = &config.ipc.workspace;
+        tracing::info!(
+            "goal checks: workspace x [{}, {}] y [{}, {}] m (inclusive); footprint: front \
+             axle at the goal, rear axle L_f + L_r = {} m behind it (L_f {} m, L_r {} m)",
+            w.x_min,
+            w.x_max,
+            w.y_min,
+            w.y_max,
+            config.machine.l_f + config.machine.l_r,
+            config.machine.l_f,
+            config.machine.l_r
+        );
+    }
 
     let mut sim_parts = None;
     let bus: Box<dyn CanBus> = match config.can.backend {
