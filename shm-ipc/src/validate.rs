@@ -10,12 +10,12 @@ use core::fmt;
 
 use crate::msg::{GoalKind, GoalReply, GoalRequest, Pose2, RejectCode, MAX_OBSTACLES};
 
-/// Largest goal heading magnitude accepted [rad] (about 1,600 turns). Beyond it a heading
+/// Largest goal heading magnitude accepted \[rad\] (about 1,600 turns). Beyond it a heading
 /// is absurd rather than merely unwrapped: at 1e300 the spacing of `f64` values is far
 /// larger than a turn, so "the heading modulo 2π" has no meaning.
 pub const MAX_HEADING_ABS: f64 = 1.0e4;
 
-/// Largest obstacle centre coordinate or radius magnitude accepted [m]. Squares of larger
+/// Largest obstacle centre coordinate or radius magnitude accepted \[m\]. Squares of larger
 /// values approach the range where the MPC's distance constraints overflow.
 pub const MAX_OBSTACLE_ABS: f64 = 1.0e6;
 
@@ -67,16 +67,16 @@ impl fmt::Display for Num {
     }
 }
 
-/// An axis-aligned rectangle of the world frame inside which goals may lie [m].
+/// An axis-aligned rectangle of the world frame inside which goals may lie \[m\].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Workspace {
-    /// Lower x bound [m]
+    /// Lower x bound \[m\]
     pub x_min: f64,
-    /// Upper x bound [m]
+    /// Upper x bound \[m\]
     pub x_max: f64,
-    /// Lower y bound [m]
+    /// Lower y bound \[m\]
     pub y_min: f64,
-    /// Upper y bound [m]
+    /// Upper y bound \[m\]
     pub y_max: f64,
 }
 
@@ -144,9 +144,9 @@ pub enum RejectReason {
         Num::with_decimals(workspace.y_min, 1), Num::with_decimals(workspace.y_max, 1)
     )]
     OutOfWorkspace {
-        /// Goal x [m]
+        /// Goal x \[m\]
         x: f64,
-        /// Goal y [m]
+        /// Goal y \[m\]
         y: f64,
         /// The configured workspace
         workspace: Workspace,
@@ -162,7 +162,7 @@ pub enum RejectReason {
     BadObstacleRadius {
         /// Obstacle index
         index: usize,
-        /// The offending radius [m]
+        /// The offending radius \[m\]
         r: f64,
     },
     /// The request kind code is not one of [`GoalKind`].
@@ -171,7 +171,7 @@ pub enum RejectReason {
     /// The goal heading is finite but absurd (|heading| > [`MAX_HEADING_ABS`]).
     #[error("goal heading {} rad is out of range (|heading| <= {} rad)", Num::new(*heading), Num::with_decimals(MAX_HEADING_ABS, 0))]
     HeadingOutOfRange {
-        /// The heading received [rad]
+        /// The heading received \[rad\]
         heading: f64,
     },
     /// An obstacle number is finite but absurd (|x|, |y| or r > [`MAX_OBSTACLE_ABS`]).
@@ -181,7 +181,7 @@ pub enum RejectReason {
         index: usize,
         /// `x`, `y` or `r`
         field: &'static str,
-        /// The offending value [m]
+        /// The offending value \[m\]
         value: f64,
     },
 }
