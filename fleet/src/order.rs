@@ -1,0 +1,945 @@
+//! Order logic, pure: checking an incoming message, deciding accept / update / reject
+//! (VDA 5050 2.0.0 §6.6, "order handling" flow), stitching updates onto the last base
+//! node, and node traversal. No I/O here; `vehicle.rs` drives it.
+
+use shm_ipc::{normalize_angle, Obstacle, Pose2, MAX_OBSTACLES};
+
+use crate::vda::{self, Edge, ErrorLevel, InstantActions, Node, Order};
+
+/// Limits on what the bridge accepts (also reported in the factsheet).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Limits {
+    /// Longest message accepted [bytes].
+    pub max_message_len: usize,
+    /// Most nodes in one order.
+    pub max_nodes: usize,
+    /// Longest id (orderId, nodeId, edgeId, actionId) [bytes].
+    pub max_id_len: usize,
+    /// Most instant actions in one message.
+    pub max_instant_actions: usize,
+}
+
+impl Default for Limits {
+    fn default() -> Self {
+        Self {
+            max_message_len: 256 * 1024,
+            max_nodes: 1000,
+            max_id_len: 256,
+            max_instant_actions: 64,
+        }
+    }
+}
+
+/// Who this vehicle is: messages for another manufacturer or serial number are refused.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Identity {
+    /// `manufacturer` in topics and headers.
+    pub manufacturer: String,
+    /// `serialNumber` in topics and headers.
+    pub serial_number: String,
+}
+
+/// A validation error, with `topic` and whatever of the header could be read as references.
+fn validation(topic: &str, what: impl Into<String>, refs: &[(&str, &str)]) -> vda::Error {
+    let mut all: Vec<(&str, &str)> = vec![("topic", topic)];
+    all.extend_from_slice(refs);
+    vda::Error::new("validationError", ErrorLevel::Warning, what, &all)
+}
+
+/// Parses `payload` as JSON within the size limit, and checks the header: protocol major
+/// version 2, this vehicle's manufacturer and serial number. Returns the raw value too so
+/// a later error can name the orderId / headerId.
+fn parse_checked<T: serde::de::DeserializeOwned>(
+    topic: &str,
+    payload: &[u8],
+    id: &Identity,
+    limits: &Limits,
+) -> Result<T, vda::Error> {
+    if payload.len() > limits.max_message_len {
+        return Err(validation(
+            topic,
+            format!(
+                "message of {} bytes exceeds the limit of {} bytes",
+                payload.len(),
+                limits.max_message_len
+            ),
+            &[],
+        ));
+    }
+    let value: serde_json::Value = serde_json::from_slice(payload)
+        .map_err(|e| validation(topic, format!("not valid JSON: {e}"), &[]))?;
+    let header_id = value.get("headerId").map(|v| v.to_string());
+    let order_id = value
+        .get("orderId")
+        .and_then(|v| v.as_str())
+        .map(str::to_owned);
+    let mut refs: Vec<(&str, &str)> = Vec::new();
+    if let Some(h) = &header_id {
+        refs.push(("headerId", h));
+    }
+    if let Some(o) = &order_id {
+        refs.push(("orderId", o));
+    }
+    let version = value.get("version").and_then(|v| v.as_str()).unwrap_or("");
+    if version.split('.').next() != Some("2") {
+        return Err(validation(
+            topic,
+            format!("protocol version {version:?} is not supported (2.x.x is)"),
+            &refs,
+        ));
+    }
+    let manufacturer = value.get("manufacturer").and_then(|v| v.as_str());
+    let serial = value.get("serialNumber").and_then(|v| v.as_str());
+    if manufacturer != Some(id.manufacturer.as_str()) || serial != Some(id.serial_number.as_str())
+    {
+        return Err(validation(
+            topic,
+            format!(
+                "message for {}/{} reached {}/{}",
+                manufacturer.unwrap_or("?"),
+                serial.unwrap_or("?"),
+                id.manufacturer,
+                id.serial_number
+            ),
+            &refs,
+        ));
+    }
+    serde_json::from_value(value)
+        .map_err(|e| validation(topic, format!("does not match the {topic} schema: {e}"), &refs))
+}
+
+/// Parses and checks an `order`: header, structure and numbers. Anything that fails is a
+/// `validationError` (WARNING) naming what is wrong; the order never reaches the daemon.
+pub fn parse_order(
+    payload: &[u8],
+    id: &Identity,
+    limits: &Limits,
+    map_id: &str,
+) -> Result<Order, vda::Error> {
+    let order: Order = parse_checked("order", payload, id, limits)?;
+    check_order(&order, limits, map_id)?;
+    Ok(order)
+}
+
+/// The structural checks of an order (after parsing).
+pub fn check_order(order: &Order, limits: &Limits, map_id: &str) -> Result<(), vda::Error> {
+    let header_id = order.header.header_id.to_string();
+    let update_id = order.order_update_id.to_string();
+    let base_refs = [
+        ("headerId", header_id.as_str()),
+        ("orderId", order.order_id.as_str()),
+        ("orderUpdateId", update_id.as_str()),
+    ];
+    let fail = |what: String, extra: &[(&str, &str)]| {
+        let mut refs = base_refs.to_vec();
+        refs.extend_from_slice(extra);
+        validation("order", what, &refs)
+    };
+    let bad_id = |s: &str| s.is_empty() || s.len() > limits.max_id_len;
+    if bad_id(&order.order_id) {
+        return Err(fail(
+            format!("orderId must have 1..={} bytes", limits.max_id_len),
+            &[],
+        ));
+    }
+    let nodes = &order.nodes;
+    let edges = &order.edges;
+    if nodes.is_empty() {
+        return Err(fail("an order needs at least one node".into(), &[]));
+    }
+    if nodes.len() > limits.max_nodes {
+        return Err(fail(
+            format!("{} nodes exceed the limit of {}", nodes.len(), limits.max_nodes),
+            &[],
+        ));
+    }
+    if edges.len() + 1 != nodes.len() {
+        return Err(fail(
+            format!(
+                "{} nodes need {} edges, the order has {}",
+                nodes.len(),
+                nodes.len() - 1,
+                edges.len()
+            ),
+            &[],
+        ));
+    }
+    if !nodes[0].released {
+        return Err(fail("the first node must be released".into(), &[]));
+    }
+    let first_seq = nodes[0].sequence_id;
+    let mut horizon = false;
+    for (i, n) in nodes.iter().enumerate() {
+        let refs = [("nodeId", n.node_id.as_str())];
+        if bad_id(&n.node_id) {
+            return Err(fail(
+                format!("node {i}: nodeId must have 1..={} bytes", limits.max_id_len),
+                &[],
+            ));
+        }
+        let expected = first_seq + 2 * i as u64;
+        if n.sequence_id != expected || n.sequence_id % 2 != 0 {
+            return Err(fail(
+                format!(
+                    "node {}: sequenceId {} out of order (expected {expected}: nodes even, \
+                     edges odd, consecutive)",
+                    n.node_id, n.sequence_id
+                ),
+                &refs,
+            ));
+        }
+        if n.released && horizon {
+            return Err(fail(
+                format!("node {}: released after an unreleased node", n.node_id),
+                &refs,
+            ));
+        }
+        horizon |= !n.released;
+        let Some(p) = &n.node_position else {
+            return Err(fail(
+                format!("node {}: nodePosition is required by this vehicle", n.node_id),
+                &refs,
+            ));
+        };
+        let finite = p.x.is_finite()
+            && p.y.is_finite()
+            && p.theta.is_none_or(f64::is_finite)
+            && p.allowed_deviation_xy.is_none_or(f64::is_finite)
+            && p.allowed_deviation_theta.is_none_or(f64::is_finite);
+        if !finite || p.x.abs() > 1e6 || p.y.abs() > 1e6 {
+            return Err(fail(
+                format!("node {}: position not finite or absurd", n.node_id),
+                &refs,
+            ));
+        }
+        if p.theta.is_some_and(|t| t.abs() > std::f64::consts::PI + 1e-9) {
+            return Err(fail(
+                format!("node {}: theta outside [-pi, pi]", n.node_id),
+                &refs,
+            ));
+        }
+        if p.allowed_deviation_xy.is_some_and(|d| d < 0.0)
+            || p
+                .allowed_deviation_theta
+                .is_some_and(|d| !(0.0..=std::f64::consts::PI + 1e-9).contains(&d))
+        {
+            return Err(fail(
+                format!("node {}: allowed deviation out of range", n.node_id),
+                &refs,
+            ));
+        }
+        if p.map_id != map_id {
+            return Err(fail(
+                format!(
+                    "node {}: mapId {:?}, but the vehicle is on map {map_id:?}",
+                    n.node_id, p.map_id
+                ),
+                &refs,
+            ));
+        }
+        if let Some(a) = n.actions.first() {
+            return Err(fail(
+                format!(
+                    "node {}: action {:?} is not supported by this vehicle (no node actions)",
+                    n.node_id, a.action_type
+                ),
+                &[("nodeId", &n.node_id), ("actionId", &a.action_id)],
+            ));
+        }
+    }
+    for (i, e) in edges.iter().enumerate() {
+        let refs = [("edgeId", e.edge_id.as_str())];
+        if bad_id(&e.edge_id) {
+            return Err(fail(
+                format!("edge {i}: edgeId must have 1..={} bytes", limits.max_id_len),
+                &[],
+            ));
+        }
+        if e.sequence_id != first_seq + 2 * i as u64 + 1 {
+            return Err(fail(
+                format!(
+                    "edge {}: sequenceId {} out of order (expected {})",
+                    e.edge_id,
+                    e.sequence_id,
+                    first_seq + 2 * i as u64 + 1
+                ),
+                &refs,
+            ));
+        }
+        if e.start_node_id != nodes[i].node_id || e.end_node_id != nodes[i + 1].node_id {
+            return Err(fail(
+                format!(
+                    "edge {} runs {} -> {}, not between its neighbours {} -> {}",
+                    e.edge_id,
+                    e.start_node_id,
+                    e.end_node_id,
+                    nodes[i].node_id,
+                    nodes[i + 1].node_id
+                ),
+                &refs,
+            ));
+        }
+        if e.released != nodes[i + 1].released {
+            return Err(fail(
+                format!(
+                    "edge {}: released must match its end node's (base ends with a node)",
+                    e.edge_id
+                ),
+                &refs,
+            ));
+        }
+        if let Some(a) = e.actions.first() {
+            return Err(fail(
+                format!(
+                    "edge {}: action {:?} is not supported by this vehicle (no edge actions)",
+                    e.edge_id, a.action_type
+                ),
+                &[("edgeId", &e.edge_id), ("actionId", &a.action_id)],
+            ));
+        }
+        if e.max_speed.is_some_and(|v| !v.is_finite() || v < 0.0) {
+            return Err(fail(format!("edge {}: bad maxSpeed", e.edge_id), &refs));
+        }
+    }
+    Ok(())
+}
+
+/// Parses and checks an `instantActions` message.
+pub fn parse_instant_actions(
+    payload: &[u8],
+    id: &Identity,
+    limits: &Limits,
+) -> Result<InstantActions, vda::Error> {
+    let msg: InstantActions = parse_checked("instantActions", payload, id, limits)?;
+    let header_id = msg.header.header_id.to_string();
+    if msg.actions.len() > limits.max_instant_actions {
+        return Err(validation(
+            "instantActions",
+            format!(
+                "{} actions exceed the limit of {}",
+                msg.actions.len(),
+                limits.max_instant_actions
+            ),
+            &[("headerId", &header_id)],
+        ));
+    }
+    if let Some(a) = msg
+        .actions
+        .iter()
+        .find(|a| a.action_id.is_empty() || a.action_id.len() > limits.max_id_len)
+    {
+        return Err(validation(
+            "instantActions",
+            format!("actionId {:?}: 1..={} bytes", a.action_id, limits.max_id_len),
+            &[("headerId", &header_id)],
+        ));
+    }
+    Ok(msg)
+}
+
+/// What to do with a valid order.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Decision {
+    /// A new order: replace everything; its first node counts as traversed.
+    New,
+    /// An update of the current order, stitched onto its last base node.
+    Update,
+    /// The same orderId and orderUpdateId again: already known, ignore.
+    Duplicate,
+    /// Refused, with the error for the state.
+    Reject(vda::Error),
+}
+
+/// The current order and how far along it the machine is. Node and edge lists hold the
+/// order as merged from all its updates; what is left to drive is everything with a
+/// sequenceId above `last_node_sequence_id`.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct OrderBook {
+    /// The current (or last) order's id; empty before the first.
+    pub order_id: String,
+    /// Its update id.
+    pub order_update_id: u64,
+    /// The last node traversed; empty before the first order.
+    pub last_node_id: String,
+    /// Its sequenceId.
+    pub last_node_sequence_id: u64,
+    /// All nodes of the order (merged over updates).
+    pub nodes: Vec<Node>,
+    /// All edges.
+    pub edges: Vec<Edge>,
+    /// The order ended with an error (goal aborted or refused by the daemon): nothing more
+    /// is driven until an update or a new order.
+    pub failed: bool,
+}
+
+/// A node the machine is to reach next.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Target {
+    /// The node's id.
+    pub node_id: String,
+    /// Its sequenceId.
+    pub sequence_id: u64,
+    /// The goal pose handed to the daemon (θ: the node's, else the direction of travel).
+    pub goal: Pose2,
+    /// Passed without stopping, traversed within `allowed_xy` (and `allowed_theta` when the
+    /// node has a θ); false: traversed when the daemon reports the goal succeeded.
+    pub pass_through: bool,
+    /// Allowed position deviation [m] (pass-through only).
+    pub allowed_xy: f64,
+    /// Allowed heading deviation [rad], `None` when any heading will do.
+    pub allowed_theta: Option<f64>,
+    /// The node's map (obstacles are that map's).
+    pub map_id: String,
+}
+
+impl OrderBook {
+    /// Nodes still to traverse (base and horizon).
+    pub fn remaining_nodes(&self) -> impl Iterator<Item = &Node> {
+        let last = self.last_node_sequence_id;
+        self.nodes.iter().filter(move |n| n.sequence_id > last)
+    }
+
+    /// Edges still to traverse.
+    pub fn remaining_edges(&self) -> impl Iterator<Item = &Edge> {
+        let last = self.last_node_sequence_id;
+        self.edges.iter().filter(move |e| e.sequence_id > last)
+    }
+
+    /// True while released nodes remain and the order has not failed: the machine is
+    /// executing it.
+    pub fn is_active(&self) -> bool {
+        !self.failed && self.remaining_nodes().any(|n| n.released)
+    }
+
+    /// True if there is anything to cancel: nodes left (base or horizon).
+    pub fn has_remaining(&self) -> bool {
+        self.remaining_nodes().next().is_some()
+    }
+
+    /// The last released node of the order (the end of its base).
+    pub fn last_base_node(&self) -> Option<&Node> {
+        self.nodes.iter().rev().find(|n| n.released)
+    }
+
+    /// The specification's order-handling flow for a valid `order`, given the machine's
+    /// pose (`None`: unknown) and how far from the first node a new order may start
+    /// (`first_node_range`, or the node's allowedDeviationXY when larger).
+    pub fn decide(&self, order: &Order, machine: Option<Pose2>, first_node_range: f64) -> Decision {
+        let header_id = order.header.header_id.to_string();
+        let update_id = order.order_update_id.to_string();
+        let refs = [
+            ("headerId", header_id.as_str()),
+            ("orderId", order.order_id.as_str()),
+            ("orderUpdateId", update_id.as_str()),
+        ];
+        let first = &order.nodes[0];
+        if !self.order_id.is_empty() && order.order_id == self.order_id {
+            if order.order_update_id < self.order_update_id {
+                return Decision::Reject(vda::Error::new(
+                    "orderUpdateError",
+                    ErrorLevel::Warning,
+                    format!(
+                        "orderUpdateId {} is older than the current {}",
+                        order.order_update_id, self.order_update_id
+                    ),
+                    &refs,
+                ));
+            }
+            if order.order_update_id == self.order_update_id {
+                return Decision::Duplicate;
+            }
+            // An update must begin at the current base's last node.
+            let stitch_ok = self
+                .last_base_node()
+                .is_some_and(|b| b.node_id == first.node_id && b.sequence_id == first.sequence_id);
+            if !stitch_ok {
+                let (id, seq) = self
+                    .last_base_node()
+                    .map(|b| (b.node_id.clone(), b.sequence_id))
+                    .unwrap_or_default();
+                return Decision::Reject(vda::Error::new(
+                    "orderUpdateError",
+                    ErrorLevel::Warning,
+                    format!(
+                        "the update starts at node {} (sequenceId {}); it must start at the \
+                         last base node {id} (sequenceId {seq})",
+                        first.node_id, first.sequence_id
+                    ),
+                    &refs,
+                ));
+            }
+            return Decision::Update;
+        }
+        if self.is_active() {
+            return Decision::Reject(vda::Error::new(
+                "orderUpdateError",
+                ErrorLevel::Warning,
+                format!(
+                    "order {} is still active; cancel it first (cancelOrder) or send an update",
+                    self.order_id
+                ),
+                &refs,
+            ));
+        }
+        let Some(pose) = machine else {
+            return Decision::Reject(vda::Error::new(
+                "noRouteError",
+                ErrorLevel::Warning,
+                "the machine's position is not known (no telemetry from wlnavd)",
+                &refs,
+            ));
+        };
+        let p = first.node_position.as_ref().expect("checked: nodes have positions");
+        let range = p.allowed_deviation_xy.unwrap_or(0.0).max(first_node_range);
+        let d = (p.x - pose.x).hypot(p.y - pose.y);
+        if d > range {
+            let mut refs = refs.to_vec();
+            refs.push(("nodeId", &first.node_id));
+            return Decision::Reject(vda::Error::new(
+                "noRouteError",
+                ErrorLevel::Warning,
+                format!(
+                    "the first node {} is {d:.2} m from the machine (more than {range:.2} m): \
+                     not trivially reachable",
+                    first.node_id
+                ),
+                &refs,
+            ));
+        }
+        Decision::New
+    }
+
+    /// Applies an order `decide` accepted.
+    pub fn apply(&mut self, order: Order, decision: &Decision) {
+        match decision {
+            Decision::New => {
+                let first = &order.nodes[0];
+                self.last_node_id = first.node_id.clone();
+                self.last_node_sequence_id = first.sequence_id;
+                self.order_id = order.order_id;
+                self.order_update_id = order.order_update_id;
+                self.nodes = order.nodes;
+                self.edges = order.edges;
+                self.failed = false;
+            }
+            Decision::Update => {
+                let stitch = order.nodes[0].sequence_id;
+                self.nodes.retain(|n| n.sequence_id < stitch);
+                self.edges.retain(|e| e.sequence_id < stitch);
+                self.nodes.extend(order.nodes);
+                self.edges.extend(order.edges);
+                self.order_update_id = order.order_update_id;
+                self.failed = false;
+            }
+            Decision::Duplicate | Decision::Reject(_) => {}
+        }
+    }
+
+    /// The next released node to drive to, or `None` when the base is done (or failed).
+    /// `from` is where the machine is, for the heading of a node without θ.
+    pub fn target(&self, from: Pose2) -> Option<Target> {
+        if self.failed {
+            return None;
+        }
+        let mut remaining = self.remaining_nodes().filter(|n| n.released);
+        let node = remaining.next()?;
+        let is_last_released = remaining.next().is_none();
+        let p = node.node_position.as_ref()?;
+        // Heading when the node gives none: the direction from the previous node (or the
+        // machine, right at the start) to this one.
+        let prev = self
+            .nodes
+            .iter()
+            .rev()
+            .find(|n| n.sequence_id < node.sequence_id)
+            .and_then(|n| n.node_position.as_ref())
+            .map(|q| (q.x, q.y))
+            .unwrap_or((from.x, from.y));
+        let heading = match p.theta {
+            Some(t) => t,
+            None => {
+                let (dx, dy) = (p.x - prev.0, p.y - prev.1);
+                if dx.hypot(dy) > 1e-6 {
+                    dy.atan2(dx)
+                } else {
+                    from.heading
+                }
+            }
+        };
+        let xy = p.allowed_deviation_xy.unwrap_or(0.0);
+        let theta_tol = p.allowed_deviation_theta.unwrap_or(0.0);
+        let pass_through = !is_last_released && xy > 0.0 && (p.theta.is_none() || theta_tol > 0.0);
+        Some(Target {
+            node_id: node.node_id.clone(),
+            sequence_id: node.sequence_id,
+            goal: Pose2::new(p.x, p.y, normalize_angle(heading)),
+            pass_through,
+            allowed_xy: xy,
+            allowed_theta: p.theta.map(|_| theta_tol),
+            map_id: p.map_id.clone(),
+        })
+    }
+
+    /// Marks `sequence_id` (the current target) traversed.
+    pub fn traverse(&mut self, node_id: &str, sequence_id: u64) {
+        self.last_node_id = node_id.to_owned();
+        self.last_node_sequence_id = sequence_id;
+    }
+
+    /// Drops every remaining node and edge (cancelOrder); the order id stays.
+    pub fn clear(&mut self) {
+        let last = self.last_node_sequence_id;
+        self.nodes.retain(|n| n.sequence_id <= last);
+        self.edges.retain(|e| e.sequence_id <= last);
+        self.failed = false;
+    }
+}
+
+/// True if a pass-through `target` counts as traversed with the machine at `pose`:
+/// within its allowed position deviation, and heading deviation when it has a θ.
+pub fn passed(target: &Target, pose: Pose2) -> bool {
+    if !target.pass_through {
+        return false;
+    }
+    let d = (pose.x - target.goal.x).hypot(pose.y - target.goal.y);
+    let heading_ok = match target.allowed_theta {
+        Some(tol) => normalize_angle(pose.heading - target.goal.heading).abs() <= tol,
+        None => true,
+    };
+    d <= target.allowed_xy && heading_ok
+}
+
+/// The site's circles to send with a goal from `from` to `goal`: all of them when they fit
+/// in one request ([`MAX_OBSTACLES`]), else the ones nearest the straight way (distance of
+/// the circle's edge to the segment), which is what the daemon's planner meets first.
+pub fn obstacles_for_goal(site: &[Obstacle], from: Pose2, goal: Pose2) -> Vec<Obstacle> {
+    if site.len() <= MAX_OBSTACLES {
+        return site.to_vec();
+    }
+    let mut by_distance: Vec<(f64, Obstacle)> = site
+        .iter()
+        .map(|o| (segment_distance((from.x, from.y), (goal.x, goal.y), (o.x, o.y)) - o.r, *o))
+        .collect();
+    by_distance.sort_by(|a, b| a.0.total_cmp(&b.0));
+    by_distance
+        .into_iter()
+        .take(MAX_OBSTACLES)
+        .map(|(_, o)| o)
+        .collect()
+}
+
+/// Distance of point `p` to the segment `a`–`b`.
+fn segment_distance(a: (f64, f64), b: (f64, f64), p: (f64, f64)) -> f64 {
+    let (dx, dy) = (b.0 - a.0, b.1 - a.1);
+    let len2 = dx * dx + dy * dy;
+    let t = if len2 > 0.0 {
+        (((p.0 - a.0) * dx + (p.1 - a.1) * dy) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (p.0 - (a.0 + t * dx)).hypot(p.1 - (a.1 + t * dy))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::json;
+
+    fn id() -> Identity {
+        Identity {
+            manufacturer: "wlnav".into(),
+            serial_number: "L1".into(),
+        }
+    }
+
+    fn node(id: &str, seq: u64, released: bool, x: f64, y: f64, dev: f64) -> serde_json::Value {
+        json!({"nodeId": id, "sequenceId": seq, "released": released, "actions": [],
+               "nodePosition": {"x": x, "y": y, "mapId": "site", "allowedDeviationXY": dev}})
+    }
+
+    fn edge(id: &str, seq: u64, released: bool, a: &str, b: &str) -> serde_json::Value {
+        json!({"edgeId": id, "sequenceId": seq, "released": released, "startNodeId": a,
+               "endNodeId": b, "actions": []})
+    }
+
+    fn order_json(order_id: &str, update: u64, nodes: Vec<serde_json::Value>) -> serde_json::Value {
+        let edges: Vec<serde_json::Value> = nodes
+            .windows(2)
+            .map(|w| {
+                let a = w[0]["nodeId"].as_str().unwrap();
+                let b = w[1]["nodeId"].as_str().unwrap();
+                edge(
+                    &format!("{a}-{b}"),
+                    w[0]["sequenceId"].as_u64().unwrap() + 1,
+                    w[1]["released"].as_bool().unwrap(),
+                    a,
+                    b,
+                )
+            })
+            .collect();
+        json!({"headerId": 1, "timestamp": "2024-01-01T00:00:00.000Z", "version": "2.0.0",
+               "manufacturer": "wlnav", "serialNumber": "L1", "orderId": order_id,
+               "orderUpdateId": update, "nodes": nodes, "edges": edges})
+    }
+
+    fn parse(v: &serde_json::Value) -> Result<Order, vda::Error> {
+        parse_order(v.to_string().as_bytes(), &id(), &Limits::default(), "site")
+    }
+
+    fn three_nodes() -> Order {
+        parse(&order_json(
+            "o1",
+            0,
+            vec![
+                node("A", 0, true, 0.0, 0.0, 0.5),
+                node("B", 2, true, 3.0, 0.0, 0.5),
+                node("C", 4, true, 6.0, 0.0, 0.0),
+            ],
+        ))
+        .unwrap()
+    }
+
+    fn err_type(r: Result<Order, vda::Error>) -> (String, String) {
+        let e = r.unwrap_err();
+        (e.error_type, e.error_description.unwrap_or_default())
+    }
+
+    #[test]
+    fn hostile_orders_are_validation_errors() {
+        let limits = Limits::default();
+        let p = |b: &[u8]| parse_order(b, &id(), &limits, "site");
+        assert_eq!(err_type(p(b"{nonsense")).0, "validationError");
+        assert_eq!(err_type(p(b"")).0, "validationError");
+        // NaN is not JSON; a number beyond f64 is refused by the parser.
+        let good = order_json("o", 0, vec![node("A", 0, true, 0.0, 0.0, 0.0)]).to_string();
+        assert!(p(good.as_bytes()).is_ok());
+        assert!(p(good.replace("\"x\":0.0", "\"x\":NaN").as_bytes()).is_err());
+        assert!(p(good.replace("\"x\":0.0", "\"x\":1e999").as_bytes()).is_err());
+        let big = vec![b' '; limits.max_message_len + 1];
+        assert!(err_type(p(&big)).1.contains("exceeds"));
+        let mut v = order_json("o", 0, vec![node("A", 0, true, 0.0, 0.0, 0.0)]);
+        v["version"] = json!("1.1.0");
+        assert!(err_type(parse(&v)).1.contains("version"));
+        let mut v = order_json("o", 0, vec![node("A", 0, true, 0.0, 0.0, 0.0)]);
+        v["serialNumber"] = json!("L2");
+        assert!(err_type(parse(&v)).1.contains("L2"));
+        // Missing required array.
+        let mut v = order_json("o", 0, vec![node("A", 0, true, 0.0, 0.0, 0.0)]);
+        v.as_object_mut().unwrap().remove("edges");
+        assert!(err_type(parse(&v)).1.contains("schema"));
+    }
+
+    #[test]
+    fn structure_is_checked() {
+        // sequenceIds out of order.
+        let v = order_json(
+            "o",
+            0,
+            vec![node("A", 0, true, 0.0, 0.0, 0.0), node("B", 4, true, 1.0, 0.0, 0.0)],
+        );
+        assert!(err_type(parse(&v)).1.contains("out of order"));
+        // Released after horizon.
+        let v = order_json(
+            "o",
+            0,
+            vec![
+                node("A", 0, true, 0.0, 0.0, 0.0),
+                node("B", 2, false, 1.0, 0.0, 0.0),
+                node("C", 4, true, 2.0, 0.0, 0.0),
+            ],
+        );
+        assert!(err_type(parse(&v)).1.contains("released after"));
+        // Wrong map.
+        let mut v = order_json("o", 0, vec![node("A", 0, true, 0.0, 0.0, 0.0)]);
+        v["nodes"][0]["nodePosition"]["mapId"] = json!("elsewhere");
+        assert!(err_type(parse(&v)).1.contains("mapId"));
+        // Theta out of range, negative deviation.
+        let mut v = order_json("o", 0, vec![node("A", 0, true, 0.0, 0.0, 0.0)]);
+        v["nodes"][0]["nodePosition"]["theta"] = json!(4.0);
+        assert!(err_type(parse(&v)).1.contains("theta"));
+        let v = order_json("o", 0, vec![node("A", 0, true, 0.0, 0.0, -1.0)]);
+        assert!(err_type(parse(&v)).1.contains("deviation"));
+        // Node actions are not supported.
+        let mut v = order_json("o", 0, vec![node("A", 0, true, 0.0, 0.0, 0.0)]);
+        v["nodes"][0]["actions"] =
+            json!([{"actionType": "pick", "actionId": "p1", "blockingType": "HARD"}]);
+        assert!(err_type(parse(&v)).1.contains("pick"));
+        // Edge that does not connect its neighbours.
+        let mut v = order_json(
+            "o",
+            0,
+            vec![node("A", 0, true, 0.0, 0.0, 0.0), node("B", 2, true, 1.0, 0.0, 0.0)],
+        );
+        v["edges"][0]["endNodeId"] = json!("Z");
+        assert!(err_type(parse(&v)).1.contains("not between"));
+        // Empty order.
+        let v = order_json("o", 0, vec![]);
+        assert!(err_type(parse(&v)).1.contains("at least one node"));
+    }
+
+    #[test]
+    fn a_new_order_starts_at_a_reachable_first_node() {
+        let book = OrderBook::default();
+        let o = three_nodes();
+        assert_eq!(book.decide(&o, Some(Pose2::new(0.3, 0.0, 0.0)), 1.0), Decision::New);
+        match book.decide(&o, Some(Pose2::new(5.0, 0.0, 0.0)), 1.0) {
+            Decision::Reject(e) => assert_eq!(e.error_type, "noRouteError"),
+            d => panic!("{d:?}"),
+        }
+        match book.decide(&o, None, 1.0) {
+            Decision::Reject(e) => assert_eq!(e.error_type, "noRouteError"),
+            d => panic!("{d:?}"),
+        }
+    }
+
+    #[test]
+    fn nodes_are_traversed_in_order_and_the_last_released_one_stops() {
+        let mut book = OrderBook::default();
+        let o = three_nodes();
+        let d = book.decide(&o, Some(Pose2::new(0.0, 0.0, 0.0)), 1.0);
+        book.apply(o, &d);
+        assert_eq!(book.last_node_id, "A");
+        let t = book.target(Pose2::default()).unwrap();
+        assert_eq!((t.node_id.as_str(), t.pass_through), ("B", true));
+        assert!(!passed(&t, Pose2::new(2.0, 0.0, 0.0)));
+        assert!(passed(&t, Pose2::new(2.6, 0.1, 1.0)));
+        book.traverse(&t.node_id, t.sequence_id);
+        let t = book.target(Pose2::default()).unwrap();
+        // The last released node ends at rest: the daemon's success decides.
+        assert_eq!((t.node_id.as_str(), t.pass_through), ("C", false));
+        assert!(!passed(&t, Pose2::new(6.0, 0.0, 0.0)));
+        assert_eq!(book.remaining_edges().count(), 1);
+        book.traverse(&t.node_id, t.sequence_id);
+        assert!(book.target(Pose2::default()).is_none());
+        assert!(!book.is_active());
+        assert_eq!(book.remaining_edges().count(), 0);
+    }
+
+    #[test]
+    fn heading_without_theta_follows_the_way() {
+        let mut book = OrderBook::default();
+        let o = parse(&order_json(
+            "o",
+            0,
+            vec![node("A", 0, true, 0.0, 0.0, 0.0), node("B", 2, true, 0.0, 2.0, 0.0)],
+        ))
+        .unwrap();
+        book.apply(o, &Decision::New);
+        let t = book.target(Pose2::default()).unwrap();
+        assert!((t.goal.heading - std::f64::consts::FRAC_PI_2).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_zero_deviation_node_is_not_passed_through() {
+        let mut book = OrderBook::default();
+        let o = parse(&order_json(
+            "o",
+            0,
+            vec![
+                node("A", 0, true, 0.0, 0.0, 0.0),
+                node("B", 2, true, 2.0, 0.0, 0.0),
+                node("C", 4, true, 4.0, 0.0, 0.0),
+            ],
+        ))
+        .unwrap();
+        book.apply(o, &Decision::New);
+        assert!(!book.target(Pose2::default()).unwrap().pass_through);
+    }
+
+    #[test]
+    fn horizon_nodes_are_not_driven_and_updates_stitch() {
+        let mut book = OrderBook::default();
+        let o = parse(&order_json(
+            "o",
+            0,
+            vec![
+                node("A", 0, true, 0.0, 0.0, 0.0),
+                node("B", 2, true, 3.0, 0.0, 0.5),
+                node("C", 4, false, 6.0, 0.0, 0.0),
+            ],
+        ))
+        .unwrap();
+        book.apply(o, &Decision::New);
+        let t = book.target(Pose2::default()).unwrap();
+        // B is the last released node: the machine stops there, C is horizon.
+        assert_eq!((t.node_id.as_str(), t.pass_through), ("B", false));
+        assert_eq!(book.remaining_nodes().count(), 2);
+
+        // An update that does not start at the last base node is refused.
+        let bad = parse(&order_json(
+            "o",
+            1,
+            vec![node("A", 0, true, 0.0, 0.0, 0.0), node("B", 2, true, 3.0, 0.0, 0.0)],
+        ))
+        .unwrap();
+        match book.decide(&bad, None, 1.0) {
+            Decision::Reject(e) => assert_eq!(e.error_type, "orderUpdateError"),
+            d => panic!("{d:?}"),
+        }
+        // Stitched at B (still untraversed): B becomes intermediate, passed within 0.5 m.
+        let up = parse(&order_json(
+            "o",
+            1,
+            vec![
+                node("B", 2, true, 3.0, 0.0, 0.5),
+                node("C", 4, true, 6.0, 0.0, 0.0),
+                node("D", 6, true, 9.0, 0.0, 0.0),
+            ],
+        ))
+        .unwrap();
+        assert_eq!(book.decide(&up, None, 1.0), Decision::Update);
+        book.apply(up.clone(), &Decision::Update);
+        let t = book.target(Pose2::default()).unwrap();
+        assert_eq!((t.node_id.as_str(), t.pass_through), ("B", true));
+        assert_eq!(book.remaining_nodes().count(), 3);
+        assert_eq!(book.remaining_edges().count(), 3);
+        // The same update again is a duplicate; an older one an error.
+        assert_eq!(book.decide(&up, None, 1.0), Decision::Duplicate);
+        let mut old = up.clone();
+        old.order_update_id = 0;
+        assert!(matches!(book.decide(&old, None, 1.0), Decision::Reject(e) if e.error_type == "orderUpdateError"));
+        // Another order while this one is active.
+        let other = parse(&order_json("o2", 0, vec![node("B", 0, true, 3.0, 0.0, 0.0)])).unwrap();
+        assert!(matches!(book.decide(&other, Some(Pose2::new(3.0, 0.0, 0.0)), 1.0), Decision::Reject(e) if e.error_type == "orderUpdateError"));
+        // After cancel nothing remains; a new order is welcome.
+        book.clear();
+        assert!(!book.has_remaining());
+        assert_eq!(book.decide(&other, Some(Pose2::new(3.0, 0.0, 0.0)), 1.0), Decision::New);
+    }
+
+    #[test]
+    fn update_after_the_base_is_done_stitches_at_the_last_node() {
+        let mut book = OrderBook::default();
+        let o = parse(&order_json(
+            "o",
+            0,
+            vec![node("A", 0, true, 0.0, 0.0, 0.0), node("B", 2, true, 3.0, 0.0, 0.0)],
+        ))
+        .unwrap();
+        book.apply(o, &Decision::New);
+        book.traverse("B", 2);
+        assert!(!book.is_active());
+        let up = parse(&order_json(
+            "o",
+            1,
+            vec![node("B", 2, true, 3.0, 0.0, 0.0), node("C", 4, true, 6.0, 0.0, 0.0)],
+        ))
+        .unwrap();
+        assert_eq!(book.decide(&up, None, 1.0), Decision::Update);
+        book.apply(up, &Decision::Update);
+        assert_eq!(book.target(Pose2::default()).unwrap().node_id, "C");
+    }
+
+    #[test]
+    fn obstacles_nearest_the_way_when_too_many() {
+        let site: Vec<Obstacle> = (0..12)
+            .map(|i| Obstacle::new(i as f64, if i % 2 == 0 { 1.0 } else { 20.0 }, 0.5))
+            .collect();
+        let few = obstacles_for_goal(&site[..3], Pose2::default(), Pose2::new(10.0, 0.0, 0.0));
+        assert_eq!(few.len(), 3);
+        let chosen = obstacles_for_goal(&site, Pose2::default(), Pose2::new(10.0, 0.0, 0.0));
+        assert_eq!(chosen.len(), MAX_OBSTACLES);
+        // All six near the way are in.
+        assert_eq!(chosen.iter().filter(|o| o.y == 1.0).count(), 6);
+    }
+}

@@ -1,0 +1,563 @@
+//! Shared by the fleet tests: a mosquitto broker on a free port, `wlnavd --sim` daemons
+//! with private prefixes, `wlnav-fleet` bridges, and a test-side MQTT client that records
+//! every message and checks it against the official schemas.
+
+#![allow(dead_code)]
+
+use std::collections::HashMap;
+use std::ffi::OsString;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::{Arc, Mutex, OnceLock};
+use std::time::{Duration, Instant};
+
+use serde_json::{json, Value};
+
+/// The repository root.
+pub fn repo_root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap().to_path_buf()
+}
+
+/// One test at a time in this binary: daemons, bridges and a broker per test on 2 cores.
+pub fn serial() -> std::sync::MutexGuard<'static, ()> {
+    static LOCK: Mutex<()> = Mutex::new(());
+    LOCK.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+// ------------------------------------------------------------------------------------
+// Schemas
+// ------------------------------------------------------------------------------------
+
+/// The official schemas by topic name.
+pub fn validators() -> &'static HashMap<&'static str, jsonschema::Validator> {
+    static V: OnceLock<HashMap<&'static str, jsonschema::Validator>> = OnceLock::new();
+    V.get_or_init(|| {
+        let mut map = HashMap::new();
+        for topic in ["connection", "factsheet", "instantActions", "order", "state", "visualization"] {
+            let path = repo_root().join(format!("fleet/schemas/{topic}.schema"));
+            let text = std::fs::read_to_string(&path).unwrap();
+            let schema: Value = serde_json::from_str(&text)
+                .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+            let v = jsonschema::options()
+                .should_validate_formats(true)
+                .build(&schema)
+                .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+            map.insert(topic, v);
+        }
+        map
+    })
+}
+
+/// Panics unless `msg` validates against the schema of `topic`.
+pub fn assert_valid(topic: &str, msg: &Value) {
+    let v = validators().get(topic).unwrap_or_else(|| panic!("no schema for {topic}"));
+    let errors: Vec<String> = v.iter_errors(msg).map(|e| format!("{} at {}", e, e.instance_path())).collect();
+    assert!(errors.is_empty(), "{topic} message fails its schema: {errors:?}\n{msg:#}");
+}
+
+// ------------------------------------------------------------------------------------
+// Broker
+// ------------------------------------------------------------------------------------
+
+/// A free TCP port on localhost.
+pub fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
+}
+
+/// mosquitto (Debian's) on a free localhost port, with a generated configuration.
+pub struct Broker {
+    pub port: u16,
+    child: Option<Child>,
+    dir: PathBuf,
+}
+
+fn mosquitto_binary() -> PathBuf {
+    for p in ["/usr/sbin/mosquitto", "/usr/bin/mosquitto"] {
+        if Path::new(p).exists() {
+            return p.into();
+        }
+    }
+    panic!("mosquitto not installed (apt-get install mosquitto; scripts/apt-packages.txt)");
+}
+
+impl Broker {
+    pub fn start() -> Self {
+        let port = free_port();
+        let dir = std::env::temp_dir().join(format!("wlnav-fleet-broker-{}-{port}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let mut b = Self { port, child: None, dir };
+        b.spawn();
+        b
+    }
+
+    fn spawn(&mut self) {
+        let conf = self.dir.join("mosquitto.conf");
+        std::fs::write(
+            &conf,
+            format!(
+                "listener {} 127.0.0.1\nallow_anonymous true\npersistence false\nlog_dest stderr\nlog_type error\nlog_type warning\n",
+                self.port
+            ),
+        )
+        .unwrap();
+        let log = std::fs::File::create(self.dir.join("mosquitto.log")).unwrap();
+        let child = Command::new(mosquitto_binary())
+            .arg("-c")
+            .arg(&conf)
+            .stdin(Stdio::null())
+            .stdout(log.try_clone().unwrap())
+            .stderr(log)
+            .spawn()
+            .expect("start mosquitto");
+        self.child = Some(child);
+        let deadline = Instant::now() + Duration::from_secs(10);
+        while std::net::TcpStream::connect(("127.0.0.1", self.port)).is_err() {
+            assert!(Instant::now() < deadline, "mosquitto did not listen on {}", self.port);
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+
+    pub fn addr(&self) -> String {
+        format!("127.0.0.1:{}", self.port)
+    }
+
+    /// Stops the broker (SIGTERM) and starts it again on the same port.
+    pub fn restart(&mut self, down_for: Duration) {
+        self.stop();
+        std::thread::sleep(down_for);
+        self.spawn();
+    }
+
+    pub fn stop(&mut self) {
+        if let Some(mut c) = self.child.take() {
+            terminate(&mut c, Duration::from_secs(5));
+        }
+    }
+}
+
+impl Drop for Broker {
+    fn drop(&mut self) {
+        self.stop();
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
+
+/// SIGTERM, then SIGKILL after `grace`; returns whether it exited by itself.
+pub fn terminate(child: &mut Child, grace: Duration) -> bool {
+    if child.try_wait().ok().flatten().is_some() {
+        return true;
+    }
+    // SAFETY: kill(2) on our own unreaped child.
+    unsafe {
+        libc::kill(child.id() as libc::pid_t, libc::SIGTERM);
+    }
+    let deadline = Instant::now() + grace;
+    while Instant::now() < deadline {
+        if child.try_wait().ok().flatten().is_some() {
+            return true;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let _ = child.kill();
+    let _ = child.wait();
+    false
+}
+
+// ------------------------------------------------------------------------------------
+// Daemon and bridge processes
+// ------------------------------------------------------------------------------------
+
+fn profile_dir() -> PathBuf {
+    // The test executable is target/<profile>/deps/<name>-<hash>.
+    let exe = std::env::current_exe().unwrap();
+    exe.parent().and_then(Path::parent).unwrap().to_path_buf()
+}
+
+/// `wlnavd`, built by `cargo test --workspace` (the daemon's own tests), or built here.
+pub fn wlnavd() -> &'static Path {
+    static BIN: OnceLock<PathBuf> = OnceLock::new();
+    BIN.get_or_init(|| {
+        if let Some(dir) = std::env::var_os("WLNAV_E2E_BIN_DIR") {
+            return PathBuf::from(dir).join("wlnavd");
+        }
+        let dir = profile_dir();
+        let bin = dir.join("wlnavd");
+        if !bin.exists() {
+            let profile = dir.file_name().unwrap().to_str().unwrap().to_owned();
+            let cargo = std::env::var_os("CARGO").unwrap_or_else(|| OsString::from("cargo"));
+            let mut cmd = Command::new(cargo);
+            cmd.current_dir(repo_root())
+                .args(["build", "-p", "daemon", "--bin", "wlnavd"])
+                .env("CARGO_TARGET_DIR", dir.parent().unwrap());
+            if profile == "release" {
+                cmd.arg("--release");
+            }
+            eprintln!("fleet tests: building wlnavd: {cmd:?}");
+            assert!(cmd.status().unwrap().success(), "cargo build of wlnavd failed");
+        }
+        bin
+    })
+}
+
+/// The cost the daemon runs with (as the e2e tests choose it).
+fn cost() -> String {
+    if let Ok(c) = std::env::var("WLNAV_E2E_COST") {
+        return c;
+    }
+    let w = repo_root().join("critic-weights/avant635");
+    if w.join("critic.safetensors").is_file() && w.join("actor.safetensors").is_file() {
+        "critic".into()
+    } else {
+        "quadratic".into()
+    }
+}
+
+/// A prefix nobody else uses.
+pub fn unique_prefix(test: &str) -> String {
+    format!(
+        "wlnav-fleet-test/{test}/{}/{}",
+        std::process::id(),
+        shm_ipc::monotonic_now_ns() % 1_000_000_000_000
+    )
+}
+
+/// The simulated daemon's time scale in the tests (as in tests/lib.rs).
+pub const FAST: f64 = 3.0;
+
+/// A child process with its log in a file.
+pub struct Proc {
+    pub child: Option<Child>,
+    pub log: PathBuf,
+    pub what: String,
+}
+
+impl Proc {
+    fn spawn(what: &str, bin: &Path, args: &[String]) -> Self {
+        let log = std::env::temp_dir().join(format!(
+            "wlnav-fleet-{what}-{}-{}.log",
+            std::process::id(),
+            shm_ipc::monotonic_now_ns()
+        ));
+        let out = std::fs::File::create(&log).unwrap();
+        let child = Command::new(bin)
+            .args(args)
+            .stdin(Stdio::null())
+            .stdout(out.try_clone().unwrap())
+            .stderr(out)
+            .env("NO_COLOR", "1")
+            .spawn()
+            .unwrap_or_else(|e| panic!("start {}: {e}", bin.display()));
+        Self { child: Some(child), log, what: what.into() }
+    }
+
+    pub fn log_tail(&self, lines: usize) -> String {
+        let text = std::fs::read_to_string(&self.log).unwrap_or_default();
+        let all: Vec<&str> = text.lines().collect();
+        all[all.len().saturating_sub(lines)..].join("\n")
+    }
+
+    /// SIGTERM; true if it exited cleanly within `grace`.
+    pub fn terminate(&mut self, grace: Duration) -> bool {
+        match self.child.take() {
+            Some(mut c) => {
+                let clean = terminate(&mut c, grace);
+                clean && c.wait().map(|s| s.success()).unwrap_or(false)
+            }
+            None => true,
+        }
+    }
+
+    /// SIGKILL.
+    pub fn kill(&mut self) {
+        if let Some(mut c) = self.child.take() {
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+    }
+
+    pub fn is_running(&mut self) -> bool {
+        self.child.as_mut().is_some_and(|c| c.try_wait().ok().flatten().is_none())
+    }
+}
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        if let Some(mut c) = self.child.take() {
+            terminate(&mut c, Duration::from_secs(5));
+        }
+    }
+}
+
+/// Starts `wlnavd --sim` on `prefix` and waits until it is ready (telemetry in idle).
+pub fn start_daemon(prefix: &str) -> Proc {
+    let args: Vec<String> = vec![
+        "--sim".into(),
+        "--prefix".into(),
+        prefix.into(),
+        "--time-scale".into(),
+        FAST.to_string(),
+        "--cost".into(),
+        cost(),
+    ];
+    let mut p = Proc::spawn("wlnavd", wlnavd(), &args);
+    let config = shm_ipc::IpcConfig::new(prefix);
+    let deadline = Instant::now() + Duration::from_secs(60);
+    let client = loop {
+        match shm_ipc::Client::new(&config) {
+            Ok(c) => break c,
+            Err(_) if Instant::now() < deadline && p.is_running() => {
+                std::thread::sleep(Duration::from_millis(50))
+            }
+            Err(e) => panic!("wlnavd did not start: {e}\n{}", p.log_tail(20)),
+        }
+    };
+    let sub = client.subscribe_telemetry().unwrap();
+    loop {
+        assert!(Instant::now() < deadline, "wlnavd not ready:\n{}", p.log_tail(20));
+        if let Some(t) = sub.recv_timeout(Duration::from_millis(200)).unwrap() {
+            if matches!(t.mode(), Ok(shm_ipc::Mode::Idle | shm_ipc::Mode::Reached | shm_ipc::Mode::Tracking)) {
+                return p;
+            }
+        }
+    }
+}
+
+/// Starts `wlnav-fleet` for serial `serial` on `prefix`, with an optional config file text.
+pub fn start_bridge(broker: &str, serial: &str, prefix: &str, config: Option<&str>) -> Proc {
+    let mut args: Vec<String> = vec![
+        "--broker".into(),
+        broker.into(),
+        "--manufacturer".into(),
+        MANUFACTURER.into(),
+        "--serial-number".into(),
+        serial.into(),
+        "--prefix".into(),
+        prefix.into(),
+    ];
+    if let Some(text) = config {
+        let path = std::env::temp_dir().join(format!(
+            "wlnav-fleet-config-{}-{}.toml",
+            std::process::id(),
+            shm_ipc::monotonic_now_ns()
+        ));
+        std::fs::write(&path, text).unwrap();
+        args.push("--config".into());
+        args.push(path.display().to_string());
+    }
+    Proc::spawn("bridge", Path::new(env!("CARGO_BIN_EXE_wlnav-fleet")), &args)
+}
+
+pub const MANUFACTURER: &str = "wlnav";
+
+// ------------------------------------------------------------------------------------
+// A test-side master: records everything, validates everything
+// ------------------------------------------------------------------------------------
+
+/// A received message.
+#[derive(Debug, Clone)]
+pub struct Received {
+    pub serial: String,
+    pub topic: String,
+    pub retained: bool,
+    pub json: Value,
+    pub at: Instant,
+}
+
+/// Subscribes to `uagv/v2/wlnav/#`, records every message and asserts it matches its
+/// schema (a failure is recorded and reported by [`Master::check_valid`]).
+pub struct Master {
+    client: rumqttc::Client,
+    pub received: Arc<Mutex<Vec<Received>>>,
+    pub invalid: Arc<Mutex<Vec<String>>>,
+    header_id: std::sync::atomic::AtomicU64,
+    _thread: std::thread::JoinHandle<()>,
+}
+
+impl Master {
+    pub fn connect(broker_port: u16) -> Self {
+        let mut opts = rumqttc::MqttOptions::new(
+            format!("test-master-{}-{}", std::process::id(), shm_ipc::monotonic_now_ns()),
+            "127.0.0.1",
+            broker_port,
+        );
+        opts.set_max_packet_size(32 << 20, 32 << 20);
+        opts.set_keep_alive(Duration::from_secs(5));
+        let (client, mut connection) = rumqttc::Client::new(opts, 1024);
+        let received = Arc::new(Mutex::new(Vec::new()));
+        let invalid = Arc::new(Mutex::new(Vec::new()));
+        let (r, inv) = (received.clone(), invalid.clone());
+        let resubscribe = client.clone();
+        let thread = std::thread::spawn(move || {
+            for ev in connection.iter() {
+                match ev {
+                    // A clean session forgets the subscription when the broker restarts.
+                    Ok(rumqttc::Event::Incoming(rumqttc::Packet::ConnAck(_))) => {
+                        let _ = resubscribe.try_subscribe("uagv/v2/wlnav/#", rumqttc::QoS::AtLeastOnce);
+                    }
+                    Ok(rumqttc::Event::Incoming(rumqttc::Packet::Publish(p))) => {
+                        let parts: Vec<&str> = p.topic.split('/').collect();
+                        if parts.len() != 5 {
+                            continue;
+                        }
+                        let (serial, topic) = (parts[3].to_owned(), parts[4].to_owned());
+                        if topic == "order" || topic == "instantActions" {
+                            continue; // our own
+                        }
+                        let json: Value = match serde_json::from_slice(&p.payload) {
+                            Ok(j) => j,
+                            Err(e) => {
+                                inv.lock().unwrap().push(format!("{}: not JSON: {e}", p.topic));
+                                continue;
+                            }
+                        };
+                        let v = validators().get(topic.as_str());
+                        if let Some(v) = v {
+                            let errs: Vec<String> = v.iter_errors(&json).map(|e| format!("{e} at {}", e.instance_path())).collect();
+                            if !errs.is_empty() {
+                                inv.lock().unwrap().push(format!("{}: {errs:?}: {json}", p.topic));
+                            }
+                        }
+                        r.lock().unwrap().push(Received { serial, topic, retained: p.retain, json, at: Instant::now() });
+                    }
+                    Ok(_) => {}
+                    Err(_) => std::thread::sleep(Duration::from_millis(200)),
+                }
+            }
+        });
+        Self { client, received, invalid, header_id: 0.into(), _thread: thread }
+    }
+
+    pub fn publish(&self, serial: &str, topic: &str, payload: Vec<u8>) {
+        self.client
+            .publish(format!("uagv/v2/{MANUFACTURER}/{serial}/{topic}"), rumqttc::QoS::AtMostOnce, false, payload)
+            .unwrap();
+    }
+
+    fn header(&self, serial: &str) -> Value {
+        json!({
+            "headerId": self.header_id.fetch_add(1, std::sync::atomic::Ordering::Relaxed),
+            "timestamp": "2026-01-01T00:00:00.000Z",
+            "version": "2.0.0",
+            "manufacturer": MANUFACTURER,
+            "serialNumber": serial,
+        })
+    }
+
+    /// Sends an order built from (nodeId, x, y, allowedDeviationXY, released) nodes,
+    /// sequence ids from `first_seq`. The order is checked against its schema first.
+    pub fn order(&self, serial: &str, order_id: &str, update: u64, first_seq: u64, nodes: &[(&str, f64, f64, f64, bool)]) -> Value {
+        let mut o = self.header(serial);
+        o["orderId"] = json!(order_id);
+        o["orderUpdateId"] = json!(update);
+        o["nodes"] = nodes
+            .iter()
+            .enumerate()
+            .map(|(i, (id, x, y, dev, rel))| json!({"nodeId": id, "sequenceId": first_seq + 2 * i as u64, "released": rel, "actions": [],
+                "nodePosition": {"x": x, "y": y, "mapId": "site", "allowedDeviationXY": dev}}))
+            .collect();
+        o["edges"] = nodes
+            .windows(2)
+            .enumerate()
+            .map(|(i, w)| json!({"edgeId": format!("{}-{}", w[0].0, w[1].0), "sequenceId": first_seq + 2 * i as u64 + 1,
+                "released": w[1].4, "startNodeId": w[0].0, "endNodeId": w[1].0, "actions": []}))
+            .collect();
+        assert_valid("order", &o);
+        self.publish(serial, "order", o.to_string().into_bytes());
+        o
+    }
+
+    /// Sends instant actions (type, id).
+    pub fn instant(&self, serial: &str, actions: &[(&str, &str)]) {
+        let mut m = self.header(serial);
+        m["actions"] = actions
+            .iter()
+            .map(|(ty, id)| json!({"actionType": ty, "actionId": id, "blockingType": "HARD"}))
+            .collect();
+        assert_valid("instantActions", &m);
+        self.publish(serial, "instantActions", m.to_string().into_bytes());
+    }
+
+    /// Messages of `serial` on `topic` so far.
+    pub fn messages(&self, serial: &str, topic: &str) -> Vec<Received> {
+        self.received.lock().unwrap().iter().filter(|r| r.serial == serial && r.topic == topic).cloned().collect()
+    }
+
+    /// The newest state of `serial`.
+    pub fn last_state(&self, serial: &str) -> Option<Value> {
+        self.messages(serial, "state").last().map(|r| r.json.clone())
+    }
+
+    /// Waits until a state of `serial` received after `since` satisfies `pred`.
+    pub fn wait_state(&self, serial: &str, since: Instant, timeout: Duration, what: &str, pred: impl Fn(&Value) -> bool) -> Value {
+        let deadline = Instant::now() + timeout;
+        loop {
+            if let Some(s) = self.messages(serial, "state").into_iter().filter(|r| r.at >= since).map(|r| r.json).find(|j| pred(j)) {
+                return s;
+            }
+            assert!(Instant::now() < deadline, "{serial}: no state with {what} within {timeout:?}; last: {:#}", self.last_state(serial).unwrap_or_default());
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+
+    /// Waits for a message on `topic` of `serial` after `since` satisfying `pred`.
+    pub fn wait_msg(&self, serial: &str, topic: &str, since: Instant, timeout: Duration, pred: impl Fn(&Received) -> bool) -> Received {
+        let deadline = Instant::now() + timeout;
+        loop {
+            if let Some(r) = self.messages(serial, topic).into_iter().filter(|r| r.at >= since).find(|r| pred(r)) {
+                return r;
+            }
+            assert!(Instant::now() < deadline, "{serial}: no matching {topic} message within {timeout:?}");
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+
+    /// Asserts every message so far matched its schema, and returns how many there were.
+    pub fn check_valid(&self) -> usize {
+        let inv = self.invalid.lock().unwrap();
+        assert!(inv.is_empty(), "messages failing their schema: {inv:#?}");
+        self.received.lock().unwrap().len()
+    }
+}
+
+/// The errors of a state, as (errorType, description).
+pub fn errors(state: &Value) -> Vec<(String, String)> {
+    state["errors"]
+        .as_array()
+        .map(|a| {
+            a.iter()
+                .map(|e| {
+                    (
+                        e["errorType"].as_str().unwrap_or("").to_owned(),
+                        e["errorDescription"].as_str().unwrap_or("").to_owned(),
+                    )
+                })
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
+pub fn has_error(state: &Value, ty: &str, text: &str) -> bool {
+    errors(state).iter().any(|(t, d)| t == ty && d.contains(text))
+}
+
+/// Reads a retained message on `topic` with a fresh client (as a master started later
+/// would see it); `None` if none arrives within `timeout`.
+pub fn retained(port: u16, topic: &str, timeout: Duration) -> Option<Value> {
+    let mut opts = rumqttc::MqttOptions::new(format!("retained-{}", shm_ipc::monotonic_now_ns()), "127.0.0.1", port);
+    opts.set_max_packet_size(32 << 20, 32 << 20);
+    let (client, mut conn) = rumqttc::Client::new(opts, 16);
+    client.subscribe(topic, rumqttc::QoS::AtLeastOnce).unwrap();
+    let deadline = Instant::now() + timeout;
+    while Instant::now() < deadline {
+        match conn.recv_timeout(Duration::from_millis(100)) {
+            Ok(Ok(rumqttc::Event::Incoming(rumqttc::Packet::Publish(p)))) if p.retain => {
+                let _ = client.disconnect();
+                return serde_json::from_slice(&p.payload).ok();
+            }
+            Ok(Err(_)) => std::thread::sleep(Duration::from_millis(100)),
+            _ => {}
+        }
+    }
+    let _ = client.disconnect();
+    None
+}
