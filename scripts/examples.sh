@@ -7,8 +7,14 @@ cd "$(dirname "$0")/.."
 # The binaries of the test build (`cargo test --workspace` builds wlnavd and the examples,
 # which have integration tests): the same selection, so nothing is rebuilt when the tests
 # just ran; the dev profile is fast enough for a 5 Hz loop.
-cargo test --workspace --locked --no-run -q
-bin=target/debug
+# WLNAV_EXAMPLES_BIN_DIR: prebuilt wlnavd, goal-client and pose-publisher from elsewhere
+# (scripts/cross-check.sh: the arm64 ones, run under qemu).
+if [ -n "${WLNAV_EXAMPLES_BIN_DIR:-}" ]; then
+  bin=$WLNAV_EXAMPLES_BIN_DIR
+else
+  cargo test --workspace --locked --no-run -q
+  bin=target/debug
+fi
 venv=target/python-examples
 [ -x "$venv/bin/python" ] || python3 -m venv "$venv"
 "$venv/bin/pip" install -q -r examples/requirements.txt
