@@ -2,8 +2,11 @@
 # Package check (issue 18), run by scripts/test.sh after the tests: builds the amd64
 # Debian package with cargo-deb, installs it, checks what it installed (files, conffile,
 # user and group, unit not enabled, `systemd-analyze verify`, `wlnavd --check-config`
-# of the installed configuration and weights as user wlnav), removes it and checks that
-# nothing but the conffile is left; then purges it.
+# of the installed configuration and weights as user wlnav; the same under
+# `qemu-x86_64-static -cpu Haswell`, the oldest CPU the x86-64-v3 baseline claims; the
+# installed daemon, run as user wlnav, reached by a client of another user in group wlnav
+# and refusing one outside it), removes it and checks that nothing but the conffile is
+# left; then purges it.
 #
 # It packages the binaries the test build just made (target/debug/, profile `dev`), so
 # CI compiles nothing more than cargo-deb itself: this checks the package, it is not the
@@ -63,13 +66,28 @@ snapshot() {
 }
 before=$(mktemp)
 after=$(mktemp)
-trap 'rm -f "$before" "$after"; dpkg-query -W "$PKG" >/dev/null 2>&1 && dpkg -P "$PKG" >/dev/null 2>&1 || true' EXIT
+# Two client users for the group check (created before the snapshot, removed at the end):
+# one joins group wlnav once the package created it, the other never does.
+MEMBER=wlnav-check-member
+OUTSIDER=wlnav-check-outsider
+for u in $MEMBER $OUTSIDER; do
+  id -u "$u" >/dev/null 2>&1 || useradd --system --no-create-home --shell /usr/sbin/nologin "$u" ||
+    fail "useradd $u"
+done
+daemon_pid=
+cleanup() {
+  [ -n "$daemon_pid" ] && kill "$daemon_pid" 2>/dev/null || true
+  rm -f "$before" "$after"
+  dpkg-query -W "$PKG" >/dev/null 2>&1 && dpkg -P "$PKG" >/dev/null 2>&1 || true
+  for u in $MEMBER $OUTSIDER; do userdel "$u" >/dev/null 2>&1 || true; done
+}
+trap cleanup EXIT
 snapshot > "$before"
 
 dpkg -i "$deb" || fail "dpkg -i $deb"
 
 for f in /usr/bin/wlnavd /usr/bin/wlnav /lib/systemd/system/wlnavd.service \
-  /etc/wlnav/wlnavd.toml /usr/lib/sysusers.d/wlnavd.conf \
+  /etc/wlnav/wlnavd.toml /usr/lib/sysusers.d/wlnavd.conf /usr/lib/tmpfiles.d/wlnavd.conf \
   /usr/share/wlnav/critic-weights/avant635/critic.safetensors \
   /usr/share/wlnav/critic-weights/avant635/actor.safetensors \
   /usr/share/wlnav/critic-weights/large-loader/critic.safetensors \
@@ -108,6 +126,57 @@ runuser -u wlnav -- /usr/bin/wlnavd --config "$other" --check-config ||
   fail "wlnavd --check-config with the large loader's installed weights (as user wlnav)"
 rm -f "$other"
 /usr/bin/wlnav --help >/dev/null || fail "/usr/bin/wlnav --help"
+
+# The shipped baseline (x86-64-v3, .cargo/config.toml): the packaged daemon runs on a
+# Haswell, the oldest CPU the baseline claims (qemu's TCG has AVX2, FMA, BMI2; a binary built
+# for the CI machine's AVX-512 dies here with SIGILL).
+qemu-x86_64-static -cpu Haswell /usr/bin/wlnavd --config /etc/wlnav/wlnavd.toml --check-config \
+  >/dev/null 2>"$stage/haswell.log" ||
+  fail "the packaged wlnavd --check-config under qemu-x86_64-static -cpu Haswell:\n$(grep -v "TCG doesn't support" "$stage/haswell.log" | tail -n 20)"
+echo "package-check: the packaged wlnavd --check-config passes under qemu-x86_64-static -cpu Haswell"
+
+# Group access (issue 28): the daemon as user wlnav (as the unit runs it; here on the
+# simulated machine, faster than real time), a client of another user in group wlnav sends
+# a goal, waits for its outcome and reads telemetry; a user outside the group is refused.
+iox=$(stat -c '%a %U %G' /tmp/iceoryx2 2>/dev/null || true)
+[ "$iox" = "2770 root wlnav" ] || fail "/tmp/iceoryx2 is '$iox', not '2770 root wlnav' (tmpfiles.d/wlnavd.conf)"
+usermod -aG wlnav $MEMBER || fail "usermod -aG wlnav $MEMBER"
+prefix=wlnav-package-check-$$
+daemon_log=$stage/group-daemon.log
+# The installed configuration without the CAN log (/var/log/wlnav is the unit's
+# LogsDirectory, which exists only when systemd starts the unit).
+group_config=$(mktemp --suffix=.toml)
+sed '/\/var\/log\/wlnav/d' /etc/wlnav/wlnavd.toml > "$group_config"
+chmod 644 "$group_config"
+runuser -u wlnav -- /usr/bin/wlnavd --config "$group_config" --sim --prefix "$prefix" \
+  --time-scale 4 >"$daemon_log" 2>&1 &
+daemon_pid=$!
+as_member() { runuser -u $MEMBER -- /usr/bin/wlnav --prefix "$prefix" "$@"; }
+ok=
+for _ in $(seq 1 100); do
+  if as_member watch --count 1 --silence-timeout 1 >/dev/null 2>&1; then ok=1; break; fi
+  kill -0 "$daemon_pid" 2>/dev/null || fail "wlnavd (user wlnav) exited:\n$(tail -n 20 "$daemon_log")"
+  sleep 0.2
+done
+[ -n "$ok" ] || fail "no telemetry for $MEMBER (group wlnav) from wlnavd (user wlnav) within 20 s:\n$(as_member watch --count 1 2>&1 | tail -n 5)\ndaemon log:\n$(tail -n 20 "$daemon_log")"
+out=$(as_member goal 2 0 0 --wait --timeout 60 2>&1) ||
+  fail "$MEMBER (group wlnav) could not drive a goal to success (exit $?):\n$out\ndaemon log:\n$(tail -n 20 "$daemon_log")"
+echo "$out" | grep -q '^succeeded' || fail "goal of $MEMBER did not succeed:\n$out"
+as_member watch --count 3 >/dev/null || fail "$MEMBER cannot read telemetry"
+set +e
+refused=$(runuser -u $OUTSIDER -- /usr/bin/wlnav --prefix "$prefix" goal 2 0 0 2>&1)
+code=$?
+set -e
+[ $code -ne 0 ] || fail "$OUTSIDER (not in group wlnav) sent a goal:\n$refused"
+echo "$refused" | grep -qi 'permission\|group wlnav' ||
+  fail "$OUTSIDER was refused (exit $code) but the message does not say why:\n$refused"
+kill -TERM "$daemon_pid"
+wait "$daemon_pid" || true   # runuser passes SIGTERM on and reports "killed"
+daemon_pid=
+grep -q 'stopped (Shutdown)' "$daemon_log" ||
+  fail "wlnavd (user wlnav) did not stop cleanly on SIGTERM:\n$(tail -n 20 "$daemon_log")"
+rm -f "$group_config"
+echo "package-check: $MEMBER (group wlnav) reached a goal and read telemetry of wlnavd running as wlnav; $OUTSIDER was refused (exit $code): $(echo "$refused" | head -n 1)"
 
 dpkg -r "$PKG" || fail "dpkg -r $PKG"
 snapshot > "$after"
