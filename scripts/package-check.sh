@@ -189,4 +189,4 @@ removed=$(comm -23 "$before" "$after" || true)
 
 dpkg -P "$PKG" >/dev/null || fail "dpkg -P $PKG"
 [ ! -e /etc/wlnav/wlnavd.toml ] || fail "dpkg -P left /etc/wlnav/wlnavd.toml"
-echo "package-check: OK in $(($(date +%s) - started)) s (install, verify, check-config, remove: only the conffile left, purge)"
+echo "package-check: OK in $(($(date +%s) - started)) s (install, verify, check-config, Haswell, group access, remove: only the conffile left, purge)"
