@@ -246,8 +246,15 @@ pub async fn run(options: Options, shutdown: impl Future<Output = ()>) -> anyhow
                 Effect::PublishState => publish_state = true,
                 Effect::PublishFactsheet if connected => {
                     let h = header(&mut ids.factsheet, &id);
-                    let f = factsheet::factsheet(&h, &config.machine, &limits, config.state_interval, visualization_interval);
-                    let _ = client.try_publish(&topics.factsheet, QoS::AtMostOnce, true, f.to_string());
+                    let f = factsheet::factsheet(
+                        &h,
+                        &config.machine,
+                        &limits,
+                        config.state_interval,
+                        visualization_interval,
+                    );
+                    let _ =
+                        client.try_publish(&topics.factsheet, QoS::AtMostOnce, true, f.to_string());
                 }
                 Effect::PublishFactsheet => {}
             }
@@ -258,7 +265,13 @@ pub async fn run(options: Options, shutdown: impl Future<Output = ()>) -> anyhow
         // Every change the specification lists (order, nodes, actions, errors, driving,
         // paused, operating mode …) changes the state without its header and motion fields.
         let key = {
-            let mut s = vehicle.state(Header { header_id: 0, timestamp: String::new(), version: String::new(), manufacturer: String::new(), serial_number: String::new() });
+            let mut s = vehicle.state(Header {
+                header_id: 0,
+                timestamp: String::new(),
+                version: String::new(),
+                manufacturer: String::new(),
+                serial_number: String::new(),
+            });
             s.agv_position = None;
             s.velocity = None;
             s.distance_since_last_node = None;
@@ -267,12 +280,22 @@ pub async fn run(options: Options, shutdown: impl Future<Output = ()>) -> anyhow
         if publish_state || key != last_state_key {
             last_state_key = key;
             let s = vehicle.state(header(&mut ids.state, &id));
-            let _ = client.try_publish(&topics.state, QoS::AtMostOnce, false, serde_json::to_vec(&s).expect("serialisable"));
+            let _ = client.try_publish(
+                &topics.state,
+                QoS::AtMostOnce,
+                false,
+                serde_json::to_vec(&s).expect("serialisable"),
+            );
             state_timer.reset();
         }
         if publish_visualization {
             let v = vehicle.visualization(header(&mut ids.visualization, &id));
-            let _ = client.try_publish(&topics.visualization, QoS::AtMostOnce, false, serde_json::to_vec(&v).expect("serialisable"));
+            let _ = client.try_publish(
+                &topics.visualization,
+                QoS::AtMostOnce,
+                false,
+                serde_json::to_vec(&v).expect("serialisable"),
+            );
         }
     }
 
@@ -322,7 +345,10 @@ fn daemon_link(
                 }
                 // Requests meanwhile fail at once; the vehicle sends them again later.
                 while let Ok(req) = commands.try_recv() {
-                    let _ = tx.send(FromDaemon::Reply(req.request_id, Err(format!("no wlnavd: {e}"))));
+                    let _ = tx.send(FromDaemon::Reply(
+                        req.request_id,
+                        Err(format!("no wlnavd: {e}")),
+                    ));
                 }
                 std::thread::sleep(Duration::from_millis(200));
                 continue;

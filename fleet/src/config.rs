@@ -135,8 +135,8 @@ impl Config {
     pub fn load(path: &Path) -> anyhow::Result<Self> {
         let text = std::fs::read_to_string(path)
             .map_err(|e| anyhow::anyhow!("cannot read {}: {e}", path.display()))?;
-        let config: Self = toml::from_str(&text)
-            .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+        let config: Self =
+            toml::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
         config.check()?;
         Ok(config)
     }
@@ -174,7 +174,10 @@ impl Config {
                 circles.extend_from_slice(&map.obstacles);
             }
         }
-        Ok(circles.iter().map(|c| Obstacle::new(c.x, c.y, c.r)).collect())
+        Ok(circles
+            .iter()
+            .map(|c| Obstacle::new(c.x, c.y, c.r))
+            .collect())
     }
 }
 
@@ -208,7 +211,8 @@ mod tests {
 
     #[test]
     fn the_shipped_example_is_the_defaults() {
-        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../systemd/wlnav-fleet.toml");
+        let path =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../systemd/wlnav-fleet.toml");
         assert_eq!(Config::load(&path).unwrap(), Config::default());
     }
 
@@ -235,7 +239,11 @@ mod tests {
         let obs = cfg.obstacles().unwrap();
         assert_eq!(obs.len(), 2);
         assert!(obs.contains(&Obstacle::new(3.0, 0.0, 0.6)));
-        std::fs::write(&site, "[maps.yard]\nobstacles = [{ x = 3.0, y = 0.0, r = -1.0 }]\n").unwrap();
+        std::fs::write(
+            &site,
+            "[maps.yard]\nobstacles = [{ x = 3.0, y = 0.0, r = -1.0 }]\n",
+        )
+        .unwrap();
         assert!(cfg.obstacles().is_err());
         std::fs::write(&cfg_path, "state_interval = 60\n").unwrap();
         assert!(Config::load(&cfg_path).is_err());

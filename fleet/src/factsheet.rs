@@ -18,7 +18,10 @@ pub const INSTANT_ACTIONS: [(&str, &str); 6] = [
         "startPause",
         "The daemon's operator stop (latched); FINISHED once at rest. State shows paused.",
     ),
-    ("stopPause", "Releases the stop and drives on to the current node."),
+    (
+        "stopPause",
+        "Releases the stop and drives on to the current node.",
+    ),
     ("stateRequest", "Publishes the state at once."),
     ("factsheetRequest", "Publishes this factsheet at once."),
     (
@@ -28,7 +31,13 @@ pub const INSTANT_ACTIONS: [(&str, &str); 6] = [
 ];
 
 /// The factsheet message for `header`.
-pub fn factsheet(header: &Header, machine: &MachineInfo, limits: &Limits, state_interval: f64, visualization_interval: f64) -> Value {
+pub fn factsheet(
+    header: &Header,
+    machine: &MachineInfo,
+    limits: &Limits,
+    state_interval: f64,
+    visualization_interval: f64,
+) -> Value {
     let actions: Vec<Value> = INSTANT_ACTIONS
         .iter()
         .map(|(ty, what)| {

@@ -41,10 +41,11 @@ fn topic_level(what: &str, s: &str) -> anyhow::Result<()> {
 fn main() -> anyhow::Result<()> {
     tracing_subscriber::fmt()
         .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| "info".into()),
+            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()),
         )
-        .with_ansi(std::env::var_os("NO_COLOR").is_none() && std::env::var_os("JOURNAL_STREAM").is_none())
+        .with_ansi(
+            std::env::var_os("NO_COLOR").is_none() && std::env::var_os("JOURNAL_STREAM").is_none(),
+        )
         .init();
     shm_ipc::iceoryx2::prelude::set_log_level(shm_ipc::iceoryx2::prelude::LogLevel::Error);
     let args = Args::parse();
@@ -52,7 +53,9 @@ fn main() -> anyhow::Result<()> {
         .broker
         .rsplit_once(':')
         .context("--broker must be HOST:PORT")?;
-    let port: u16 = port.parse().context("--broker: the port must be a number")?;
+    let port: u16 = port
+        .parse()
+        .context("--broker: the port must be a number")?;
     anyhow::ensure!(!host.is_empty(), "--broker: empty host");
     topic_level("--manufacturer", &args.manufacturer)?;
     topic_level("--serial-number", &args.serial_number)?;
@@ -64,7 +67,10 @@ fn main() -> anyhow::Result<()> {
     // Fail early on a bad site file.
     config.obstacles()?;
     let options = Options {
-        host: host.trim_start_matches('[').trim_end_matches(']').to_owned(),
+        host: host
+            .trim_start_matches('[')
+            .trim_end_matches(']')
+            .to_owned(),
         port,
         identity: Identity {
             manufacturer: args.manufacturer,
@@ -78,8 +84,9 @@ fn main() -> anyhow::Result<()> {
         .build()?;
     runtime.block_on(async {
         let shutdown = async {
-            let mut term = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
-                .expect("SIGTERM handler");
+            let mut term =
+                tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
+                    .expect("SIGTERM handler");
             tokio::select! {
                 _ = term.recv() => {}
                 _ = tokio::signal::ctrl_c() => {}

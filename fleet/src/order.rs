@@ -90,8 +90,7 @@ fn parse_checked<T: serde::de::DeserializeOwned>(
     }
     let manufacturer = value.get("manufacturer").and_then(|v| v.as_str());
     let serial = value.get("serialNumber").and_then(|v| v.as_str());
-    if manufacturer != Some(id.manufacturer.as_str()) || serial != Some(id.serial_number.as_str())
-    {
+    if manufacturer != Some(id.manufacturer.as_str()) || serial != Some(id.serial_number.as_str()) {
         return Err(validation(
             topic,
             format!(
@@ -104,8 +103,13 @@ fn parse_checked<T: serde::de::DeserializeOwned>(
             &refs,
         ));
     }
-    serde_json::from_value(value)
-        .map_err(|e| validation(topic, format!("does not match the {topic} schema: {e}"), &refs))
+    serde_json::from_value(value).map_err(|e| {
+        validation(
+            topic,
+            format!("does not match the {topic} schema: {e}"),
+            &refs,
+        )
+    })
 }
 
 /// Parses and checks an `order`: header, structure and numbers. Anything that fails is a
@@ -149,7 +153,11 @@ pub fn check_order(order: &Order, limits: &Limits, map_id: &str) -> Result<(), v
     }
     if nodes.len() > limits.max_nodes {
         return Err(fail(
-            format!("{} nodes exceed the limit of {}", nodes.len(), limits.max_nodes),
+            format!(
+                "{} nodes exceed the limit of {}",
+                nodes.len(),
+                limits.max_nodes
+            ),
             &[],
         ));
     }
@@ -197,7 +205,10 @@ pub fn check_order(order: &Order, limits: &Limits, map_id: &str) -> Result<(), v
         horizon |= !n.released;
         let Some(p) = &n.node_position else {
             return Err(fail(
-                format!("node {}: nodePosition is required by this vehicle", n.node_id),
+                format!(
+                    "node {}: nodePosition is required by this vehicle",
+                    n.node_id
+                ),
                 &refs,
             ));
         };
@@ -212,15 +223,16 @@ pub fn check_order(order: &Order, limits: &Limits, map_id: &str) -> Result<(), v
                 &refs,
             ));
         }
-        if p.theta.is_some_and(|t| t.abs() > std::f64::consts::PI + 1e-9) {
+        if p.theta
+            .is_some_and(|t| t.abs() > std::f64::consts::PI + 1e-9)
+        {
             return Err(fail(
                 format!("node {}: theta outside [-pi, pi]", n.node_id),
                 &refs,
             ));
         }
         if p.allowed_deviation_xy.is_some_and(|d| d < 0.0)
-            || p
-                .allowed_deviation_theta
+            || p.allowed_deviation_theta
                 .is_some_and(|d| !(0.0..=std::f64::consts::PI + 1e-9).contains(&d))
         {
             return Err(fail(
@@ -330,7 +342,10 @@ pub fn parse_instant_actions(
     {
         return Err(validation(
             "instantActions",
-            format!("actionId {:?}: 1..={} bytes", a.action_id, limits.max_id_len),
+            format!(
+                "actionId {:?}: 1..={} bytes",
+                a.action_id, limits.max_id_len
+            ),
             &[("headerId", &header_id)],
         ));
     }
@@ -489,7 +504,10 @@ impl OrderBook {
                 &refs,
             ));
         };
-        let p = first.node_position.as_ref().expect("checked: nodes have positions");
+        let p = first
+            .node_position
+            .as_ref()
+            .expect("checked: nodes have positions");
         let range = p.allowed_deviation_xy.unwrap_or(0.0).max(first_node_range);
         let d = (p.x - pose.x).hypot(p.y - pose.y);
         if d > range {
@@ -618,7 +636,12 @@ pub fn obstacles_for_goal(site: &[Obstacle], from: Pose2, goal: Pose2) -> Vec<Ob
     }
     let mut by_distance: Vec<(f64, Obstacle)> = site
         .iter()
-        .map(|o| (segment_distance((from.x, from.y), (goal.x, goal.y), (o.x, o.y)) - o.r, *o))
+        .map(|o| {
+            (
+                segment_distance((from.x, from.y), (goal.x, goal.y), (o.x, o.y)) - o.r,
+                *o,
+            )
+        })
         .collect();
     by_distance.sort_by(|a, b| a.0.total_cmp(&b.0));
     by_distance
@@ -735,7 +758,10 @@ mod tests {
         let v = order_json(
             "o",
             0,
-            vec![node("A", 0, true, 0.0, 0.0, 0.0), node("B", 4, true, 1.0, 0.0, 0.0)],
+            vec![
+                node("A", 0, true, 0.0, 0.0, 0.0),
+                node("B", 4, true, 1.0, 0.0, 0.0),
+            ],
         );
         assert!(err_type(parse(&v)).1.contains("out of order"));
         // Released after horizon.
@@ -768,7 +794,10 @@ mod tests {
         let mut v = order_json(
             "o",
             0,
-            vec![node("A", 0, true, 0.0, 0.0, 0.0), node("B", 2, true, 1.0, 0.0, 0.0)],
+            vec![
+                node("A", 0, true, 0.0, 0.0, 0.0),
+                node("B", 2, true, 1.0, 0.0, 0.0),
+            ],
         );
         v["edges"][0]["endNodeId"] = json!("Z");
         assert!(err_type(parse(&v)).1.contains("not between"));
@@ -781,7 +810,10 @@ mod tests {
     fn a_new_order_starts_at_a_reachable_first_node() {
         let book = OrderBook::default();
         let o = three_nodes();
-        assert_eq!(book.decide(&o, Some(Pose2::new(0.3, 0.0, 0.0)), 1.0), Decision::New);
+        assert_eq!(
+            book.decide(&o, Some(Pose2::new(0.3, 0.0, 0.0)), 1.0),
+            Decision::New
+        );
         match book.decide(&o, Some(Pose2::new(5.0, 0.0, 0.0)), 1.0) {
             Decision::Reject(e) => assert_eq!(e.error_type, "noRouteError"),
             d => panic!("{d:?}"),
@@ -821,7 +853,10 @@ mod tests {
         let o = parse(&order_json(
             "o",
             0,
-            vec![node("A", 0, true, 0.0, 0.0, 0.0), node("B", 2, true, 0.0, 2.0, 0.0)],
+            vec![
+                node("A", 0, true, 0.0, 0.0, 0.0),
+                node("B", 2, true, 0.0, 2.0, 0.0),
+            ],
         ))
         .unwrap();
         book.apply(o, &Decision::New);
@@ -869,7 +904,10 @@ mod tests {
         let bad = parse(&order_json(
             "o",
             1,
-            vec![node("A", 0, true, 0.0, 0.0, 0.0), node("B", 2, true, 3.0, 0.0, 0.0)],
+            vec![
+                node("A", 0, true, 0.0, 0.0, 0.0),
+                node("B", 2, true, 3.0, 0.0, 0.0),
+            ],
         ))
         .unwrap();
         match book.decide(&bad, None, 1.0) {
@@ -897,14 +935,26 @@ mod tests {
         assert_eq!(book.decide(&up, None, 1.0), Decision::Duplicate);
         let mut old = up.clone();
         old.order_update_id = 0;
-        assert!(matches!(book.decide(&old, None, 1.0), Decision::Reject(e) if e.error_type == "orderUpdateError"));
+        assert!(
+            matches!(book.decide(&old, None, 1.0), Decision::Reject(e) if e.error_type == "orderUpdateError")
+        );
         // Another order while this one is active.
-        let other = parse(&order_json("o2", 0, vec![node("B", 0, true, 3.0, 0.0, 0.0)])).unwrap();
-        assert!(matches!(book.decide(&other, Some(Pose2::new(3.0, 0.0, 0.0)), 1.0), Decision::Reject(e) if e.error_type == "orderUpdateError"));
+        let other = parse(&order_json(
+            "o2",
+            0,
+            vec![node("B", 0, true, 3.0, 0.0, 0.0)],
+        ))
+        .unwrap();
+        assert!(
+            matches!(book.decide(&other, Some(Pose2::new(3.0, 0.0, 0.0)), 1.0), Decision::Reject(e) if e.error_type == "orderUpdateError")
+        );
         // After cancel nothing remains; a new order is welcome.
         book.clear();
         assert!(!book.has_remaining());
-        assert_eq!(book.decide(&other, Some(Pose2::new(3.0, 0.0, 0.0)), 1.0), Decision::New);
+        assert_eq!(
+            book.decide(&other, Some(Pose2::new(3.0, 0.0, 0.0)), 1.0),
+            Decision::New
+        );
     }
 
     #[test]
@@ -913,7 +963,10 @@ mod tests {
         let o = parse(&order_json(
             "o",
             0,
-            vec![node("A", 0, true, 0.0, 0.0, 0.0), node("B", 2, true, 3.0, 0.0, 0.0)],
+            vec![
+                node("A", 0, true, 0.0, 0.0, 0.0),
+                node("B", 2, true, 3.0, 0.0, 0.0),
+            ],
         ))
         .unwrap();
         book.apply(o, &Decision::New);
@@ -922,7 +975,10 @@ mod tests {
         let up = parse(&order_json(
             "o",
             1,
-            vec![node("B", 2, true, 3.0, 0.0, 0.0), node("C", 4, true, 6.0, 0.0, 0.0)],
+            vec![
+                node("B", 2, true, 3.0, 0.0, 0.0),
+                node("C", 4, true, 6.0, 0.0, 0.0),
+            ],
         ))
         .unwrap();
         assert_eq!(book.decide(&up, None, 1.0), Decision::Update);

@@ -538,10 +538,7 @@ mod tests {
             format_timestamp(1_492_256_403, 120),
             "2017-04-15T11:40:03.120Z"
         );
-        assert_eq!(
-            format_timestamp(951_782_400, 5),
-            "2000-02-29T00:00:00.005Z"
-        );
+        assert_eq!(format_timestamp(951_782_400, 5), "2000-02-29T00:00:00.005Z");
     }
 
     #[test]

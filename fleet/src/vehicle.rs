@@ -166,11 +166,9 @@ impl Vehicle {
                 return vec![Effect::PublishState];
             }
         };
-        let decision = self.book.decide(
-            &order,
-            self.machine_pose(),
-            self.settings.first_node_range,
-        );
+        let decision =
+            self.book
+                .decide(&order, self.machine_pose(), self.settings.first_node_range);
         match &decision {
             Decision::Reject(e) => {
                 self.keep_error(e.clone());
@@ -369,7 +367,11 @@ impl Vehicle {
         let refs: Vec<(&str, &str)> = refs.iter().map(|(k, v)| (*k, v.as_str())).collect();
         match outcome {
             Ok(GoalOutcome::Succeeded) => {
-                if self.book.target(self.machine_pose().unwrap_or_default()).is_some_and(|tg| tg.sequence_id == goal.sequence_id) {
+                if self
+                    .book
+                    .target(self.machine_pose().unwrap_or_default())
+                    .is_some_and(|tg| tg.sequence_id == goal.sequence_id)
+                {
                     self.traverse(&goal.node_id, goal.sequence_id);
                 }
                 vec![Effect::PublishState]
@@ -427,7 +429,12 @@ impl Vehicle {
 
     /// The reply to a request [`Effect::Daemon`] asked for; `Err` when it could not be sent
     /// or no reply came.
-    pub fn on_reply(&mut self, request_id: u64, reply: Result<GoalReply, String>, now: Duration) -> Vec<Effect> {
+    pub fn on_reply(
+        &mut self,
+        request_id: u64,
+        reply: Result<GoalReply, String>,
+        now: Duration,
+    ) -> Vec<Effect> {
         self.now = now;
         let Some(goal) = self.goal.clone().filter(|g| g.request_id == request_id) else {
             // Replies to cancel / stop / resume: always accepted by the daemon.
@@ -439,7 +446,10 @@ impl Vehicle {
         match reply {
             Ok(r) if r.is_accepted() => Vec::new(),
             Ok(r) if r.reject_code() == Ok(RejectCode::NotReady) => {
-                tracing::info!("goal refused, not ready ({}); again in 1 s", r.reason_text());
+                tracing::info!(
+                    "goal refused, not ready ({}); again in 1 s",
+                    r.reason_text()
+                );
                 self.goal = None;
                 self.retry_at = Some(self.now + RETRY_AFTER);
                 Vec::new()
@@ -449,7 +459,10 @@ impl Vehicle {
                 // obstacle, … The order stops; nothing was driven.
                 self.goal = None;
                 self.book.failed = true;
-                let code = r.reject_code().map(|c| format!("{c:?}")).unwrap_or_default();
+                let code = r
+                    .reject_code()
+                    .map(|c| format!("{c:?}"))
+                    .unwrap_or_default();
                 self.keep_error(vda::Error::new(
                     "noRouteError",
                     ErrorLevel::Warning,
@@ -517,7 +530,11 @@ impl Vehicle {
                 effects.push(Effect::PublishState);
                 continue;
             }
-            if self.goal.as_ref().is_some_and(|g| g.sequence_id == target.sequence_id) {
+            if self
+                .goal
+                .as_ref()
+                .is_some_and(|g| g.sequence_id == target.sequence_id)
+            {
                 break;
             }
             if self.retry_at.is_some_and(|t| self.now < t) {
@@ -571,7 +588,11 @@ impl Vehicle {
         Some(Velocity {
             vx: Some(t.state.v_f),
             vy: Some(0.0),
-            omega: Some(if self.omega.is_finite() { self.omega } else { 0.0 }),
+            omega: Some(if self.omega.is_finite() {
+                self.omega
+            } else {
+                0.0
+            }),
         })
     }
 
@@ -669,7 +690,11 @@ impl Vehicle {
             },
             errors,
             safety_state: SafetyState {
-                e_stop: if stop_latched { EStop::Remote } else { EStop::None },
+                e_stop: if stop_latched {
+                    EStop::Remote
+                } else {
+                    EStop::None
+                },
                 field_violation: false,
             },
         }
@@ -760,13 +785,17 @@ mod tests {
     fn order(order_id: &str, update: u64, nodes: &[(&str, u64, f64, f64, f64)]) -> Vec<u8> {
         let ns: Vec<_> = nodes
             .iter()
-            .map(|(id, seq, x, y, dev)| json!({"nodeId": id, "sequenceId": seq, "released": true, "actions": [],
-                "nodePosition": {"x": x, "y": y, "mapId": "site", "allowedDeviationXY": dev}}))
+            .map(|(id, seq, x, y, dev)| {
+                json!({"nodeId": id, "sequenceId": seq, "released": true, "actions": [],
+                "nodePosition": {"x": x, "y": y, "mapId": "site", "allowedDeviationXY": dev}})
+            })
             .collect();
         let es: Vec<_> = nodes
             .windows(2)
-            .map(|w| json!({"edgeId": format!("{}{}", w[0].0, w[1].0), "sequenceId": w[0].1 + 1,
-                "released": true, "startNodeId": w[0].0, "endNodeId": w[1].0, "actions": []}))
+            .map(|w| {
+                json!({"edgeId": format!("{}{}", w[0].0, w[1].0), "sequenceId": w[0].1 + 1,
+                "released": true, "startNodeId": w[0].0, "endNodeId": w[1].0, "actions": []})
+            })
             .collect();
         json!({"headerId": 1, "timestamp": "t", "version": "2.0.0", "manufacturer": "wlnav",
                "serialNumber": "L1", "orderId": order_id, "orderUpdateId": update,
@@ -802,11 +831,24 @@ mod tests {
     fn an_order_is_driven_node_by_node() {
         let mut v = vehicle();
         v.on_telemetry(&telemetry(0.0, 0.0, 0.0, Mode::Idle), T);
-        let fx = v.on_order(&order("o", 0, &[("A", 0, 0.0, 0.0, 0.0), ("B", 2, 3.0, 0.0, 0.5), ("C", 4, 6.0, 0.0, 0.0)]), T);
+        let fx = v.on_order(
+            &order(
+                "o",
+                0,
+                &[
+                    ("A", 0, 0.0, 0.0, 0.0),
+                    ("B", 2, 3.0, 0.0, 0.5),
+                    ("C", 4, 6.0, 0.0, 0.0),
+                ],
+            ),
+            T,
+        );
         let g = goals(&fx);
         assert_eq!(g.len(), 1);
         assert_eq!((g[0].goal.x, g[0].obstacle_count), (3.0, 1));
-        assert!(v.on_reply(g[0].request_id, Ok(GoalReply::accept(g[0].request_id)), T).is_empty());
+        assert!(v
+            .on_reply(g[0].request_id, Ok(GoalReply::accept(g[0].request_id)), T)
+            .is_empty());
         let s = v.state(header());
         assert_eq!(s.last_node_id, "A");
         assert_eq!(s.node_states.len(), 2);
@@ -818,15 +860,34 @@ mod tests {
         assert_eq!(v.state(header()).last_node_id, "B");
         // B's goal ends preempted: expected, no error.
         let mut t = telemetry(2.8, 0.0, 0.8, Mode::Tracking);
-        t.set_outcome(g[0].request_id, GoalOutcome::Preempted, AbortReason::None, 1, "newer goal");
+        t.set_outcome(
+            g[0].request_id,
+            GoalOutcome::Preempted,
+            AbortReason::None,
+            1,
+            "newer goal",
+        );
         v.on_telemetry(&t, T);
         assert!(v.state(header()).errors.is_empty());
         // C succeeds: the order is done.
         let mut t = telemetry(6.0, 0.0, 0.0, Mode::Reached);
-        t.set_outcome(g2[0].request_id, GoalOutcome::Succeeded, AbortReason::None, 2, "");
+        t.set_outcome(
+            g2[0].request_id,
+            GoalOutcome::Succeeded,
+            AbortReason::None,
+            2,
+            "",
+        );
         v.on_telemetry(&t, T);
         let s = v.state(header());
-        assert_eq!((s.last_node_id.as_str(), s.node_states.len(), s.edge_states.len()), ("C", 0, 0));
+        assert_eq!(
+            (
+                s.last_node_id.as_str(),
+                s.node_states.len(),
+                s.edge_states.len()
+            ),
+            ("C", 0, 0)
+        );
         assert!(s.errors.is_empty());
         assert!(!s.driving);
     }
@@ -835,9 +896,18 @@ mod tests {
     fn aborted_goals_become_errors_and_stop_the_order() {
         let mut v = vehicle();
         v.on_telemetry(&telemetry(0.0, 0.0, 0.0, Mode::Idle), T);
-        let g = goals(&v.on_order(&order("o", 0, &[("A", 0, 0.0, 0.0, 0.0), ("B", 2, 3.0, 0.0, 0.0)]), T));
+        let g = goals(&v.on_order(
+            &order("o", 0, &[("A", 0, 0.0, 0.0, 0.0), ("B", 2, 3.0, 0.0, 0.0)]),
+            T,
+        ));
         let mut t = telemetry(1.0, 0.0, 0.0, Mode::Idle);
-        t.set_outcome(g[0].request_id, GoalOutcome::Aborted, AbortReason::NoRoute, 1, "no route");
+        t.set_outcome(
+            g[0].request_id,
+            GoalOutcome::Aborted,
+            AbortReason::NoRoute,
+            1,
+            "no route",
+        );
         v.on_telemetry(&t, T);
         let s = v.state(header());
         assert_eq!(s.errors.len(), 1);
@@ -847,13 +917,25 @@ mod tests {
         // A fault abort is FATAL.
         let mut v = vehicle();
         v.on_telemetry(&telemetry(0.0, 0.0, 0.0, Mode::Idle), T);
-        let g = goals(&v.on_order(&order("o", 0, &[("A", 0, 0.0, 0.0, 0.0), ("B", 2, 3.0, 0.0, 0.0)]), T));
+        let g = goals(&v.on_order(
+            &order("o", 0, &[("A", 0, 0.0, 0.0, 0.0), ("B", 2, 3.0, 0.0, 0.0)]),
+            T,
+        ));
         let mut t = telemetry(1.0, 0.0, 0.0, Mode::Fault);
         t.fault_flags = fault_flags::POSE_STALE;
-        t.set_outcome(g[0].request_id, GoalOutcome::Aborted, AbortReason::Fault, 1, "pose stale");
+        t.set_outcome(
+            g[0].request_id,
+            GoalOutcome::Aborted,
+            AbortReason::Fault,
+            1,
+            "pose stale",
+        );
         v.on_telemetry(&t, T);
         let s = v.state(header());
-        assert!(s.errors.iter().any(|e| e.error_type == "goalAbortedError" && e.error_level == ErrorLevel::Fatal));
+        assert!(s
+            .errors
+            .iter()
+            .any(|e| e.error_type == "goalAbortedError" && e.error_level == ErrorLevel::Fatal));
         assert!(s.errors.iter().any(|e| e.error_type == "machineFaultError"));
         assert_eq!(s.operating_mode, OperatingMode::Service);
         assert!(!s.agv_position.unwrap().position_initialized);
@@ -863,20 +945,57 @@ mod tests {
     fn a_goal_the_daemon_refuses_is_an_error_and_not_retried() {
         let mut v = vehicle();
         v.on_telemetry(&telemetry(0.0, 0.0, 0.0, Mode::Idle), T);
-        let g = goals(&v.on_order(&order("o", 0, &[("A", 0, 0.0, 0.0, 0.0), ("B", 2, 500.0, 0.0, 0.0)]), T));
-        let reply = GoalReply::reject(g[0].request_id, RejectCode::OutOfWorkspace, "outside the workspace");
+        let g = goals(&v.on_order(
+            &order(
+                "o",
+                0,
+                &[("A", 0, 0.0, 0.0, 0.0), ("B", 2, 500.0, 0.0, 0.0)],
+            ),
+            T,
+        ));
+        let reply = GoalReply::reject(
+            g[0].request_id,
+            RejectCode::OutOfWorkspace,
+            "outside the workspace",
+        );
         v.on_reply(g[0].request_id, Ok(reply), T);
         let s = v.state(header());
         assert_eq!(s.errors[0].error_type, "noRouteError");
-        assert!(s.errors[0].error_description.as_ref().unwrap().contains("workspace"));
+        assert!(s.errors[0]
+            .error_description
+            .as_ref()
+            .unwrap()
+            .contains("workspace"));
         assert!(goals(&v.on_telemetry(&telemetry(0.0, 0.0, 0.0, Mode::Idle), T)).is_empty());
         // Not ready: tried again after a second.
         let mut v = vehicle();
         v.on_telemetry(&telemetry(0.0, 0.0, 0.0, Mode::Idle), T);
-        let g = goals(&v.on_order(&order("o", 0, &[("A", 0, 0.0, 0.0, 0.0), ("B", 2, 3.0, 0.0, 0.0)]), T));
-        v.on_reply(g[0].request_id, Ok(GoalReply::reject(g[0].request_id, RejectCode::NotReady, "starting")), T);
-        assert!(goals(&v.on_telemetry(&telemetry(0.0, 0.0, 0.0, Mode::Idle), Duration::from_millis(500))).is_empty());
-        assert_eq!(goals(&v.on_telemetry(&telemetry(0.0, 0.0, 0.0, Mode::Idle), Duration::from_millis(1100))).len(), 1);
+        let g = goals(&v.on_order(
+            &order("o", 0, &[("A", 0, 0.0, 0.0, 0.0), ("B", 2, 3.0, 0.0, 0.0)]),
+            T,
+        ));
+        v.on_reply(
+            g[0].request_id,
+            Ok(GoalReply::reject(
+                g[0].request_id,
+                RejectCode::NotReady,
+                "starting",
+            )),
+            T,
+        );
+        assert!(goals(&v.on_telemetry(
+            &telemetry(0.0, 0.0, 0.0, Mode::Idle),
+            Duration::from_millis(500)
+        ))
+        .is_empty());
+        assert_eq!(
+            goals(&v.on_telemetry(
+                &telemetry(0.0, 0.0, 0.0, Mode::Idle),
+                Duration::from_millis(1100)
+            ))
+            .len(),
+            1
+        );
     }
 
     #[test]
@@ -890,16 +1009,32 @@ mod tests {
         assert_eq!(s.errors[0].error_type, "noOrderToCancel");
         // initPosition fails with a reason, factsheetRequest asks for the factsheet, an
         // unknown action fails.
-        let fx = v.on_instant_actions(&instant(&[("initPosition", "i"), ("factsheetRequest", "f"), ("dance", "d")]), T);
+        let fx = v.on_instant_actions(
+            &instant(&[
+                ("initPosition", "i"),
+                ("factsheetRequest", "f"),
+                ("dance", "d"),
+            ]),
+            T,
+        );
         assert!(fx.contains(&Effect::PublishFactsheet));
         let s = v.state(header());
-        let status = |id: &str| s.action_states.iter().find(|a| a.action_id == id).unwrap().action_status;
+        let status = |id: &str| {
+            s.action_states
+                .iter()
+                .find(|a| a.action_id == id)
+                .unwrap()
+                .action_status
+        };
         assert_eq!(status("i"), ActionStatus::Failed);
         assert_eq!(status("f"), ActionStatus::Finished);
         assert_eq!(status("d"), ActionStatus::Failed);
 
         // A new order clears action states and errors.
-        let g = goals(&v.on_order(&order("o", 0, &[("A", 0, 0.0, 0.0, 0.0), ("B", 2, 3.0, 0.0, 0.0)]), T));
+        let g = goals(&v.on_order(
+            &order("o", 0, &[("A", 0, 0.0, 0.0, 0.0), ("B", 2, 3.0, 0.0, 0.0)]),
+            T,
+        ));
         assert!(v.state(header()).action_states.is_empty());
         assert!(v.state(header()).errors.is_empty());
         // Pause: a stop; finished once at rest with the stop latched; no goal while paused.
@@ -907,7 +1042,13 @@ mod tests {
         assert_eq!(goals(&fx)[0].kind, 3);
         let mut t = telemetry(1.0, 0.0, 0.3, Mode::Stopping);
         t.fault_flags = fault_flags::STOP_REQUESTED;
-        t.set_outcome(g[0].request_id, GoalOutcome::Cancelled, AbortReason::None, 1, "stop");
+        t.set_outcome(
+            g[0].request_id,
+            GoalOutcome::Cancelled,
+            AbortReason::None,
+            1,
+            "stop",
+        );
         assert!(goals(&v.on_telemetry(&t, T)).is_empty());
         let s = v.state(header());
         assert_eq!(s.action_states[0].action_status, ActionStatus::Running);
@@ -917,7 +1058,10 @@ mod tests {
         let mut t = telemetry(1.1, 0.0, 0.0, Mode::Idle);
         t.fault_flags = fault_flags::STOP_REQUESTED;
         v.on_telemetry(&t, T);
-        assert_eq!(v.state(header()).action_states[0].action_status, ActionStatus::Finished);
+        assert_eq!(
+            v.state(header()).action_states[0].action_status,
+            ActionStatus::Finished
+        );
         // Resume: the goal for B is sent again after the resume.
         let fx = v.on_instant_actions(&instant(&[("stopPause", "r")]), T);
         let g = goals(&fx);
@@ -929,7 +1073,13 @@ mod tests {
         let fx = v.on_instant_actions(&instant(&[("cancelOrder", "c1")]), T);
         assert_eq!(goals(&fx)[0].kind, 2);
         let s = v.state(header());
-        let status = |s: &State, id: &str| s.action_states.iter().find(|a| a.action_id == id).unwrap().action_status;
+        let status = |s: &State, id: &str| {
+            s.action_states
+                .iter()
+                .find(|a| a.action_id == id)
+                .unwrap()
+                .action_status
+        };
         assert_eq!(status(&s, "c1"), ActionStatus::Running);
         assert!(goals(&v.on_telemetry(&telemetry(1.5, 0.0, 0.5, Mode::Stopping), T)).is_empty());
         let s = v.state(header());
@@ -947,12 +1097,24 @@ mod tests {
     #[test]
     fn a_lost_daemon_is_an_error_and_the_goal_is_sent_again() {
         let mut v = vehicle();
-        assert_eq!(v.state(header()).errors[0].error_type, "daemonUnavailableError");
+        assert_eq!(
+            v.state(header()).errors[0].error_type,
+            "daemonUnavailableError"
+        );
         v.on_telemetry(&telemetry(0.0, 0.0, 0.0, Mode::Idle), T);
-        let g = goals(&v.on_order(&order("o", 0, &[("A", 0, 0.0, 0.0, 0.0), ("B", 2, 3.0, 0.0, 0.0)]), T));
+        let g = goals(&v.on_order(
+            &order("o", 0, &[("A", 0, 0.0, 0.0, 0.0), ("B", 2, 3.0, 0.0, 0.0)]),
+            T,
+        ));
         assert_eq!(g.len(), 1);
         let mut t = telemetry(1.0, 0.0, 0.0, Mode::Stopping);
-        t.set_outcome(g[0].request_id, GoalOutcome::Aborted, AbortReason::Shutdown, 1, "shutdown");
+        t.set_outcome(
+            g[0].request_id,
+            GoalOutcome::Aborted,
+            AbortReason::Shutdown,
+            1,
+            "shutdown",
+        );
         v.on_telemetry(&t, T);
         v.on_daemon_lost(T);
         let s = v.state(header());

@@ -46,7 +46,15 @@ fn vda_5050_lib_master_drives_two_machines() {
     let out = std::fs::File::create(&log).unwrap();
     let mut child = Command::new("node")
         .arg(master_dir.join("master.mjs"))
-        .args(["--broker", &broker.addr(), "--manufacturer", MANUFACTURER, "--serials", "L1,L2", "--schemas"])
+        .args([
+            "--broker",
+            &broker.addr(),
+            "--manufacturer",
+            MANUFACTURER,
+            "--serials",
+            "L1,L2",
+            "--schemas",
+        ])
         .arg(repo_root().join("fleet/schemas"))
         .stdin(Stdio::null())
         .stdout(out.try_clone().unwrap())

@@ -8,7 +8,9 @@ mod common;
 use std::time::Duration;
 
 use serde_json::{json, Value};
-use shm_ipc::{fault_flags, AbortReason, GoalOutcome, GoalReply, Mode, Obstacle, RejectCode, Telemetry};
+use shm_ipc::{
+    fault_flags, AbortReason, GoalOutcome, GoalReply, Mode, Obstacle, RejectCode, Telemetry,
+};
 use wlnav_fleet::config::MachineInfo;
 use wlnav_fleet::order::{Identity, Limits};
 use wlnav_fleet::vda::{self, ConnectionState, Header};
@@ -29,7 +31,10 @@ fn header(id: u64) -> Header {
 fn vehicle() -> Vehicle {
     Vehicle::new(
         VehicleSettings {
-            identity: Identity { manufacturer: "wlnav".into(), serial_number: "L1".into() },
+            identity: Identity {
+                manufacturer: "wlnav".into(),
+                serial_number: "L1".into(),
+            },
             limits: Limits::default(),
             map_id: "site".into(),
             first_node_range: 1.0,
@@ -72,8 +77,10 @@ fn order(order_id: &str, update: u64, nodes: &[(&str, u64, f64, bool)]) -> Vec<u
 fn instant(actions: &[(&str, &str)]) -> Vec<u8> {
     let a: Vec<_> = actions
         .iter()
-        .map(|(ty, id)| json!({"actionType": ty, "actionId": id, "blockingType": "HARD",
-            "actionParameters": [{"key": "k", "value": [1, "x", {"o": true}]}]}))
+        .map(|(ty, id)| {
+            json!({"actionType": ty, "actionId": id, "blockingType": "HARD",
+            "actionParameters": [{"key": "k", "value": [1, "x", {"o": true}]}]})
+        })
         .collect();
     let m = json!({"headerId": 1, "timestamp": "2026-01-01T00:00:00.000Z", "version": "2.0.0", "manufacturer": "wlnav",
            "serialNumber": "L1", "actions": a});
@@ -92,12 +99,26 @@ fn states_in_every_situation_match_the_schema() {
     // Every kind of rejection.
     v.on_order(b"garbage", t0);
     v.on_order(&order("far", 0, &[("X", 0, 30.0, true)]), t0);
-    v.on_instant_actions(&instant(&[("cancelOrder", "c0"), ("initPosition", "i"), ("dance", "d")]), t0);
+    v.on_instant_actions(
+        &instant(&[("cancelOrder", "c0"), ("initPosition", "i"), ("dance", "d")]),
+        t0,
+    );
     let s = state_json(&v);
     assert_valid("state", &s);
     assert!(s["errors"].as_array().unwrap().len() >= 3, "{s:#}");
     // An order with a horizon, driven.
-    let fx = v.on_order(&order("o", 0, &[("A", 0, 0.0, true), ("B", 2, 3.0, true), ("C", 4, 6.0, false)]), t0);
+    let fx = v.on_order(
+        &order(
+            "o",
+            0,
+            &[
+                ("A", 0, 0.0, true),
+                ("B", 2, 3.0, true),
+                ("C", 4, 6.0, false),
+            ],
+        ),
+        t0,
+    );
     let goal = fx
         .iter()
         .find_map(|e| match e {
@@ -131,13 +152,27 @@ fn states_in_every_situation_match_the_schema() {
         .unwrap();
     let mut t = telemetry(1.2, 0.0, Mode::Fault);
     t.fault_flags = fault_flags::MACHINE_STATE_STALE | fault_flags::POSE_STALE;
-    t.set_outcome(goal.request_id, GoalOutcome::Aborted, AbortReason::Fault, 3, "machine state stale");
+    t.set_outcome(
+        goal.request_id,
+        GoalOutcome::Aborted,
+        AbortReason::Fault,
+        3,
+        "machine state stale",
+    );
     v.on_telemetry(&t, t0);
     let s = state_json(&v);
     assert_valid("state", &s);
     assert_eq!(s["agvPosition"]["positionInitialized"], false);
     // A refused goal, the daemon lost.
-    v.on_reply(12345, Ok(GoalReply::reject(12345, RejectCode::GoalInCollision, "in an obstacle")), t0);
+    v.on_reply(
+        12345,
+        Ok(GoalReply::reject(
+            12345,
+            RejectCode::GoalInCollision,
+            "in an obstacle",
+        )),
+        t0,
+    );
     v.on_daemon_lost(t0);
     assert_valid("state", &state_json(&v));
     // Visualization.
@@ -147,11 +182,25 @@ fn states_in_every_situation_match_the_schema() {
 
 #[test]
 fn connection_and_factsheet_match_the_schema() {
-    for state in [ConnectionState::Online, ConnectionState::Offline, ConnectionState::ConnectionBroken] {
-        let c = serde_json::to_value(vda::Connection { header: header(1), connection_state: state }).unwrap();
+    for state in [
+        ConnectionState::Online,
+        ConnectionState::Offline,
+        ConnectionState::ConnectionBroken,
+    ] {
+        let c = serde_json::to_value(vda::Connection {
+            header: header(1),
+            connection_state: state,
+        })
+        .unwrap();
         assert_valid("connection", &c);
     }
-    let f = wlnav_fleet::factsheet::factsheet(&header(0), &MachineInfo::default(), &Limits::default(), 30.0, 0.2);
+    let f = wlnav_fleet::factsheet::factsheet(
+        &header(0),
+        &MachineInfo::default(),
+        &Limits::default(),
+        30.0,
+        0.2,
+    );
     assert_valid("factsheet", &f);
 }
 

@@ -251,7 +251,10 @@ fn an_enclosed_goal_has_no_route_and_aborts_on_the_first_tick() {
             .unwrap();
         let report = nav.last_plan().unwrap();
         assert_eq!(report.outcome, PlanOutcome::NoRoute);
-        assert!(report.duration.as_secs_f64() < 0.5 * timing_scale(), "{report:?}");
+        assert!(
+            report.duration.as_secs_f64() < 0.5 * timing_scale(),
+            "{report:?}"
+        );
         assert_eq!(
             nav.update(&at_rest(0.0, 0.0, 0.0), 0.0),
             NavStep::Abort(AbortReason::NoRoute)

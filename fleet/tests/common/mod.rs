@@ -15,7 +15,10 @@ use serde_json::{json, Value};
 
 /// The repository root.
 pub fn repo_root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap().to_path_buf()
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .unwrap()
+        .to_path_buf()
 }
 
 /// One test at a time in this binary: daemons, bridges and a broker per test on 2 cores.
@@ -33,11 +36,18 @@ pub fn validators() -> &'static HashMap<&'static str, jsonschema::Validator> {
     static V: OnceLock<HashMap<&'static str, jsonschema::Validator>> = OnceLock::new();
     V.get_or_init(|| {
         let mut map = HashMap::new();
-        for topic in ["connection", "factsheet", "instantActions", "order", "state", "visualization"] {
+        for topic in [
+            "connection",
+            "factsheet",
+            "instantActions",
+            "order",
+            "state",
+            "visualization",
+        ] {
             let path = repo_root().join(format!("fleet/schemas/{topic}.schema"));
             let text = std::fs::read_to_string(&path).unwrap();
-            let schema: Value = serde_json::from_str(&text)
-                .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+            let schema: Value =
+                serde_json::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
             let v = jsonschema::options()
                 .should_validate_formats(true)
                 .build(&schema)
@@ -50,9 +60,17 @@ pub fn validators() -> &'static HashMap<&'static str, jsonschema::Validator> {
 
 /// Panics unless `msg` validates against the schema of `topic`.
 pub fn assert_valid(topic: &str, msg: &Value) {
-    let v = validators().get(topic).unwrap_or_else(|| panic!("no schema for {topic}"));
-    let errors: Vec<String> = v.iter_errors(msg).map(|e| format!("{} at {}", e, e.instance_path())).collect();
-    assert!(errors.is_empty(), "{topic} message fails its schema: {errors:?}\n{msg:#}");
+    let v = validators()
+        .get(topic)
+        .unwrap_or_else(|| panic!("no schema for {topic}"));
+    let errors: Vec<String> = v
+        .iter_errors(msg)
+        .map(|e| format!("{} at {}", e, e.instance_path()))
+        .collect();
+    assert!(
+        errors.is_empty(),
+        "{topic} message fails its schema: {errors:?}\n{msg:#}"
+    );
 }
 
 // ------------------------------------------------------------------------------------
@@ -61,7 +79,11 @@ pub fn assert_valid(topic: &str, msg: &Value) {
 
 /// A free TCP port on localhost.
 pub fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
 }
 
 /// mosquitto (Debian's) on a free localhost port, with a generated configuration.
@@ -83,9 +105,14 @@ fn mosquitto_binary() -> PathBuf {
 impl Broker {
     pub fn start() -> Self {
         let port = free_port();
-        let dir = std::env::temp_dir().join(format!("wlnav-fleet-broker-{}-{port}", std::process::id()));
+        let dir =
+            std::env::temp_dir().join(format!("wlnav-fleet-broker-{}-{port}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
-        let mut b = Self { port, child: None, dir };
+        let mut b = Self {
+            port,
+            child: None,
+            dir,
+        };
         b.spawn();
         b
     }
@@ -112,7 +139,11 @@ impl Broker {
         self.child = Some(child);
         let deadline = Instant::now() + Duration::from_secs(10);
         while std::net::TcpStream::connect(("127.0.0.1", self.port)).is_err() {
-            assert!(Instant::now() < deadline, "mosquitto did not listen on {}", self.port);
+            assert!(
+                Instant::now() < deadline,
+                "mosquitto did not listen on {}",
+                self.port
+            );
             std::thread::sleep(Duration::from_millis(20));
         }
     }
@@ -193,7 +224,10 @@ pub fn wlnavd() -> &'static Path {
                 cmd.arg("--release");
             }
             eprintln!("fleet tests: building wlnavd: {cmd:?}");
-            assert!(cmd.status().unwrap().success(), "cargo build of wlnavd failed");
+            assert!(
+                cmd.status().unwrap().success(),
+                "cargo build of wlnavd failed"
+            );
         }
         bin
     })
@@ -247,7 +281,11 @@ impl Proc {
             .env("NO_COLOR", "1")
             .spawn()
             .unwrap_or_else(|e| panic!("start {}: {e}", bin.display()));
-        Self { child: Some(child), log, what: what.into() }
+        Self {
+            child: Some(child),
+            log,
+            what: what.into(),
+        }
     }
 
     pub fn log_tail(&self, lines: usize) -> String {
@@ -276,7 +314,9 @@ impl Proc {
     }
 
     pub fn is_running(&mut self) -> bool {
-        self.child.as_mut().is_some_and(|c| c.try_wait().ok().flatten().is_none())
+        self.child
+            .as_mut()
+            .is_some_and(|c| c.try_wait().ok().flatten().is_none())
     }
 }
 
@@ -313,9 +353,16 @@ pub fn start_daemon(prefix: &str) -> Proc {
     };
     let sub = client.subscribe_telemetry().unwrap();
     loop {
-        assert!(Instant::now() < deadline, "wlnavd not ready:\n{}", p.log_tail(20));
+        assert!(
+            Instant::now() < deadline,
+            "wlnavd not ready:\n{}",
+            p.log_tail(20)
+        );
         if let Some(t) = sub.recv_timeout(Duration::from_millis(200)).unwrap() {
-            if matches!(t.mode(), Ok(shm_ipc::Mode::Idle | shm_ipc::Mode::Reached | shm_ipc::Mode::Tracking)) {
+            if matches!(
+                t.mode(),
+                Ok(shm_ipc::Mode::Idle | shm_ipc::Mode::Reached | shm_ipc::Mode::Tracking)
+            ) {
                 return p;
             }
         }
@@ -344,7 +391,11 @@ pub fn start_bridge(broker: &str, serial: &str, prefix: &str, config: Option<&st
         args.push("--config".into());
         args.push(path.display().to_string());
     }
-    Proc::spawn("bridge", Path::new(env!("CARGO_BIN_EXE_wlnav-fleet")), &args)
+    Proc::spawn(
+        "bridge",
+        Path::new(env!("CARGO_BIN_EXE_wlnav-fleet")),
+        &args,
+    )
 }
 
 pub const MANUFACTURER: &str = "wlnav";
@@ -376,7 +427,11 @@ pub struct Master {
 impl Master {
     pub fn connect(broker_port: u16) -> Self {
         let mut opts = rumqttc::MqttOptions::new(
-            format!("test-master-{}-{}", std::process::id(), shm_ipc::monotonic_now_ns()),
+            format!(
+                "test-master-{}-{}",
+                std::process::id(),
+                shm_ipc::monotonic_now_ns()
+            ),
             "127.0.0.1",
             broker_port,
         );
@@ -392,7 +447,8 @@ impl Master {
                 match ev {
                     // A clean session forgets the subscription when the broker restarts.
                     Ok(rumqttc::Event::Incoming(rumqttc::Packet::ConnAck(_))) => {
-                        let _ = resubscribe.try_subscribe("uagv/v2/wlnav/#", rumqttc::QoS::AtLeastOnce);
+                        let _ =
+                            resubscribe.try_subscribe("uagv/v2/wlnav/#", rumqttc::QoS::AtLeastOnce);
                     }
                     Ok(rumqttc::Event::Incoming(rumqttc::Packet::Publish(p))) => {
                         let parts: Vec<&str> = p.topic.split('/').collect();
@@ -406,30 +462,54 @@ impl Master {
                         let json: Value = match serde_json::from_slice(&p.payload) {
                             Ok(j) => j,
                             Err(e) => {
-                                inv.lock().unwrap().push(format!("{}: not JSON: {e}", p.topic));
+                                inv.lock()
+                                    .unwrap()
+                                    .push(format!("{}: not JSON: {e}", p.topic));
                                 continue;
                             }
                         };
                         let v = validators().get(topic.as_str());
                         if let Some(v) = v {
-                            let errs: Vec<String> = v.iter_errors(&json).map(|e| format!("{e} at {}", e.instance_path())).collect();
+                            let errs: Vec<String> = v
+                                .iter_errors(&json)
+                                .map(|e| format!("{e} at {}", e.instance_path()))
+                                .collect();
                             if !errs.is_empty() {
-                                inv.lock().unwrap().push(format!("{}: {errs:?}: {json}", p.topic));
+                                inv.lock()
+                                    .unwrap()
+                                    .push(format!("{}: {errs:?}: {json}", p.topic));
                             }
                         }
-                        r.lock().unwrap().push(Received { serial, topic, retained: p.retain, json, at: Instant::now() });
+                        r.lock().unwrap().push(Received {
+                            serial,
+                            topic,
+                            retained: p.retain,
+                            json,
+                            at: Instant::now(),
+                        });
                     }
                     Ok(_) => {}
                     Err(_) => std::thread::sleep(Duration::from_millis(200)),
                 }
             }
         });
-        Self { client, received, invalid, header_id: 0.into(), _thread: thread }
+        Self {
+            client,
+            received,
+            invalid,
+            header_id: 0.into(),
+            _thread: thread,
+        }
     }
 
     pub fn publish(&self, serial: &str, topic: &str, payload: Vec<u8>) {
         self.client
-            .publish(format!("uagv/v2/{MANUFACTURER}/{serial}/{topic}"), rumqttc::QoS::AtMostOnce, false, payload)
+            .publish(
+                format!("uagv/v2/{MANUFACTURER}/{serial}/{topic}"),
+                rumqttc::QoS::AtMostOnce,
+                false,
+                payload,
+            )
             .unwrap();
     }
 
@@ -445,7 +525,14 @@ impl Master {
 
     /// Sends an order built from (nodeId, x, y, allowedDeviationXY, released) nodes,
     /// sequence ids from `first_seq`. The order is checked against its schema first.
-    pub fn order(&self, serial: &str, order_id: &str, update: u64, first_seq: u64, nodes: &[(&str, f64, f64, f64, bool)]) -> Value {
+    pub fn order(
+        &self,
+        serial: &str,
+        order_id: &str,
+        update: u64,
+        first_seq: u64,
+        nodes: &[(&str, f64, f64, f64, bool)],
+    ) -> Value {
         let mut o = self.header(serial);
         o["orderId"] = json!(order_id);
         o["orderUpdateId"] = json!(update);
@@ -479,34 +566,74 @@ impl Master {
 
     /// Messages of `serial` on `topic` so far.
     pub fn messages(&self, serial: &str, topic: &str) -> Vec<Received> {
-        self.received.lock().unwrap().iter().filter(|r| r.serial == serial && r.topic == topic).cloned().collect()
+        self.received
+            .lock()
+            .unwrap()
+            .iter()
+            .filter(|r| r.serial == serial && r.topic == topic)
+            .cloned()
+            .collect()
     }
 
     /// The newest state of `serial`.
     pub fn last_state(&self, serial: &str) -> Option<Value> {
-        self.messages(serial, "state").last().map(|r| r.json.clone())
+        self.messages(serial, "state")
+            .last()
+            .map(|r| r.json.clone())
     }
 
     /// Waits until a state of `serial` received after `since` satisfies `pred`.
-    pub fn wait_state(&self, serial: &str, since: Instant, timeout: Duration, what: &str, pred: impl Fn(&Value) -> bool) -> Value {
+    pub fn wait_state(
+        &self,
+        serial: &str,
+        since: Instant,
+        timeout: Duration,
+        what: &str,
+        pred: impl Fn(&Value) -> bool,
+    ) -> Value {
         let deadline = Instant::now() + timeout;
         loop {
-            if let Some(s) = self.messages(serial, "state").into_iter().filter(|r| r.at >= since).map(|r| r.json).find(|j| pred(j)) {
+            if let Some(s) = self
+                .messages(serial, "state")
+                .into_iter()
+                .filter(|r| r.at >= since)
+                .map(|r| r.json)
+                .find(|j| pred(j))
+            {
                 return s;
             }
-            assert!(Instant::now() < deadline, "{serial}: no state with {what} within {timeout:?}; last: {:#}", self.last_state(serial).unwrap_or_default());
+            assert!(
+                Instant::now() < deadline,
+                "{serial}: no state with {what} within {timeout:?}; last: {:#}",
+                self.last_state(serial).unwrap_or_default()
+            );
             std::thread::sleep(Duration::from_millis(20));
         }
     }
 
     /// Waits for a message on `topic` of `serial` after `since` satisfying `pred`.
-    pub fn wait_msg(&self, serial: &str, topic: &str, since: Instant, timeout: Duration, pred: impl Fn(&Received) -> bool) -> Received {
+    pub fn wait_msg(
+        &self,
+        serial: &str,
+        topic: &str,
+        since: Instant,
+        timeout: Duration,
+        pred: impl Fn(&Received) -> bool,
+    ) -> Received {
         let deadline = Instant::now() + timeout;
         loop {
-            if let Some(r) = self.messages(serial, topic).into_iter().filter(|r| r.at >= since).find(|r| pred(r)) {
+            if let Some(r) = self
+                .messages(serial, topic)
+                .into_iter()
+                .filter(|r| r.at >= since)
+                .find(|r| pred(r))
+            {
                 return r;
             }
-            assert!(Instant::now() < deadline, "{serial}: no matching {topic} message within {timeout:?}");
+            assert!(
+                Instant::now() < deadline,
+                "{serial}: no matching {topic} message within {timeout:?}"
+            );
             std::thread::sleep(Duration::from_millis(20));
         }
     }
@@ -537,13 +664,19 @@ pub fn errors(state: &Value) -> Vec<(String, String)> {
 }
 
 pub fn has_error(state: &Value, ty: &str, text: &str) -> bool {
-    errors(state).iter().any(|(t, d)| t == ty && d.contains(text))
+    errors(state)
+        .iter()
+        .any(|(t, d)| t == ty && d.contains(text))
 }
 
 /// Reads a retained message on `topic` with a fresh client (as a master started later
 /// would see it); `None` if none arrives within `timeout`.
 pub fn retained(port: u16, topic: &str, timeout: Duration) -> Option<Value> {
-    let mut opts = rumqttc::MqttOptions::new(format!("retained-{}", shm_ipc::monotonic_now_ns()), "127.0.0.1", port);
+    let mut opts = rumqttc::MqttOptions::new(
+        format!("retained-{}", shm_ipc::monotonic_now_ns()),
+        "127.0.0.1",
+        port,
+    );
     opts.set_max_packet_size(32 << 20, 32 << 20);
     let (client, mut conn) = rumqttc::Client::new(opts, 16);
     client.subscribe(topic, rumqttc::QoS::AtLeastOnce).unwrap();
