@@ -3,28 +3,14 @@
 
 use shm_ipc::{fault_flags, AbortReason, GoalOutcome, Mode, Telemetry};
 
-/// Fault bits and their names, in bit order.
-pub const FAULT_NAMES: [(u32, &str); 10] = [
-    (fault_flags::POSE_STALE, "pose-stale"),
-    (fault_flags::MACHINE_STATE_STALE, "machine-state-stale"),
-    (fault_flags::CAN_CRC, "can-crc"),
-    (fault_flags::CAN_ALIVE, "can-alive"),
-    (fault_flags::SOLVE_FAILED, "solve-failed"),
-    (fault_flags::FALLBACK_PLAN, "fallback-plan"),
-    (fault_flags::OVERRUN, "overrun"),
-    (fault_flags::STOP_REQUESTED, "stop-requested"),
-    (fault_flags::CAN_BUS, "can-bus"),
-    (fault_flags::POSE_REJECTED, "pose-rejected"),
-];
-
 /// Names of the set fault bits (unknown bits as `bit-N`).
 pub fn fault_names(flags: u32) -> Vec<String> {
-    let mut names: Vec<String> = FAULT_NAMES
+    let mut names: Vec<String> = fault_flags::NAMES
         .iter()
         .filter(|(bit, _)| flags & bit != 0)
         .map(|(_, n)| (*n).to_owned())
         .collect();
-    let known = FAULT_NAMES.iter().fold(0, |acc, (bit, _)| acc | bit);
+    let known = fault_flags::NAMES.iter().fold(0, |acc, (bit, _)| acc | bit);
     for bit in 0..32 {
         if flags & !known & (1 << bit) != 0 {
             names.push(format!("bit-{bit}"));

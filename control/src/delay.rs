@@ -194,39 +194,64 @@ impl DelayCompensator {
     /// in the window (true for duration ≤ the delay, and for duration ≤ delay
     /// + command period once the command sent at `time` is recorded).
     pub fn propagate_over(&self, time: f64, measured: &State, duration: f64) -> State {
-        let mut x = *measured;
         if duration <= 0.0 {
-            return x;
+            return *measured;
         }
+        self.propagate_with(time, measured, &[], time + duration, |_| {})
+    }
+
+    /// The state at `end` from the state measured at `time`, with the commands
+    /// recorded and then `pending` ((issue time, command), issue times ≥ the
+    /// last recorded one and increasing: commands not sent yet, e.g. a
+    /// candidate and the stop after it, [`crate::envelope`]); each takes
+    /// effect a delay after its issue. `observe` sees the state after every
+    /// integration sub-step (at most `substep` apart, split at every
+    /// activation and ramp end).
+    pub fn propagate_with(
+        &self,
+        time: f64,
+        measured: &State,
+        pending: &[(f64, VelocityCommand)],
+        end: f64,
+        mut observe: impl FnMut(&State),
+    ) -> State {
+        let mut x = *measured;
         let p = self.params;
         let max = [p.beta_ddot_max, p.a_max];
-        let act = |i: usize| self.history[i].0 + self.delay;
+        let recorded = self.history.len();
+        let count = recorded + pending.len();
+        let command = |i: usize| {
+            if i < recorded {
+                self.history[i]
+            } else {
+                let (t, c) = pending[i - recorded];
+                (t, c.limited(&p))
+            }
+        };
+        let act = |i: usize| command(i).0 + self.delay;
         // The command in effect at `time`: the last one activated by then.
-        let mut next = self
-            .history
-            .iter()
-            .position(|(t, _)| t + self.delay > time + 1e-12)
-            .unwrap_or(self.history.len());
+        let mut next = (0..count)
+            .position(|i| act(i) > time + 1e-12)
+            .unwrap_or(count);
         let mut ramps = [Ramp::default(); 2];
         if next > 0 {
-            let (t0, cmd) = self.history[next - 1];
+            let (t0, cmd) = command(next - 1);
             let remaining = (t0 + self.delay + self.ramp - time).max(0.0);
             for (c, (&k, target)) in CHANNELS.iter().zip([cmd.beta_dot, cmd.v]).enumerate() {
                 ramps[c] = Ramp::start(time, x[k], target, remaining, max[c]);
             }
         }
         let mut t = time;
-        let end = time + duration;
         while end - t > 1e-12 {
-            while next < self.history.len() && act(next) <= t + 1e-12 {
-                let cmd = self.history[next].1;
+            while next < count && act(next) <= t + 1e-12 {
+                let cmd = command(next).1;
                 for (c, (&k, target)) in CHANNELS.iter().zip([cmd.beta_dot, cmd.v]).enumerate() {
                     ramps[c] = Ramp::start(t, x[k], target, self.ramp, max[c]);
                 }
                 next += 1;
             }
             let mut h = self.substep.min(end - t);
-            if next < self.history.len() {
+            if next < count {
                 h = h.min(act(next) - t);
             }
             for r in &ramps {
@@ -250,9 +275,40 @@ impl DelayCompensator {
             clamp_state(&p, &mut next_x);
             x = next_x;
             t += h;
+            observe(&x);
         }
         x
     }
+}
+
+/// Carries a pose measured `age` seconds before the tick to the tick (DESIGN
+/// §14): `x` holds that pose (x_f, y_f, θ_f) with the machine state read at the
+/// tick (β, β̇, v_f, the machine's own sensors, current). Over the age window
+/// β̇ and v_f are taken constant at their current values (β then was
+/// β − β̇·age), and the kinematics (paper eq. 5) integrated forward with RK4;
+/// the error is of the order of ½·a_max·age² (5 mm at 0.1 s). An age ≤ 0 or
+/// not finite returns `x` unchanged.
+pub fn compensate_pose_age(p: &MachineParams, x: &State, age: f64) -> State {
+    if !(age.is_finite() && age > 0.0) {
+        return *x;
+    }
+    let mut y = *x;
+    y[ix::BETA] = x[ix::BETA] - x[ix::BETA_DOT] * age;
+    clamp_state(p, &mut y);
+    let steps = (age / DEFAULT_SUBSTEP).ceil().max(1.0);
+    let h = age / steps;
+    let u = Control::zeros();
+    for _ in 0..steps as usize {
+        let k1 = f_continuous(p, &y, &u);
+        let k2 = f_continuous(p, &(y + k1 * (0.5 * h)), &u);
+        let k3 = f_continuous(p, &(y + k2 * (0.5 * h)), &u);
+        let k4 = f_continuous(p, &(y + k3 * h), &u);
+        y += (k1 + 2.0 * k2 + 2.0 * k3 + k4) * (h / 6.0);
+    }
+    for k in [ix::BETA, ix::BETA_DOT, ix::V] {
+        y[k] = x[k];
+    }
+    y
 }
 
 #[cfg(test)]
@@ -289,5 +345,57 @@ mod tests {
             );
         }
         assert!(c.history.len() <= 4, "{}", c.history.len());
+    }
+
+    #[test]
+    fn an_old_pose_is_carried_to_the_tick_along_the_arc_driven() {
+        // Straight at 1 m/s: 0.1 s old means 0.1 m behind.
+        let p = MachineParams::default();
+        let x = State::new(1.0, 2.0, 0.0, 0.0, 0.0, 1.0);
+        let y = compensate_pose_age(&p, &x, 0.1);
+        assert!((y[ix::X] - 1.1).abs() < 1e-12 && y[ix::Y] == 2.0, "{y:?}");
+        assert_eq!(compensate_pose_age(&p, &x, 0.0), x);
+        // Turning at constant β and v: the closed form of a circle of radius
+        // R = (L_f cos β + L_r) / sin β (paper eq. 5 with β̇ = 0).
+        let beta: f64 = 0.3;
+        let x = State::new(0.0, 0.0, 0.0, beta, 0.0, 0.8);
+        let age = 0.25;
+        let y = compensate_pose_age(&p, &x, age);
+        let r = (p.l_f * beta.cos() + p.l_r) / beta.sin();
+        let phi = 0.8 * age / r;
+        assert!((y[ix::X] - r * phi.sin()).abs() < 1e-9, "{y:?}");
+        assert!((y[ix::Y] - r * (1.0 - phi.cos())).abs() < 1e-9, "{y:?}");
+        assert!((y[ix::THETA] - phi).abs() < 1e-9 && y[ix::BETA] == beta);
+        // While articulating, the measured β is kept (it is current).
+        let x = State::new(0.0, 0.0, 0.0, 0.2, 0.3, 0.5);
+        let y = compensate_pose_age(&p, &x, 0.1);
+        assert_eq!(y[ix::BETA], 0.2);
+        assert!(y[ix::THETA] > 0.0 && y[ix::X] > 0.049);
+    }
+
+    #[test]
+    fn pending_commands_act_after_the_recorded_ones() {
+        // Recorded: 0.5 m/s at t = 0; pending: a stop issued at 0.2 s. With
+        // delay 0.1 and ramp 0.2 the stop starts at 0.3 s and decelerates at
+        // a_max (0.5 / 0.2 = 2.5 > 1): at rest at 0.8 s.
+        let p = MachineParams::default();
+        let mut c = DelayCompensator::new(p, 0.1, 0.2).unwrap();
+        c.record(
+            0.0,
+            VelocityCommand {
+                beta_dot: 0.0,
+                v: 0.5,
+            },
+        );
+        let x = State::new(0.0, 0.0, 0.0, 0.0, 0.0, 0.5);
+        let mut seen = 0;
+        let y = c.propagate_with(0.0, &x, &[(0.2, VelocityCommand::ZERO)], 2.0, |_| seen += 1);
+        assert_eq!(y[ix::V], 0.0);
+        // 0.3 s at 0.5 m/s, then 0.5²/2 = 0.125 m of braking.
+        assert!((y[ix::X] - 0.275).abs() < 1e-9, "{}", y[ix::X]);
+        assert!(seen >= 200, "{seen}");
+        // Without pending commands it is propagate_over.
+        let a = c.propagate_with(0.0, &x, &[], 0.3, |_| {});
+        assert_eq!(a, c.propagate_over(0.0, &x, 0.3));
     }
 }

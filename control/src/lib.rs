@@ -9,6 +9,7 @@ pub mod critic;
 pub mod delay;
 pub mod delay_estimate;
 pub mod encoder;
+pub mod envelope;
 pub mod gain;
 pub mod goal_check;
 pub mod mlp;

@@ -17,6 +17,11 @@ use serde::{Deserialize, Serialize};
 
 use crate::model::{ix, MachineParams, State};
 
+/// How far inside a circle an axle point may be before it counts as
+/// penetration [m]: a planned one makes the MPC's plan a failed solve, a driven
+/// one fails a run (DESIGN §7, §14).
+pub const PENETRATION_TOLERANCE: f64 = 0.005;
+
 /// A circular obstacle around (x, y); the radius includes the machine's own.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct Obstacle {

@@ -9,6 +9,11 @@
 //! ```toml
 //! [machine]            # control::MachineParams: l_f, l_r, beta_max, beta_dot_max, v_max, beta_ddot_max, a_max
 //! [mpc]                # control::mpc::MpcSettings: horizon, dt, hessian, delay, time_budget, ...
+//! [envelope]           # control::envelope::EnvelopeSettings: the safety envelope (DESIGN §14)
+//! margin = 0.01        # m kept beyond the tolerances below
+//! geometry_tolerance = 0.0  # m: how far the true rear axle may be from the configured L_f, L_r
+//! pose_noise_xy = 0.0  # m, 1 σ;  pose_noise_theta = 0.0  # rad, 1 σ
+//! pose_latency = 0.0   # s: uncertainty of the pose's stamp;  response_lag = 0.0  # s
 //! [controller]
 //! cost = "critic"      # "critic" (the trained network) or "quadratic" (no weights; for bring-up)
 //! planner = "hybrid-astar"  # the global layer (DESIGN §10): "hybrid-astar", "waypoint-graph" or "none"
@@ -42,6 +47,7 @@
 
 use std::path::{Path, PathBuf};
 
+use control::envelope::EnvelopeSettings;
 use control::mpc::MpcSettings;
 use control::progress::ProgressSettings;
 use control::weights::{self, NetworkRole};
@@ -94,6 +100,11 @@ pub struct Config {
     pub machine: MachineParams,
     /// MPC settings.
     pub mpc: MpcSettings,
+    /// The safety envelope after the MPC and the tolerances its margins come
+    /// from (DESIGN §14). Not in `[machine]`: the weights' metadata names the
+    /// machine, and a tolerance is a property of the installation, not of the
+    /// trained networks.
+    pub envelope: EnvelopeSettings,
     /// Which cost the MPC uses.
     pub controller: ControllerConfig,
     /// Weight files.
@@ -487,6 +498,14 @@ fn invalid_in(section: &str, name: Option<&str>, e: impl std::fmt::Display) -> C
 }
 
 impl Config {
+    /// The MPC's settings as it runs: `[mpc]` with the planned clearances widened
+    /// by the envelope's tolerances, so the MPC plans outside what the envelope
+    /// guards (DESIGN §14; `wlnav-sim eval` does the same).
+    pub fn mpc_settings(&self) -> MpcSettings {
+        self.mpc
+            .widened(self.envelope.tolerance_widening(&self.machine))
+    }
+
     /// The tick period [s]: the MPC's stage Δt (`mpc.dt`), the command period
     /// the critic was trained with.
     pub fn period(&self) -> f64 {
@@ -599,6 +618,9 @@ impl Config {
         self.mpc
             .validate()
             .map_err(|e| invalid_in("mpc", e.setting(), &e))?;
+        self.envelope
+            .validate()
+            .map_err(|e| invalid_in("envelope", Some(e.name), &e))?;
         let l = &self.control;
         if let Some(hz) = l.rate_hz {
             return Err(invalid(

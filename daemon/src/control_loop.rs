@@ -15,7 +15,7 @@
 //!    driving, the controller's step (it owns the fallback on its shifted plan) and
 //!    [`safety::after_solve`] (a global-layer abort, or too many ticks without a
 //!    fresh solve, stops);
-//! 4. the command — the controller's, or the stop ramp ([`safety::ramp_down`]) —
+//! 4. the command — the controller's, or the stop ramp ([`envelope::stop_command`]) —
 //!    limited to the machine's bounds, to the CAN I/O task, and back to the
 //!    controller ([`Controller::sent`]: its delay compensation runs on the daemon's
 //!    clock with the commands actually sent);
@@ -35,8 +35,10 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
+use control::delay::{compensate_pose_age, DelayCompensator};
+use control::envelope::{self, EnvelopeInput};
 use control::model::pose_error;
-use control::{Goal, MachineParams, State, VelocityCommand};
+use control::{Goal, MachineParams, Obstacle, State, VelocityCommand};
 use shm_ipc::{fault_flags, AbortReason, DaemonEndpoint, GoalOutcome, Mode, Pose2, Telemetry};
 use tokio::sync::mpsc;
 
@@ -103,6 +105,11 @@ pub struct ControlLoop {
     latched: u32,
     /// The last command sent (the stop ramp starts from it).
     last_command: VelocityCommand,
+    /// The loop's own record of the commands sent, for the safety envelope
+    /// (independent of the controller's).
+    sent: DelayCompensator,
+    /// Envelope overrides are logged at a limited rate.
+    envelope_log: LogLimiter,
     /// Every pose sample passes this gate (age, future stamps, plausibility).
     pose_gate: PoseGate,
     /// Rejected pose samples are logged at a limited rate.
@@ -147,6 +154,9 @@ impl ControlLoop {
         let params = ctx.config.machine;
         let period = ctx.config.period();
         let pose_gate = PoseGate::new(ctx.config.pose_gate());
+        // The configuration was validated: delay ≥ 0, dt > 0.
+        let sent = envelope::command_record(params, ctx.config.mpc.delay, period)
+            .unwrap_or_else(|e| panic!("validated configuration: {e}"));
         Self {
             ctx,
             controller,
@@ -157,6 +167,8 @@ impl ControlLoop {
             dropped_outcomes: 0,
             latched: 0,
             last_command: VelocityCommand::ZERO,
+            sent,
+            envelope_log: LogLimiter::new(5, 10.0),
             pose_gate,
             pose_log: LogLimiter::new(5, 10.0),
             solve_failures: 0,
@@ -257,13 +269,22 @@ impl ControlLoop {
             self.disengage();
         }
 
-        let ramp = safety::ramp_down(self.last_command, &self.params, self.period);
-        let (mode, drive, command) = match decision {
-            Decision::Track => {
+        // A stop at the limits from the machine's own velocity where it is
+        // trusted (never faster than it goes).
+        let ramp = envelope::stop_command(
+            self.last_command,
+            inputs.x.as_ref(),
+            &self.params,
+            self.period,
+        );
+        let (mode, drive, command) = match (decision, &plan, &inputs.x) {
+            (Decision::Track, TickPlan::Track(g), Some(x)) => {
                 let c = solve.as_ref().and_then(|s| s.command).unwrap_or(ramp);
+                let c = self.guard(start, x, g.obstacles(), c, &mut flags);
                 (Mode::Tracking, DriveMode::Drive, c)
             }
-            Decision::Stop(cause) => {
+            (Decision::Track, _, _) => (Mode::Tracking, DriveMode::Drive, ramp),
+            (Decision::Stop(cause), _, _) => {
                 let (mode, drive) = cause.modes(ramp == VelocityCommand::ZERO);
                 (mode, drive, ramp)
             }
@@ -285,6 +306,64 @@ impl ControlLoop {
             solve_time: solve.and_then(|s| s.solve_time),
             exit,
         }
+    }
+
+    /// The safety envelope (DESIGN §14, [`envelope::guard`]) on the command
+    /// proposed while tracking: the command to send. An override is flagged in
+    /// telemetry, counted and logged (rate-limited).
+    fn guard(
+        &mut self,
+        now: f64,
+        x: &State,
+        obstacles: &[Obstacle],
+        proposed: VelocityCommand,
+        flags: &mut u32,
+    ) -> VelocityCommand {
+        let configured = self.ctx.config.mpc.delay;
+        let delay = self
+            .controller
+            .compensated_delay()
+            .map_or(configured, |d| d.max(configured));
+        self.sent.set_delay(delay);
+        let g = envelope::guard(
+            &EnvelopeInput {
+                params: &self.params,
+                settings: &self.ctx.config.envelope,
+                sent: &self.sent,
+                now,
+                state: x,
+                obstacles,
+                dt: self.period,
+                last: self.last_command,
+            },
+            proposed,
+        );
+        if g.overridden() {
+            *flags |= fault_flags::ENVELOPE_OVERRIDE;
+            self.ctx
+                .stats
+                .lock()
+                .unwrap_or_else(|p| p.into_inner())
+                .envelope_overrides += 1;
+            if let LogDecision::Log { suppressed } = self.envelope_log.check(now) {
+                tracing::warn!(
+                    "envelope: command (β̇ {:.3}, v {:.3}) would come {:.3} m inside the \
+                     margin: sent {} (β̇ {:.3}, v {:.3}){}",
+                    proposed.beta_dot,
+                    proposed.v,
+                    -g.proposed_excess,
+                    g.choice.name(),
+                    g.command.beta_dot,
+                    g.command.v,
+                    if suppressed > 0 {
+                        format!("; {suppressed} more overrides since the last report")
+                    } else {
+                        String::new()
+                    }
+                );
+            }
+        }
+        g.command
     }
 
     fn fallback_ticks(&self) -> u32 {
@@ -313,6 +392,9 @@ impl ControlLoop {
         let can = self.ctx.can.snapshot();
         let pose = self.pose_gate.fresh(start);
         let machine = self.state_fresh(&can, start);
+        // The pose is stamped: carried to the tick over its age with the
+        // machine's current velocities (DESIGN §14).
+        let age = self.pose_gate.last().map_or(0.0, |(_, t)| start - t);
         let health = InputHealth {
             pose_fresh: pose.is_some(),
             pose_rejected,
@@ -327,7 +409,9 @@ impl ControlLoop {
         );
         self.prev_counters = can.counters;
         Inputs {
-            x: pose.zip(machine).map(|(p, s)| s.with_pose(&p)),
+            x: pose
+                .zip(machine)
+                .map(|(p, s)| compensate_pose_age(&self.params, &s.with_pose(&p), age)),
             machine,
             latest: can.latest.map(|(s, _)| s),
             faults,
@@ -426,6 +510,7 @@ impl ControlLoop {
         let sent = match self.ctx.commands.try_send(OutCommand { command, mode }) {
             Ok(()) => {
                 self.controller.sent(now, command);
+                self.sent.record(now, command);
                 true
             }
             Err(e) => {

@@ -121,6 +121,12 @@ pub trait Controller {
     /// command, a stop ramp, a hold): every tick, so the delay compensation
     /// works with what the machine was told on the real clock.
     fn sent(&mut self, now: f64, command: VelocityCommand);
+    /// The actuator delay the controller compensates now [s] (its online
+    /// estimate), if it has one: the safety envelope assumes the longer of it
+    /// and the configured delay.
+    fn compensated_delay(&self) -> Option<f64> {
+        None
+    }
 }
 
 /// Builds the controller on the control thread.
@@ -223,6 +229,10 @@ impl<C: StageCost> Controller for MpcController<C> {
     fn sent(&mut self, now: f64, command: VelocityCommand) {
         self.mpc.sent(now, command);
     }
+
+    fn compensated_delay(&self) -> Option<f64> {
+        Some(self.mpc.compensated_delay())
+    }
 }
 
 /// Start-up failures: each names the file or setting and the problem.
@@ -253,7 +263,7 @@ pub fn quadratic_cost() -> QuadraticCost {
 /// builds the MPC on the control thread.
 pub fn load_controller(config: &Config) -> Result<ControllerFactory, LoadError> {
     let machine = config.machine;
-    let settings: MpcSettings = config.mpc;
+    let settings: MpcSettings = config.mpc_settings();
     // The quadratic bring-up cost runs without any network (the actor was trained
     // for the critic's cost).
     let actor = if config.weights.actor.as_os_str().is_empty()

@@ -117,7 +117,7 @@ impl RunReport {
         let mb =
             |b: Option<u64>| b.map_or("?".into(), |b| format!("{:.1} MiB", b as f64 / 1048576.0));
         format!(
-            "ticks {}, overruns {}, missed deadlines {}\n\
+            "ticks {}, overruns {}, missed deadlines {}, envelope overrides {}\n\
              tick start jitter: {}\n\
              solve time: {}\n\
              commands sent {}, clamped by the guard {}\n\
@@ -126,6 +126,7 @@ impl RunReport {
             self.stats.ticks,
             self.stats.overruns,
             self.stats.missed_deadlines,
+            self.stats.envelope_overrides,
             self.stats.jitter(),
             self.stats.solve(),
             self.commands_sent,
@@ -331,9 +332,10 @@ async fn run_async(
                 tokio::time::sleep(period).await;
                 let s = stats.lock().unwrap_or_else(|p| p.into_inner()).clone();
                 tracing::info!(
-                    "loop: {} ticks, {} overruns; jitter {}; solve {}",
+                    "loop: {} ticks, {} overruns, {} envelope overrides; jitter {}; solve {}",
                     s.ticks,
                     s.overruns,
+                    s.envelope_overrides,
                     s.jitter(),
                     s.solve()
                 );

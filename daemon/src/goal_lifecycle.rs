@@ -610,7 +610,7 @@ mod tests {
             .on_request(&set_goal(2, 5.0, 0.0, &[]), false)
             .unwrap_err();
         assert_eq!(r.code, RejectCode::NotReady);
-        assert!(r.text.contains("pose stale"), "{}", r.text);
+        assert!(r.text.contains("pose-stale"), "{}", r.text);
         // A reached goal is dropped by a fault without a second outcome.
         l.on_tick(tick(0.6, Some(&at(4.98))));
         l.on_request(&set_goal(3, 5.0, 0.0, &[]), false).unwrap();

@@ -46,21 +46,9 @@ pub fn wire_state(x: &control::State) -> shm_ipc::MachineState {
     shm_ipc::MachineState::from_array([x[0], x[1], x[2], x[3], x[4], x[5]])
 }
 
-/// Names of the fault bits, for reject reasons and logs.
+/// Names of the fault bits ([`fault_flags::NAMES`]), for reject reasons and logs.
 pub fn fault_names(flags: u32) -> String {
-    const NAMES: [(u32, &str); 10] = [
-        (fault_flags::POSE_STALE, "pose stale"),
-        (fault_flags::MACHINE_STATE_STALE, "machine state stale"),
-        (fault_flags::CAN_CRC, "CAN CRC"),
-        (fault_flags::CAN_ALIVE, "CAN alive counter"),
-        (fault_flags::SOLVE_FAILED, "solve failed"),
-        (fault_flags::FALLBACK_PLAN, "fallback plan"),
-        (fault_flags::OVERRUN, "overrun"),
-        (fault_flags::STOP_REQUESTED, "stop requested"),
-        (fault_flags::CAN_BUS, "CAN bus"),
-        (fault_flags::POSE_REJECTED, "pose rejected"),
-    ];
-    let names: Vec<&str> = NAMES
+    let names: Vec<&str> = fault_flags::NAMES
         .iter()
         .filter(|(bit, _)| flags & bit != 0)
         .map(|(_, n)| *n)

@@ -5,10 +5,11 @@
 //! ([`StopCause::modes`]). The control loop gathers the inputs and carries the
 //! decisions out; every branch here is unit-tested without a daemon.
 //!
-//! Every stop is a controlled stop: the last command ramped to zero at the
-//! acceleration limits ([`ramp_down`]).
+//! Every stop is a controlled stop: braking at the acceleration limits from the
+//! last command or the machine's own velocity, whichever is nearer zero
+//! (`control::envelope::stop_command`, one function with the safety envelope's
+//! stop).
 
-use control::{MachineParams, VelocityCommand};
 use shm_ipc::{fault_flags, AbortReason, Mode};
 
 use crate::can::{DriveMode, MachineStatus, RxCounters};
@@ -242,22 +243,6 @@ pub fn after_solve(result: SolveResult, failures: u32, fallback_ticks: u32) -> D
             Decision::Stop(StopCause::SolveFailed)
         }
         _ => Decision::Track,
-    }
-}
-
-/// The controlled-stop command: `last` moved towards zero by at most one tick
-/// `dt` at the acceleration limits (β̈_max, a_max).
-pub fn ramp_down(last: VelocityCommand, p: &MachineParams, dt: f64) -> VelocityCommand {
-    let towards_zero = |v: f64, step: f64| {
-        if v.abs() <= step {
-            0.0
-        } else {
-            v - step.copysign(v)
-        }
-    };
-    VelocityCommand {
-        beta_dot: towards_zero(last.beta_dot, p.beta_ddot_max * dt),
-        v: towards_zero(last.v, p.a_max * dt),
     }
 }
 
@@ -563,35 +548,6 @@ mod tests {
         assert_eq!(
             decide(&s),
             Decision::Stop(StopCause::Fault(fault_flags::POSE_STALE))
-        );
-    }
-
-    #[test]
-    fn ramp_down_respects_the_acceleration_limits_and_ends_at_zero() {
-        let p = MachineParams::default();
-        let dt = 0.2;
-        let mut c = VelocityCommand {
-            beta_dot: -p.beta_dot_max,
-            v: p.v_max,
-        };
-        let mut ticks = 0;
-        while c != VelocityCommand::ZERO {
-            let next = ramp_down(c, &p, dt);
-            assert!((next.beta_dot - c.beta_dot).abs() <= p.beta_ddot_max * dt + 1e-12);
-            assert!((next.v - c.v).abs() <= p.a_max * dt + 1e-12);
-            assert!(next.beta_dot.abs() <= c.beta_dot.abs() && next.v.abs() <= c.v.abs());
-            c = next;
-            ticks += 1;
-            assert!(ticks < 100, "the ramp does not end");
-        }
-        let expected = (p.v_max / (p.a_max * dt))
-            .max(p.beta_dot_max / (p.beta_ddot_max * dt))
-            .ceil() as usize;
-        // Within one tick of the closed form (the repeated subtraction may leave
-        // a rounding remainder for one more tick).
-        assert!(
-            (expected..=expected + 1).contains(&ticks),
-            "{ticks} ticks, expected {expected}"
         );
     }
 }

@@ -47,6 +47,8 @@ pub struct ReceivedCommand {
     pub time: f64,
     /// The decoded command.
     pub command: VelocityCommandFrame,
+    /// The machine's true (β̇, v) when it arrived.
+    pub velocity: (f64, f64),
 }
 
 /// What the simulated machine saw and did.
@@ -239,12 +241,14 @@ impl Machine {
                 self.last_command_time = now;
                 self.stopped_by_timeout = false;
                 let record = self.record;
+                let x = self.plant.state();
                 self.log.with(|l| {
                     l.commands_received += 1;
                     if record {
                         l.commands.push(ReceivedCommand {
                             time: now,
                             command: cmd,
+                            velocity: (x[control::model::ix::BETA_DOT], x[control::model::ix::V]),
                         });
                     }
                 });

@@ -81,6 +81,8 @@ pub struct LoopStats {
     pub overruns: u64,
     /// Deadlines skipped because a tick overran.
     pub missed_deadlines: u64,
+    /// Ticks whose command the safety envelope replaced (DESIGN §14).
+    pub envelope_overrides: u64,
     /// Resident memory after warm-up (tick [`LoopStats::WARM_TICK`]).
     pub rss_warm: Option<u64>,
     jitter: Ring,
@@ -106,6 +108,7 @@ impl LoopStats {
             ticks: 0,
             overruns: 0,
             missed_deadlines: 0,
+            envelope_overrides: 0,
             rss_warm: None,
             jitter: Ring::new(Self::WINDOW),
             solve: Ring::new(Self::WINDOW),

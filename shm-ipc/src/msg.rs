@@ -663,6 +663,26 @@ pub mod fault_flags {
     /// rejected sample and while a run of rejects holds; a run of
     /// `loop.pose_reject_stop` consecutive rejects is a pose fault (controlled stop).
     pub const POSE_REJECTED: u32 = 1 << 9;
+    /// The safety envelope replaced the controller's command this tick (DESIGN §14): under
+    /// it, the predicted motion until the next tick and a stop at the braking limits after
+    /// it would have come closer to an obstacle than the protective margin. Not a fault:
+    /// the machine brakes (or brakes while steering) and the controller goes on.
+    pub const ENVELOPE_OVERRIDE: u32 = 1 << 10;
+
+    /// Every bit and its name, in bit order (logs, reject reasons, `wlnav watch`).
+    pub const NAMES: [(u32, &str); 11] = [
+        (POSE_STALE, "pose-stale"),
+        (MACHINE_STATE_STALE, "machine-state-stale"),
+        (CAN_CRC, "can-crc"),
+        (CAN_ALIVE, "can-alive"),
+        (SOLVE_FAILED, "solve-failed"),
+        (FALLBACK_PLAN, "fallback-plan"),
+        (OVERRUN, "overrun"),
+        (STOP_REQUESTED, "stop-requested"),
+        (CAN_BUS, "can-bus"),
+        (POSE_REJECTED, "pose-rejected"),
+        (ENVELOPE_OVERRIDE, "envelope-override"),
+    ];
 }
 
 /// Published on `{prefix}/v2/telemetry` by the daemon once per control tick. 2704 bytes,

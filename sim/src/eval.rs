@@ -94,6 +94,78 @@ pub fn timing_text(ev: &Evaluation) -> String {
     s
 }
 
+/// The safety envelope's figures (MPC runs): ticks it overrode, in how many
+/// runs, and which.
+pub fn envelope_text(ev: &Evaluation) -> String {
+    let mut runs: Vec<(&str, usize)> = ev
+        .runs
+        .iter()
+        .flat_map(|s| {
+            s.runs
+                .iter()
+                .filter(|(m, _)| *m == crate::runner::Method::Mpc)
+                .map(|(_, r)| (s.scenario.name.as_str(), r.envelope_overrides))
+        })
+        .filter(|(_, n)| *n > 0)
+        .collect();
+    let ticks: usize = runs.iter().map(|(_, n)| n).sum();
+    runs.sort_by(|a, b| b.1.cmp(&a.1));
+    let most: Vec<String> = runs
+        .iter()
+        .take(8)
+        .map(|(name, n)| format!("{name} {n}"))
+        .collect();
+    format!(
+        "envelope: {ticks} tick(s) overridden in {} run(s){}{}\n",
+        runs.len(),
+        if most.is_empty() { "" } else { ": " },
+        most.join(", ")
+    )
+}
+
+/// The obstacle rows' figures (MPC runs): plans discarded because they
+/// penetrated a circle, and the largest stage multiplier sum seen (the L1
+/// penalty is exact while `obstacle_slack_weight` exceeds it, DESIGN §14).
+pub fn obstacle_rows_text(ev: &Evaluation, weight: f64) -> String {
+    let mpc = ev.runs.iter().flat_map(|s| {
+        s.runs
+            .iter()
+            .filter(|(m, _)| *m == crate::runner::Method::Mpc)
+            .map(|(_, r)| r)
+    });
+    let (mut plans, mut runs, mut multiplier, mut at_weight) = (0, 0, 0.0f64, 0);
+    for r in mpc {
+        plans += r.penetrating_plans;
+        runs += usize::from(r.penetrating_plans > 0);
+        multiplier = multiplier.max(r.obstacle_multiplier_max);
+        at_weight += usize::from(r.obstacle_multiplier_max >= 0.999 * weight);
+    }
+    let mut worst = (f64::INFINITY, "–");
+    let mut below = 0;
+    for s in &ev.runs {
+        for (_, r) in s
+            .runs
+            .iter()
+            .filter(|(m, _)| *m == crate::runner::Method::Mpc)
+        {
+            if let Some(c) = r.row.min_clearance {
+                below += usize::from(c < -crate::report::PENETRATION_TOLERANCE);
+                if c < worst.0 {
+                    worst = (c, s.scenario.name.as_str());
+                }
+            }
+        }
+    }
+    format!(
+        "obstacle rows: {plans} penetrating plan(s) discarded in {runs} run(s); largest stage \
+         multiplier {multiplier:.1} (weight {weight}; {at_weight} run(s) at the weight)\n\
+         clearance: worst {:.3} m ({}), {below} run(s) below -{} m\n",
+        worst.0,
+        worst.1,
+        crate::report::PENETRATION_TOLERANCE
+    )
+}
+
 /// The global layer's figures (MPC runs with a navigator): how many runs
 /// planned a route, plan times (median / p99 / max over every plan, the
 /// direct decisions included), `update` times, and aborts by reason.

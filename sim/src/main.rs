@@ -20,6 +20,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand, ValueEnum};
 use control::critic::HessianMode;
+use control::envelope::EnvelopeSettings;
 use control::mpc::{MpcSettings, ObstacleConstraint};
 use control::planner::{NavigatorSettings, PlannerKind};
 use control::plant::PlantConfig;
@@ -133,6 +134,51 @@ impl Perturbations {
     }
 }
 
+/// The safety envelope (DESIGN §14) and the tolerances its margins come from;
+/// the tolerances also widen the MPC's planned clearances.
+#[derive(clap::Args, Clone)]
+struct EnvelopeArgs {
+    /// Run without the safety envelope (to measure what it changes).
+    #[arg(long)]
+    no_envelope: bool,
+    /// Protective margin kept beyond the tolerances [m] (default: the daemon's).
+    #[arg(long, value_name = "M")]
+    envelope_margin: Option<f64>,
+    /// How far the true rear axle may be from the configured geometry's [m].
+    #[arg(long, value_name = "M")]
+    geometry_tolerance: Option<f64>,
+    /// Stated pose noise (standard deviations) x, y [m] and θ [rad].
+    #[arg(long, value_name = "SXY,STHETA", value_parser = robustness::parse_pose_noise)]
+    pose_noise_tolerance: Option<(f64, f64)>,
+    /// Stated uncertainty of the pose's timestamp [s].
+    #[arg(long, value_name = "S", value_parser = robustness::parse_seconds)]
+    pose_latency_tolerance: Option<f64>,
+    /// The machine may start a stop this much later than the model says [s].
+    #[arg(long, value_name = "S", value_parser = robustness::parse_seconds)]
+    response_lag: Option<f64>,
+}
+
+impl EnvelopeArgs {
+    fn settings(&self) -> Result<EnvelopeSettings> {
+        let d = EnvelopeSettings::default();
+        let (sxy, sth) = self
+            .pose_noise_tolerance
+            .unwrap_or((d.pose_noise_xy, d.pose_noise_theta));
+        let s = EnvelopeSettings {
+            enabled: !self.no_envelope,
+            margin: self.envelope_margin.unwrap_or(d.margin),
+            geometry_tolerance: self.geometry_tolerance.unwrap_or(d.geometry_tolerance),
+            pose_noise_xy: sxy,
+            pose_noise_theta: sth,
+            pose_latency: self.pose_latency_tolerance.unwrap_or(d.pose_latency),
+            response_lag: self.response_lag.unwrap_or(d.response_lag),
+            ..d
+        };
+        s.validate()?;
+        Ok(s)
+    }
+}
+
 // Parsed once; the size of the `eval` variant does not matter.
 #[allow(clippy::large_enum_variant)]
 #[derive(Subcommand)]
@@ -205,8 +251,14 @@ enum Command {
         /// Navigator: clearance the actor's roll-out keeps for "nothing in the way" [m].
         #[arg(long)]
         direct_margin: Option<f64>,
+        /// Results file whose min-time rows give T* (e.g. docs/results/worksite.csv
+        /// for obstacles200), so t / T* is reported without solving the bound again.
+        #[arg(long, value_name = "FILE")]
+        t_star: Option<PathBuf>,
         #[command(flatten)]
         perturbations: Perturbations,
+        #[command(flatten)]
+        envelope: EnvelopeArgs,
         #[command(flatten)]
         common: Common,
         #[arg(long)]
@@ -331,7 +383,9 @@ fn main() -> Result<()> {
             route_margin,
             replan_after,
             direct_margin,
+            t_star,
             perturbations,
+            envelope,
             common,
             out,
         } => {
@@ -393,7 +447,24 @@ fn main() -> Result<()> {
             };
             cfg.plant.validate()?;
             cfg.perturbation = perturbations.options().perturbation()?;
-            let ev = eval::evaluate(&cfg, &nets, &set)?;
+            cfg.envelope = envelope.settings()?;
+            let mut ev = eval::evaluate(&cfg, &nets, &set)?;
+            if let Some(path) = &t_star {
+                if cfg.methods.contains(&Method::MinTime) {
+                    bail!("--t-star and the method min-time exclude each other");
+                }
+                let text = std::fs::read_to_string(path)
+                    .with_context(|| format!("reading {}", path.display()))?;
+                let names: std::collections::HashSet<&str> =
+                    set.iter().map(|s| s.name.as_str()).collect();
+                let mut rows = ev.rows.clone();
+                rows.extend(
+                    sim::results::parse(&text, &path.display().to_string())?
+                        .into_iter()
+                        .filter(|r| r.method == "min-time" && names.contains(r.name.as_str())),
+                );
+                ev.summaries = eval::summarize_runs(&cfg.methods, &ev.runs, &rows);
+            }
             let header = format!(
                 "# eval: {}\n\nmethods {methods}, planner {planner}, N = {}, Hessian {:?}, obstacles {:?} with margin {} m, SQP iterations {} × step {}, gain estimation {}, delay estimation {}, delay {delay} s, lag {lag} s, plant perturbation: {}, tolerance {}, networks: {}, machine (MPC, plant and min-time bound): {}\n",
                 scenarios.display(),
@@ -414,6 +485,11 @@ fn main() -> Result<()> {
             print!("{}", sim::results::summary_markdown(&ev.summaries));
             print!("{}", eval::timing_text(&ev));
             print!("{}", eval::navigation_text(&ev));
+            print!("{}", eval::envelope_text(&ev));
+            print!(
+                "{}",
+                eval::obstacle_rows_text(&ev, cfg.mpc.obstacle_slack_weight)
+            );
             println!("wrote {}", out.join("results.csv").display());
         }
         Command::Paper {

@@ -420,8 +420,7 @@ pub fn paper(
     Ok(())
 }
 
-/// Allowed penetration of the footprint into a circle on the plant [m] (issue 14).
-pub const PENETRATION_TOLERANCE: f64 = 0.005;
+pub use control::obstacle::PENETRATION_TOLERANCE;
 
 /// The scenario's kind: its name without the trailing number (`wall012` → `wall`).
 fn kind_of(name: &str) -> &str {

@@ -20,12 +20,13 @@ use std::sync::Mutex;
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
-use control::delay::DelayCompensator;
+use control::delay::{compensate_pose_age, DelayCompensator};
+use control::envelope::{self, EnvelopeInput, EnvelopeSettings};
 use control::mlp::PAPER_HIDDEN;
 use control::model::{
     converged, env_step, ix, Control, Goal, MachineParams, State, REACH_SPEED, SUCCESS_TOLERANCE,
 };
-use control::mpc::{Mpc, MpcSettings};
+use control::mpc::{FallbackReason, Mpc, MpcSettings, StepStatus};
 use control::planner::{AbortReason, NavStep, Navigator, NavigatorSettings, PlanOutcome};
 use control::plant::{Plant, PlantConfig, PlantPerturbation};
 use control::scenario::Scenario;
@@ -228,6 +229,9 @@ pub struct EvalConfig {
     /// The global layer above the MPC (DESIGN §10); `None` drives the MPC
     /// straight to the goal.
     pub navigator: Option<NavigatorSettings>,
+    /// The safety envelope after the MPC (DESIGN §14), as the daemon runs it;
+    /// its tolerances also widen the MPC's planned clearances.
+    pub envelope: EnvelopeSettings,
     /// Worker threads.
     pub jobs: usize,
     pub progress: bool,
@@ -255,6 +259,7 @@ impl Default for EvalConfig {
             baseline: BaselineSettings::default(),
             min_time: MinTimeSettings::default(),
             navigator: Some(NavigatorSettings::default()),
+            envelope: EnvelopeSettings::default(),
             jobs: std::thread::available_parallelism().map_or(2, |n| n.get()),
             progress: true,
         }
@@ -274,6 +279,13 @@ pub struct Run {
     pub wall_s: f64,
     /// What the global layer did (MPC runs with a navigator only).
     pub navigation: Option<Navigation>,
+    /// Ticks whose command the safety envelope replaced (MPC runs).
+    pub envelope_overrides: usize,
+    /// Ticks whose plan penetrated a circle and was discarded (MPC runs).
+    pub penetrating_plans: usize,
+    /// Largest per-stage sum of obstacle-row multipliers over the run's QPs
+    /// (MPC runs): the obstacle slack weight must exceed it (DESIGN §14).
+    pub obstacle_multiplier_max: f64,
 }
 
 /// The global layer's record of one run.
@@ -377,7 +389,9 @@ pub fn run_mpc(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run> 
     let settings = MpcSettings {
         delay: cfg.plant.delay,
         ..cfg.mpc
-    };
+    }
+    .widened(cfg.envelope.tolerance_widening(&cfg.params));
+    cfg.envelope.validate()?;
     let mut mpc = Mpc::new(
         cfg.params,
         nets.critic.clone(),
@@ -413,8 +427,21 @@ pub fn run_mpc(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run> 
     clearance.observe(&plant.state());
     let mut rest = RestCounter::new(cfg, settings.dt);
     let mut aborted = false;
+    // The envelope's own record of the commands sent (as the daemon's loop
+    // keeps one), acting after the longer of the configured and the estimated
+    // delay.
+    let mut sent = envelope::command_record(cfg.params, settings.delay, settings.dt)?;
+    let mut last = VelocityCommand::ZERO;
+    let mut overrides = 0;
+    let (mut penetrating_plans, mut multiplier_max) = (0, 0.0f64);
     for k in 0..=steps {
-        let x = plant.measure();
+        // The pose is stamped: its age is known and compensated, as in the
+        // daemon (DESIGN §14).
+        let x = compensate_pose_age(
+            &cfg.params,
+            &plant.measure(),
+            plant.perturbation().pose_latency,
+        );
         states.push(plant.state());
         if k == steps || rest.done(&plant.state(), &sc.goal, cfg.tolerance) {
             break;
@@ -449,10 +476,31 @@ pub fn run_mpc(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run> 
         } else {
             let sol = mpc.step(&x, now)?;
             solve_ms.push(sol.solve_time.as_secs_f64() * 1e3);
-            sol.command
+            penetrating_plans +=
+                usize::from(sol.status == StepStatus::Fallback(FallbackReason::PlanPenetrates));
+            multiplier_max = multiplier_max.max(sol.obstacle_multiplier);
+            let proposed = sol.command;
+            sent.set_delay(settings.delay.max(mpc.compensated_delay()));
+            let guarded = envelope::guard(
+                &EnvelopeInput {
+                    params: &cfg.params,
+                    settings: &cfg.envelope,
+                    sent: &sent,
+                    now,
+                    state: &x,
+                    obstacles: &sc.obstacles,
+                    dt: settings.dt,
+                    last,
+                },
+                proposed,
+            );
+            overrides += usize::from(guarded.overridden());
+            guarded.command
         };
         plant.command(cmd)?;
         mpc.sent(now, cmd);
+        sent.record(now, cmd);
+        last = cmd;
         plant.advance_observed(settings.dt, |x| clearance.observe(x));
     }
     let row = score(
@@ -471,6 +519,9 @@ pub fn run_mpc(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run> 
         solve_ms,
         wall_s: start.elapsed().as_secs_f64(),
         navigation,
+        envelope_overrides: overrides,
+        penetrating_plans,
+        obstacle_multiplier_max: multiplier_max,
     })
 }
 
@@ -523,6 +574,9 @@ pub fn run_actor(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run
         solve_ms,
         wall_s: start.elapsed().as_secs_f64(),
         navigation: None,
+        envelope_overrides: 0,
+        penetrating_plans: 0,
+        obstacle_multiplier_max: 0.0,
     })
 }
 
@@ -565,6 +619,9 @@ pub fn run_baseline(cfg: &EvalConfig, sc: &Scenario) -> Result<(Run, ocp::Plan)>
             solve_ms,
             wall_s: start.elapsed().as_secs_f64(),
             navigation: None,
+            envelope_overrides: 0,
+            penetrating_plans: 0,
+            obstacle_multiplier_max: 0.0,
         },
         plan,
     ))
@@ -659,6 +716,9 @@ pub fn run_min_time(cfg: &EvalConfig, sc: &Scenario, others: &[(Method, Run)]) -
         solve_ms,
         wall_s: start.elapsed().as_secs_f64(),
         navigation: None,
+        envelope_overrides: 0,
+        penetrating_plans: 0,
+        obstacle_multiplier_max: 0.0,
     })
 }
 

@@ -81,6 +81,9 @@ pub struct Mpc<C: StageCost, D: Dynamics = Rk4Model, B: QpBackend = ClarabelBack
     /// The state measured at the last step and its time (the delay estimate
     /// predicts the next measurement from it once the command is sent).
     measured: Option<(f64, State)>,
+    /// The obstacle rows' L1 weight in force: `settings.obstacle_slack_weight`,
+    /// raised while the QP buys penetration (sqp.rs, `raise_obstacle_weight`).
+    obstacle_weight: f64,
     solution: Solution,
 }
 
@@ -156,6 +159,7 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
             backup_xs: vec![State::zeros(); n + 1],
             backup_us: vec![Control::zeros(); n],
             has_plan: false,
+            obstacle_weight: settings.obstacle_slack_weight,
             measured: None,
             solution: Solution::new(n),
         })
@@ -203,6 +207,7 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
         self.goal = None;
         self.n_obstacles = 0;
         self.has_plan = false;
+        self.set_obstacle_weight(self.settings.obstacle_slack_weight);
     }
 
     /// Forgets the goal, the plan and the command history: for a new machine
@@ -267,6 +272,7 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
         }
         if self.goal != Some(goal) {
             self.has_plan = false;
+            self.set_obstacle_weight(self.settings.obstacle_slack_weight);
         }
         self.goal = Some(goal);
         self.obstacles[..obstacles.len()].copy_from_slice(obstacles);
@@ -282,11 +288,18 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
     /// Without a goal yet this is [`Self::set_goal`] with no obstacles change.
     pub fn retarget(&mut self, goal: Goal) -> Result<(), MpcError> {
         let keep = self.has_plan && self.goal.is_some();
+        let weight = self.obstacle_weight;
         let n = self.n_obstacles;
         let obstacles = self.obstacles;
         self.set_goal(goal, &obstacles[..n])?;
         self.has_plan = keep;
+        self.set_obstacle_weight(weight);
         Ok(())
+    }
+
+    /// The obstacle rows' L1 weight in force (DESIGN §14).
+    pub fn obstacle_weight(&self) -> f64 {
+        self.obstacle_weight
     }
 }
 

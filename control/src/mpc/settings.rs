@@ -173,6 +173,18 @@ fn setting(name: &'static str, requirement: &'static str, value: impl ToString) 
 }
 
 impl MpcSettings {
+    /// The settings with the planned clearances widened by the envelope's
+    /// tolerances ([`crate::envelope::EnvelopeSettings::tolerance_widening`],
+    /// [front, rear]): the MPC plans outside what the envelope guards, so that
+    /// stated pose noise, latency and geometry error do not make it act.
+    pub fn widened(self, widening: [f64; 2]) -> Self {
+        Self {
+            obstacle_margin: self.obstacle_margin + widening[0],
+            obstacle_margin_rear: self.obstacle_margin_rear + widening[1],
+            ..self
+        }
+    }
+
     /// Checks every field; the error names the first bad one.
     pub fn validate(&self) -> Result<(), MpcError> {
         if !(1..=MAX_HORIZON).contains(&self.horizon) {

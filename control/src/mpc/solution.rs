@@ -18,6 +18,10 @@ pub enum FallbackReason {
     QpFailed,
     /// The QP's solution was not finite.
     NonFiniteSolution,
+    /// The solved plan puts an axle point inside a circle, deeper than the
+    /// tolerance and deeper than the machine already is (DESIGN §14: the
+    /// obstacle rows are not to be traded away).
+    PlanPenetrates,
 }
 
 /// Outcome of a tick.
@@ -66,6 +70,11 @@ pub struct Solution {
     pub obstacle_slacks: Vec<f64>,
     /// Σ weight × slack of the last QP.
     pub slack_cost: f64,
+    /// Largest multiplier sum Σ_{j,a} λ_{k,j,a} of one stage's obstacle rows in
+    /// the last QP. The L1 penalty of the shared slack is exact (the QP cannot
+    /// trade penetration for cost) while the weight exceeds it: a value equal
+    /// to `obstacle_slack_weight` means the penalty was bought, not obeyed.
+    pub obstacle_multiplier: f64,
     /// Wall time of the whole tick.
     pub solve_time: Duration,
     /// Part of it spent in the QP solver (data update and solve).
@@ -89,6 +98,7 @@ impl Solution {
             state_slacks: vec![[0.0; 3]; horizon],
             obstacle_slacks: vec![0.0; horizon],
             slack_cost: 0.0,
+            obstacle_multiplier: 0.0,
             solve_time: Duration::ZERO,
             qp_time: Duration::ZERO,
         }

@@ -7,11 +7,12 @@ use std::time::{Duration, Instant};
 use crate::critic::{Derivatives, TerminalDerivatives};
 use crate::model::VelocityCommand;
 use crate::model::{ix, Control, Goal, State};
+use crate::obstacle::{footprint_clearance, PENETRATION_TOLERANCE};
 
 use super::constraints::{fill_bounds, fill_obstacles};
 use super::cost::{stage_block, terminal_block, StageCost};
 use super::dynamics::Dynamics;
-use super::layout::{QpLayout, NU, NX, NZ};
+use super::layout::{QpLayout, AXLE_POINTS, NU, NX, NZ};
 use super::qp::{QpBackend, QpStatus};
 use super::settings::{MpcError, MpcSettings};
 use super::solution::{FallbackReason, StepStatus};
@@ -30,6 +31,9 @@ pub(super) fn fill_slack_costs(layout: &QpLayout, settings: &MpcSettings, q: &mu
         }
     }
 }
+
+/// The largest weight the obstacle rows' exact penalty is raised to.
+pub const MAX_OBSTACLE_WEIGHT: f64 = 1e6;
 
 fn derivatives_finite(value: f64, grad: &[f64], hess: &[f64]) -> bool {
     value.is_finite() && grad.iter().chain(hess).all(|v| v.is_finite())
@@ -167,10 +171,10 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
         let budget = Duration::from_secs_f64(self.settings.time_budget);
         let mut status = StepStatus::Fallback(FallbackReason::QpFailed);
         let mut may_restart = shifted;
-        if shifted {
-            self.backup_xs.copy_from_slice(&self.xs);
-            self.backup_us.copy_from_slice(&self.us);
-        }
+        // The plan before this tick's iterations: the fallback if they fail or
+        // their plan penetrates a circle.
+        self.backup_xs.copy_from_slice(&self.xs);
+        self.backup_us.copy_from_slice(&self.us);
         let mut attempts = 0;
         while attempts < self.settings.sqp_iterations {
             attempts += 1;
@@ -202,7 +206,27 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
                 break;
             }
         }
+        if status == StepStatus::Solved && self.plan_penetrates(x_hat) {
+            self.xs.copy_from_slice(&self.backup_xs);
+            self.us.copy_from_slice(&self.backup_us);
+            status = StepStatus::Fallback(FallbackReason::PlanPenetrates);
+        }
         status
+    }
+
+    /// True if a planned state x₁..x_N puts an axle point more than
+    /// [`PENETRATION_TOLERANCE`] inside a circle and deeper than x̂ is (a
+    /// machine already inside may plan its way out, not further in).
+    fn plan_penetrates(&self, x_hat: &State) -> bool {
+        let obstacles = &self.obstacles[..self.n_obstacles];
+        if obstacles.is_empty() {
+            return false;
+        }
+        let start = footprint_clearance(&self.params, x_hat, obstacles);
+        let floor = (-PENETRATION_TOLERANCE).min(start - PENETRATION_TOLERANCE);
+        self.xs[1..]
+            .iter()
+            .any(|x| footprint_clearance(&self.params, x, obstacles) < floor)
     }
 
     /// Builds and solves one QP and takes its step; on failure nothing changes
@@ -356,6 +380,37 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
 
     /// Applies α·Δ from the QP solution, projects the controls onto their box
     /// (removing interior-point round-off) and records the slacks.
+    /// Exact penalty for the obstacle rows (DESIGN §14, issue 26): the L1
+    /// weight is exact only while it exceeds the multipliers of the hard rows
+    /// (Nocedal & Wright, Thm 17.3). A QP whose slack went beyond the planned
+    /// margin (into the circle itself) while its stage multipliers reached the
+    /// weight bought the penetration: the weight is raised tenfold (up to
+    /// [`MAX_OBSTACLE_WEIGHT`]) for the ticks that follow, and a new goal
+    /// starts again from the configured one. The margin stays soft (a slack
+    /// within it is a plan closer than planned, not inside), so a QP that
+    /// never buys penetration never changes the weight.
+    fn raise_obstacle_weight(&mut self) {
+        let margin = self
+            .settings
+            .obstacle_margin
+            .min(self.settings.obstacle_margin_rear);
+        let bought = self.solution.max_obstacle_slack() > margin + PENETRATION_TOLERANCE
+            && self.solution.obstacle_multiplier >= 0.999 * self.obstacle_weight;
+        if bought && self.obstacle_weight < MAX_OBSTACLE_WEIGHT {
+            self.set_obstacle_weight((10.0 * self.obstacle_weight).min(MAX_OBSTACLE_WEIGHT));
+        }
+    }
+
+    /// Puts `weight` on every obstacle slack of the QP's q.
+    pub(super) fn set_obstacle_weight(&mut self, weight: f64) {
+        self.obstacle_weight = weight;
+        if self.layout.n_obs > 0 {
+            for k in 0..self.settings.horizon {
+                self.data.q[self.layout.obstacle_slack(k)] = weight;
+            }
+        }
+    }
+
     fn take_step(&mut self) {
         let s = self.settings;
         let l = &self.layout;
@@ -396,8 +451,21 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
                 0.0
             };
             self.solution.obstacle_slacks[k] = v;
-            slack_cost += s.obstacle_slack_weight * v;
+            slack_cost += self.obstacle_weight * v;
         }
         self.solution.slack_cost = slack_cost;
+        let z = self.backend.dual();
+        let mut multiplier: f64 = 0.0;
+        for k in 0..s.horizon {
+            let mut stage = 0.0;
+            for j in 0..l.n_obs {
+                for a in 0..AXLE_POINTS {
+                    stage += z.get(l.row_obstacle(k, j, a)).copied().unwrap_or(0.0);
+                }
+            }
+            multiplier = multiplier.max(stage);
+        }
+        self.solution.obstacle_multiplier = multiplier;
+        self.raise_obstacle_weight();
     }
 }

@@ -1,0 +1,619 @@
+//! The safety envelope after the optimiser (DESIGN §14).
+//!
+//! The MPC is not the safety function. Before a command leaves the loop, [`guard`]
+//! predicts the machine's motion under it: the commands already sent that act
+//! within the actuator delay, then this command until the next tick, then a full
+//! stop at the machine's braking limits (β̈_max, a_max), started
+//! `response_lag` late. Both axle points are checked on the integration
+//! sub-steps ([`DelayCompensator::propagate_with`], the model the delay
+//! compensation uses). If the prediction comes closer to a circle than the
+//! protective margin — and closer than stopping now would — the command is
+//! replaced by the safest one of a small set (a stop at the limits, or braking
+//! while keeping the proposed articulation rate: whichever keeps the larger
+//! clearance). The daemon and `wlnav-sim` call this same function.
+//!
+//! # Margins
+//!
+//! The margins come from stated tolerances, not from scenarios
+//! ([`EnvelopeSettings::margins`]): with k = `noise_sigmas`,
+//!
+//! ```text
+//! m_front = margin + k·σ_xy + v_max·δt_pose
+//! m_rear  = m_front + δ_geometry + (L_f + L_r)·k·σ_θ
+//! ```
+//!
+//! σ_xy, σ_θ: the pose estimate's noise; δt_pose: how far its timestamp may be
+//! off once its age is compensated ([`crate::delay::compensate_pose_age`]);
+//! δ_geometry: how far the true rear axle may be from where the configured L_f,
+//! L_r put it (≤ |ΔL_f| + |ΔL_r|); the rear axle's heading error acts over its
+//! lever L_f + L_r from the measured front axle.
+//!
+//! # What passes
+//!
+//! A command passes when its prediction keeps every margin, or is no worse than
+//! an immediate stop (the commands already sent cannot be taken back, so a
+//! machine already inside a margin may still move away from the circle, never
+//! towards it). With every tolerance zero and nothing near, the command passes
+//! unchanged: the envelope changes nothing where it does not act.
+
+use serde::{Deserialize, Serialize};
+
+use crate::delay::DelayCompensator;
+use crate::model::{MachineParams, State, VelocityCommand};
+use crate::obstacle::{AxlePoint, Obstacle};
+
+/// Settings of the envelope: what it assumes about the machine and its pose
+/// estimate. `Default` gives the values below.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct EnvelopeSettings {
+    /// Check every command (default true). Off only to measure what the
+    /// envelope changes.
+    pub enabled: bool,
+    /// Protective margin [m] kept beyond the tolerances below. Default 0.01
+    /// (the MPC plans 0.05 away: the envelope acts only on commands that leave
+    /// the plan's own margin).
+    pub margin: f64,
+    /// How far the true rear axle may be from where the configured L_f, L_r put
+    /// it [m] (≤ |ΔL_f| + |ΔL_r|). Default 0.
+    pub geometry_tolerance: f64,
+    /// Standard deviation of the pose estimate's position [m]. Default 0.
+    pub pose_noise_xy: f64,
+    /// Standard deviation of the pose estimate's heading [rad]. Default 0.
+    pub pose_noise_theta: f64,
+    /// How many standard deviations of pose noise the margins cover. Default 3.
+    pub noise_sigmas: f64,
+    /// Uncertainty of the pose's timestamp once its age is compensated [s].
+    /// Default 0.
+    pub pose_latency: f64,
+    /// The machine may begin a stop this much later than the model says [s]:
+    /// unmodelled velocity lag, an actuator delay longer than the compensated
+    /// one. Default 0.
+    pub response_lag: f64,
+    /// Prediction sub-step [s], in (0, 0.02]. Default 0.01 (the plant's).
+    pub substep: f64,
+}
+
+impl Default for EnvelopeSettings {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            margin: 0.01,
+            geometry_tolerance: 0.0,
+            pose_noise_xy: 0.0,
+            pose_noise_theta: 0.0,
+            noise_sigmas: 3.0,
+            pose_latency: 0.0,
+            response_lag: 0.0,
+            substep: crate::delay::DEFAULT_SUBSTEP,
+        }
+    }
+}
+
+/// A bad envelope setting.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("envelope setting `{name}` {requirement} (got {value})")]
+pub struct EnvelopeError {
+    pub name: &'static str,
+    pub requirement: &'static str,
+    pub value: f64,
+}
+
+impl EnvelopeSettings {
+    /// Every value finite and ≥ 0, `substep` in (0, 0.02], response lag and
+    /// pose latency at most 2 s.
+    pub fn validate(&self) -> Result<(), EnvelopeError> {
+        let err = |name, requirement, value| {
+            Err(EnvelopeError {
+                name,
+                requirement,
+                value,
+            })
+        };
+        for (name, value) in [
+            ("margin", self.margin),
+            ("geometry_tolerance", self.geometry_tolerance),
+            ("pose_noise_xy", self.pose_noise_xy),
+            ("pose_noise_theta", self.pose_noise_theta),
+            ("noise_sigmas", self.noise_sigmas),
+            ("pose_latency", self.pose_latency),
+            ("response_lag", self.response_lag),
+        ] {
+            if !(value.is_finite() && value >= 0.0) {
+                return err(name, "must be finite and >= 0", value);
+            }
+        }
+        for (name, value) in [
+            ("pose_latency", self.pose_latency),
+            ("response_lag", self.response_lag),
+        ] {
+            if value > 2.0 {
+                return err(name, "must be at most 2 s", value);
+            }
+        }
+        if !(self.substep > 0.0 && self.substep <= 0.02) {
+            return err("substep", "must be in (0, 0.02] s", self.substep);
+        }
+        Ok(())
+    }
+
+    /// The margins [front, rear] (in the order of [`AxlePoint::ALL`]) from the
+    /// tolerances (module docs).
+    pub fn margins(&self, p: &MachineParams) -> [f64; 2] {
+        let front =
+            self.margin + self.noise_sigmas * self.pose_noise_xy + p.v_max * self.pose_latency;
+        let rear = front
+            + self.geometry_tolerance
+            + (p.l_f + p.l_r) * self.noise_sigmas * self.pose_noise_theta;
+        [front, rear]
+    }
+
+    /// What the tolerances add to each margin beyond `margin` [front, rear]: the
+    /// MPC's planned clearance grows by this too, so that it plans outside the
+    /// envelope's reach ([`crate::mpc::MpcSettings::with_tolerances`]).
+    pub fn tolerance_widening(&self, p: &MachineParams) -> [f64; 2] {
+        let [f, r] = self.margins(p);
+        [f - self.margin, r - self.margin]
+    }
+}
+
+/// The machine's stop at its acceleration limits: each velocity moved towards
+/// zero by at most one tick of β̈_max, a_max from the last command sent. Sent
+/// every tick while stopping, it brakes at the limits.
+pub fn ramp_down(last: VelocityCommand, p: &MachineParams, dt: f64) -> VelocityCommand {
+    let towards_zero = |v: f64, step: f64| {
+        if v.abs() <= step {
+            0.0
+        } else {
+            v - step.copysign(v)
+        }
+    };
+    VelocityCommand {
+        beta_dot: towards_zero(last.beta_dot, p.beta_ddot_max * dt),
+        v: towards_zero(last.v, p.a_max * dt),
+    }
+}
+
+/// A stop at the limits that never speeds the machine up: [`ramp_down`] from,
+/// per channel, whichever of the last command and the measured velocity is
+/// closer to zero (zero if they differ in sign). `ramp_down` of the last
+/// command alone would command −0.8 m/s to a machine still reversing at
+/// −0.4 m/s towards a −1 m/s command, i.e. accelerate it (seen at N = 40 in
+/// `dock038`). Without a trusted measurement (`None`), from the last command.
+pub fn stop_command(
+    last: VelocityCommand,
+    measured: Option<&State>,
+    p: &MachineParams,
+    dt: f64,
+) -> VelocityCommand {
+    let Some(x) = measured else {
+        return ramp_down(last, p, dt);
+    };
+    let nearer_zero = |a: f64, b: f64| {
+        if !(a * b > 0.0) {
+            0.0
+        } else if a.abs() <= b.abs() {
+            a
+        } else {
+            b
+        }
+    };
+    let from = VelocityCommand {
+        beta_dot: nearer_zero(last.beta_dot, x[crate::model::ix::BETA_DOT]),
+        v: nearer_zero(last.v, x[crate::model::ix::V]),
+    };
+    ramp_down(from, p, dt)
+}
+
+/// The loop's own record of the commands it sent, for [`EnvelopeInput::sent`]:
+/// they act after `delay`, with room reserved for any delay the online estimate
+/// can take ([`crate::delay_estimate::MAX_DELAY`]), so that raising it later
+/// does not allocate in a tick.
+pub fn command_record(
+    p: MachineParams,
+    delay: f64,
+    dt: f64,
+) -> Result<DelayCompensator, crate::delay::DelayError> {
+    let mut sent = DelayCompensator::new(p, delay, dt)?;
+    sent.reserve_for(crate::delay_estimate::MAX_DELAY);
+    Ok(sent)
+}
+
+/// What the envelope knows at a tick.
+#[derive(Debug, Clone, Copy)]
+pub struct EnvelopeInput<'a> {
+    /// The nominal machine.
+    pub params: &'a MachineParams,
+    pub settings: &'a EnvelopeSettings,
+    /// The commands already sent and the delay they act after (the loop's own
+    /// record, independent of the optimiser's).
+    pub sent: &'a DelayCompensator,
+    /// The tick's time [s, the clock of `sent`].
+    pub now: f64,
+    /// The measured state at `now` (the pose's age compensated).
+    pub state: &'a State,
+    /// The circles, radii inflated by the machine's half-width.
+    pub obstacles: &'a [Obstacle],
+    /// The command period Δt [s].
+    pub dt: f64,
+    /// The last command sent (the stop ramps down from it).
+    pub last: VelocityCommand,
+}
+
+/// Which command left the loop.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Choice {
+    /// The proposed command: it keeps the margins.
+    Proposed,
+    /// A stop at the limits ([`stop_command`]).
+    Stop,
+    /// Braking at the limits while keeping the proposed articulation rate.
+    BrakeSteering,
+}
+
+impl Choice {
+    pub fn name(self) -> &'static str {
+        match self {
+            Choice::Proposed => "proposed",
+            Choice::Stop => "stop",
+            Choice::BrakeSteering => "brake-steering",
+        }
+    }
+}
+
+/// The envelope's verdict on one command.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Guarded {
+    /// The command to send.
+    pub command: VelocityCommand,
+    pub choice: Choice,
+    /// Smallest predicted clearance beyond the margins [m] of the proposed
+    /// command (negative: it would come closer than a margin; +∞ without
+    /// obstacles or with the envelope off).
+    pub proposed_excess: f64,
+    /// The same for the command sent.
+    pub excess: f64,
+}
+
+impl Guarded {
+    /// True if the proposed command was replaced.
+    pub fn overridden(&self) -> bool {
+        self.choice != Choice::Proposed
+    }
+}
+
+/// Smallest clearance beyond the margins [m] of both axle points over the
+/// prediction: `command` sent now, a stop sent a tick later (and
+/// `response_lag` late), until at rest.
+pub fn predicted_excess(input: &EnvelopeInput, command: VelocityCommand) -> f64 {
+    let EnvelopeInput {
+        params: p,
+        settings: s,
+        ..
+    } = *input;
+    if input.obstacles.is_empty() {
+        return f64::INFINITY;
+    }
+    let margins = s.margins(p);
+    let stop_at = input.now + input.dt + s.response_lag;
+    // The stop acts a delay after it is sent; from the fastest the machine can
+    // go, it is at rest within the longer of the two braking times (plus the
+    // ramp of the model's response).
+    let braking = (p.v_max / p.a_max).max(p.beta_dot_max / p.beta_ddot_max) + input.dt;
+    let end = stop_at + input.sent.delay() + braking;
+    let pending = [(input.now, command), (stop_at, VelocityCommand::ZERO)];
+    let mut excess = f64::INFINITY;
+    let mut observe = |x: &State| {
+        for (point, m) in AxlePoint::ALL.iter().zip(margins) {
+            let q = point.position(p, x);
+            for o in input.obstacles {
+                excess = excess.min(o.clearance_of(q) - m);
+            }
+        }
+    };
+    observe(input.state);
+    input
+        .sent
+        .propagate_with(input.now, input.state, &pending, end, &mut observe);
+    excess
+}
+
+/// Checks `proposed` (module docs) and returns what to send. Allocation-free.
+pub fn guard(input: &EnvelopeInput, proposed: VelocityCommand) -> Guarded {
+    let pass = Guarded {
+        command: proposed,
+        choice: Choice::Proposed,
+        proposed_excess: f64::INFINITY,
+        excess: f64::INFINITY,
+    };
+    if !input.settings.enabled || input.obstacles.is_empty() {
+        return pass;
+    }
+    let excess = predicted_excess(input, proposed);
+    if excess >= 0.0 {
+        return Guarded {
+            proposed_excess: excess,
+            excess,
+            ..pass
+        };
+    }
+    let stop = stop_command(input.last, Some(input.state), input.params, input.dt);
+    let stop_excess = predicted_excess(input, stop);
+    // No worse than stopping now: moving away from (or along) a circle the
+    // machine is already too close to.
+    if excess >= stop_excess - 1e-9 {
+        return Guarded {
+            proposed_excess: excess,
+            excess,
+            ..pass
+        };
+    }
+    let steer = VelocityCommand {
+        beta_dot: proposed.beta_dot,
+        ..stop
+    }
+    .limited(input.params);
+    let steer_excess = predicted_excess(input, steer);
+    let (command, choice, best) = if steer_excess > stop_excess {
+        (steer, Choice::BrakeSteering, steer_excess)
+    } else {
+        (stop, Choice::Stop, stop_excess)
+    };
+    Guarded {
+        command,
+        choice,
+        proposed_excess: excess,
+        excess: best,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::ix;
+
+    fn avant() -> MachineParams {
+        MachineParams::default()
+    }
+
+    /// Driving straight along +x at `v`, its commands sent every tick so far.
+    fn driving(v: f64, delay: f64) -> (DelayCompensator, State) {
+        let mut sent = DelayCompensator::new(avant(), delay, 0.2).unwrap();
+        for k in -5..0 {
+            sent.record(0.2 * k as f64, VelocityCommand { beta_dot: 0.0, v });
+        }
+        (sent, State::new(0.0, 0.0, 0.0, 0.0, 0.0, v))
+    }
+
+    fn input<'a>(
+        p: &'a MachineParams,
+        s: &'a EnvelopeSettings,
+        sent: &'a DelayCompensator,
+        x: &'a State,
+        obstacles: &'a [Obstacle],
+        last: VelocityCommand,
+    ) -> EnvelopeInput<'a> {
+        EnvelopeInput {
+            params: p,
+            settings: s,
+            sent,
+            now: 0.0,
+            state: x,
+            obstacles,
+            dt: 0.2,
+            last,
+        }
+    }
+
+    #[test]
+    fn a_command_that_would_cut_into_a_circle_is_replaced_by_a_stop() {
+        let p = avant();
+        let s = EnvelopeSettings::default();
+        let (sent, x) = driving(1.0, 0.2);
+        let full = VelocityCommand {
+            beta_dot: 0.0,
+            v: 1.0,
+        };
+        // At 1 m/s, 0.2 s delay: 0.2 m committed, 0.2 m under the command, then
+        // 0.5 m of braking (+ the model's ramp) before rest: a circle whose
+        // edge is 0.75 m ahead is hit.
+        let wall = [Obstacle::new(1.25, 0.0, 0.5)];
+        let g = guard(&input(&p, &s, &sent, &x, &wall, full), full);
+        assert!(g.overridden(), "{g:?}");
+        assert!(g.proposed_excess < 0.0);
+        assert!(g.excess > g.proposed_excess);
+        assert!(g.command.v < full.v && g.command.v >= full.v - p.a_max * 0.2 - 1e-12);
+        // Its independent check: stopping from 1 m/s after 0.4 m ends
+        // 0.4 + 0.5 = 0.9 m ahead (ramp model: the last 0.2 m/s in 0.2 s
+        // linearly, same distance): the excess is 0.75 − 0.9 − margin < 0 for
+        // the proposed command and the stop gains one tick of braking.
+        let expected = 0.75 - (0.2 + 0.2 + 0.5) - s.margin;
+        assert!(
+            (g.proposed_excess - expected).abs() < 2e-3,
+            "{g:?} vs {expected}"
+        );
+        // Far enough ahead, the same command passes unchanged.
+        let far = [Obstacle::new(2.0, 0.0, 0.5)];
+        let g = guard(&input(&p, &s, &sent, &x, &far, full), full);
+        assert_eq!(g.choice, Choice::Proposed);
+        assert_eq!(g.command, full);
+        assert!(g.excess > 0.0 && g.excess < 0.6);
+    }
+
+    #[test]
+    fn the_rear_axle_is_checked_too() {
+        // Reversing at 1 m/s towards a circle behind: the rear axle (1.2 m
+        // behind the front one when straight) reaches it first.
+        let p = avant();
+        let s = EnvelopeSettings::default();
+        let (sent, x) = driving(-1.0, 0.0);
+        let back = VelocityCommand {
+            beta_dot: 0.0,
+            v: -1.0,
+        };
+        // No delay: 0.2 m under the command, then 0.5 m of braking. The front
+        // axle ends 0.7 m back, far from the edge at −1.8 m; the rear one
+        // starts at −1.2 m and ends at −1.9 m, 0.1 m inside.
+        let behind = [Obstacle::new(-2.3, 0.0, 0.5)];
+        let g = guard(&input(&p, &s, &sent, &x, &behind, back), back);
+        assert!(g.overridden(), "{g:?}");
+        let expected = -0.1 - s.margin;
+        assert!(
+            (g.proposed_excess - expected).abs() < 2e-3,
+            "{g:?} vs {expected}"
+        );
+    }
+
+    #[test]
+    fn a_machine_inside_its_margin_may_move_away_but_not_closer() {
+        let p = avant();
+        let s = EnvelopeSettings {
+            margin: 0.1,
+            ..Default::default()
+        };
+        // At rest, 0.05 m from a circle ahead (inside the 0.1 m margin).
+        let sent = DelayCompensator::new(p, 0.2, 0.2).unwrap();
+        let x = State::zeros();
+        let ahead = [Obstacle::new(0.55, 0.0, 0.5)];
+        let away = VelocityCommand {
+            beta_dot: 0.0,
+            v: -0.2,
+        };
+        let towards = VelocityCommand {
+            beta_dot: 0.0,
+            v: 0.2,
+        };
+        let inp = input(&p, &s, &sent, &x, &ahead, VelocityCommand::ZERO);
+        let g = guard(&inp, away);
+        assert_eq!(g.choice, Choice::Proposed, "{g:?}");
+        assert!(g.excess < 0.0);
+        let g = guard(&inp, towards);
+        assert_eq!(g.choice, Choice::Stop, "{g:?}");
+        assert_eq!(g.command, VelocityCommand::ZERO);
+    }
+
+    #[test]
+    fn margins_follow_the_formula_and_widen_the_check() {
+        let p = avant();
+        let s = EnvelopeSettings {
+            margin: 0.01,
+            geometry_tolerance: 0.06,
+            pose_noise_xy: 0.02,
+            pose_noise_theta: 0.01,
+            noise_sigmas: 3.0,
+            pose_latency: 0.05,
+            ..Default::default()
+        };
+        let [f, r] = s.margins(&p);
+        assert!((f - (0.01 + 0.06 + 0.05)).abs() < 1e-12, "{f}");
+        assert!((r - (f + 0.06 + 1.2 * 0.03)).abs() < 1e-12, "{r}");
+        let [wf, wr] = s.tolerance_widening(&p);
+        assert!((wf - (f - 0.01)).abs() < 1e-12 && (wr - (r - 0.01)).abs() < 1e-12);
+        // A command that passes at zero tolerance fails once they are stated.
+        let (sent, x) = driving(1.0, 0.2);
+        let full = VelocityCommand {
+            beta_dot: 0.0,
+            v: 1.0,
+        };
+        // Edge 0.98 m ahead: the prediction ends 0.08 m before it, more than
+        // the 0.01 m margin, less than 0.12 m.
+        let o = [Obstacle::new(1.48, 0.0, 0.5)];
+        let zero = EnvelopeSettings::default();
+        assert!(!guard(&input(&p, &zero, &sent, &x, &o, full), full).overridden());
+        assert!(guard(&input(&p, &s, &sent, &x, &o, full), full).overridden());
+        assert!(s.validate().is_ok());
+        let bad = EnvelopeSettings {
+            pose_latency: -1.0,
+            ..s
+        };
+        assert!(bad
+            .validate()
+            .unwrap_err()
+            .to_string()
+            .contains("`pose_latency`"));
+    }
+
+    #[test]
+    fn nothing_near_or_switched_off_passes_unchanged() {
+        let p = avant();
+        let (sent, x) = driving(1.0, 0.2);
+        let full = VelocityCommand {
+            beta_dot: 0.3,
+            v: 1.0,
+        };
+        let s = EnvelopeSettings::default();
+        let g = guard(&input(&p, &s, &sent, &x, &[], full), full);
+        assert_eq!((g.command, g.choice), (full, Choice::Proposed));
+        let off = EnvelopeSettings {
+            enabled: false,
+            ..s
+        };
+        let wall = [Obstacle::new(0.8, 0.0, 0.5)];
+        let g = guard(&input(&p, &off, &sent, &x, &wall, full), full);
+        assert_eq!((g.command, g.choice), (full, Choice::Proposed));
+        assert_eq!(x[ix::V], 1.0);
+    }
+
+    #[test]
+    fn the_stop_never_speeds_up_a_machine_that_lags_its_command() {
+        let p = avant();
+        // Commanded −1 m/s, still at −0.4 m/s (the ramp under way): the stop
+        // brakes from −0.4, not from the command.
+        let last = VelocityCommand {
+            beta_dot: 0.43,
+            v: -1.0,
+        };
+        let x = State::new(0.0, 0.0, 0.0, 0.6, 0.1, -0.4);
+        let stop = stop_command(last, Some(&x), &p, 0.2);
+        assert!((stop.v - (-0.2)).abs() < 1e-12, "{stop:?}");
+        assert_eq!(stop.beta_dot, 0.0);
+        // Opposite signs: the stop is zero; no measurement: from the command.
+        let back = State::new(0.0, 0.0, 0.0, 0.0, -0.1, 0.3);
+        assert_eq!(
+            stop_command(last, Some(&back), &p, 0.2),
+            VelocityCommand::ZERO
+        );
+        assert_eq!(stop_command(last, None, &p, 0.2), ramp_down(last, &p, 0.2));
+        // A machine faster than its last command (braking under way): from
+        // the command.
+        let fast = State::new(0.0, 0.0, 0.0, 0.0, 0.5, -0.9);
+        let slow = VelocityCommand {
+            beta_dot: 0.2,
+            v: -0.5,
+        };
+        let c = stop_command(slow, Some(&fast), &p, 0.2);
+        assert!(
+            (c.v - (-0.3)).abs() < 1e-12 && c.beta_dot.abs() < 0.2,
+            "{c:?}"
+        );
+    }
+
+    #[test]
+    fn ramp_down_respects_the_acceleration_limits_and_ends_at_zero() {
+        let p = avant();
+        let dt = 0.2;
+        let mut c = VelocityCommand {
+            beta_dot: -p.beta_dot_max,
+            v: p.v_max,
+        };
+        let mut ticks = 0;
+        while c != VelocityCommand::ZERO {
+            let next = ramp_down(c, &p, dt);
+            assert!((next.beta_dot - c.beta_dot).abs() <= p.beta_ddot_max * dt + 1e-12);
+            assert!((next.v - c.v).abs() <= p.a_max * dt + 1e-12);
+            assert!(next.beta_dot.abs() <= c.beta_dot.abs() && next.v.abs() <= c.v.abs());
+            c = next;
+            ticks += 1;
+            assert!(ticks < 100, "the ramp does not end");
+        }
+        let expected = (p.v_max / (p.a_max * dt))
+            .max(p.beta_dot_max / (p.beta_ddot_max * dt))
+            .ceil() as usize;
+        // Within one tick of the closed form (the repeated subtraction may leave
+        // a rounding remainder for one more tick).
+        assert!(
+            (expected..=expected + 1).contains(&ticks),
+            "{ticks} ticks, expected {expected}"
+        );
+    }
+}
