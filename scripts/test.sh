@@ -16,6 +16,21 @@ if [ ${#need_apt[@]} -gt 0 ]; then
   apt-get install -y -qq --no-install-recommends "${need_apt[@]}"
 fi
 
+# The fleet link's acceptance test (fleet/tests/master.rs) runs a VDA 5050 master written
+# with the npm package vda-5050-lib: Node.js, npm, and the packages of
+# fleet/master/package-lock.json, installed with `npm ci` when node_modules is missing or
+# was installed from another lock file (node_modules/.wlnav-lock, as the test checks it).
+if ! command -v node >/dev/null || ! command -v npm >/dev/null; then
+  echo "installing: nodejs npm (fleet/master)"
+  export DEBIAN_FRONTEND=noninteractive
+  apt-get update -qq
+  apt-get install -y -qq --no-install-recommends nodejs npm
+fi
+if ! cmp -s fleet/master/package-lock.json fleet/master/node_modules/.wlnav-lock; then
+  npm ci --prefix fleet/master --no-audit --no-fund --loglevel=error
+  cp fleet/master/package-lock.json fleet/master/node_modules/.wlnav-lock
+fi
+
 cargo test --workspace --locked "$@"
 
 # The committed weights (one directory per machine) must open in Python's

@@ -615,7 +615,7 @@ impl Vehicle {
         let Some(t) = &self.telemetry else {
             return errors;
         };
-        let faults = t.fault_flags & !fault_flags::STOP_REQUESTED;
+        let faults = t.fault_flags & !NOT_FAULTS;
         if faults != 0 || t.mode == Mode::Fault.code() {
             let level = if t.mode == Mode::Fault.code() {
                 ErrorLevel::Fatal
@@ -715,25 +715,25 @@ impl Vehicle {
     }
 }
 
-/// The names of the set fault bits.
+/// Telemetry flags that are no fault: the operator stop (shown as `paused` and
+/// `safetyState.eStop`) and the safety envelope braking near an obstacle (the controller
+/// goes on; DESIGN §14).
+const NOT_FAULTS: u32 = fault_flags::STOP_REQUESTED | fault_flags::ENVELOPE_OVERRIDE;
+
+/// The names of the set fault bits, as the wire names them ([`fault_flags::NAMES`]); a bit
+/// this build does not know (a newer daemon's) as `bit-N`.
 pub fn fault_names(flags: u32) -> String {
-    const NAMES: [(u32, &str); 10] = [
-        (fault_flags::POSE_STALE, "pose stale"),
-        (fault_flags::MACHINE_STATE_STALE, "machine state stale"),
-        (fault_flags::CAN_CRC, "CAN CRC"),
-        (fault_flags::CAN_ALIVE, "CAN alive counter"),
-        (fault_flags::SOLVE_FAILED, "solve failed"),
-        (fault_flags::FALLBACK_PLAN, "fallback plan"),
-        (fault_flags::OVERRUN, "tick overrun"),
-        (fault_flags::STOP_REQUESTED, "operator stop"),
-        (fault_flags::CAN_BUS, "CAN bus"),
-        (fault_flags::POSE_REJECTED, "pose rejected"),
-    ];
-    let names: Vec<&str> = NAMES
+    let mut names: Vec<String> = fault_flags::NAMES
         .iter()
         .filter(|(bit, _)| flags & bit != 0)
-        .map(|(_, n)| *n)
+        .map(|(_, n)| (*n).to_owned())
         .collect();
+    let known = fault_flags::NAMES.iter().fold(0, |acc, (bit, _)| acc | bit);
+    names.extend(
+        (0..32)
+            .filter(|b| flags & !known & (1 << b) != 0)
+            .map(|b| format!("bit-{b}")),
+    );
     if names.is_empty() {
         "fault".into()
     } else {
@@ -826,6 +826,27 @@ mod tests {
     }
 
     const T: Duration = Duration::ZERO;
+
+    #[test]
+    fn faults_are_errors_and_the_envelope_is_not() {
+        let mut v = vehicle();
+        let mut t = telemetry(0.0, 0.0, 0.5, Mode::Tracking);
+        t.fault_flags = fault_flags::ENVELOPE_OVERRIDE;
+        v.on_telemetry(&t, T);
+        assert!(
+            v.state(header()).errors.is_empty(),
+            "envelope braking is no fault"
+        );
+        t.fault_flags = fault_flags::ENVELOPE_OVERRIDE | fault_flags::OVERRUN | (1 << 30);
+        v.on_telemetry(&t, T);
+        let e = v.state(header()).errors;
+        assert_eq!(e.len(), 1);
+        assert_eq!(e[0].error_type, "machineFaultError");
+        assert_eq!(
+            e[0].error_description.as_deref(),
+            Some("wlnavd reports: overrun, bit-30")
+        );
+    }
 
     #[test]
     fn an_order_is_driven_node_by_node() {

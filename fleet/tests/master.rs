@@ -14,10 +14,14 @@ use std::time::{Duration, Instant};
 
 use common::*;
 
+/// `npm ci` in `dir` unless its node_modules holds exactly the committed lock file's
+/// packages: `npm ci` copies package-lock.json to node_modules/.wlnav-lock (as
+/// scripts/test.sh does), and a different or missing copy means missing or stale.
 fn npm_ci(dir: &std::path::Path) {
-    if dir.join("node_modules/vda-5050-lib/package.json").is_file()
-        && dir.join("node_modules/ajv/package.json").is_file()
-    {
+    let lock =
+        std::fs::read(dir.join("package-lock.json")).expect("fleet/master/package-lock.json");
+    let stamp = dir.join("node_modules/.wlnav-lock");
+    if std::fs::read(&stamp).is_ok_and(|s| s == lock) {
         return;
     }
     eprintln!("fleet master: npm ci in {}", dir.display());
@@ -25,12 +29,17 @@ fn npm_ci(dir: &std::path::Path) {
         .args(["ci", "--no-audit", "--no-fund", "--loglevel=error"])
         .current_dir(dir)
         .status()
-        .expect("npm (Node.js) is needed for the master test");
+        .unwrap_or_else(|e| {
+            panic!(
+                "npm: {e}: Node.js and npm are needed for the VDA 5050 master test \
+                 (apt-get install nodejs npm; scripts/test.sh installs them)"
+            )
+        });
     assert!(status.success(), "npm ci failed in {}", dir.display());
+    std::fs::write(&stamp, lock).unwrap();
 }
 
 #[test]
-#[ignore = "end to end, not yet run (issue 29): cargo test -p wlnav-fleet -- --ignored"]
 fn vda_5050_lib_master_drives_two_machines() {
     let _g = serial();
     let master_dir = repo_root().join("fleet/master");
@@ -60,7 +69,7 @@ fn vda_5050_lib_master_drives_two_machines() {
         .stdout(out.try_clone().unwrap())
         .stderr(out)
         .spawn()
-        .expect("node (Node.js) is needed for the master test");
+        .unwrap_or_else(|e| panic!("node: {e}: Node.js is needed for the VDA 5050 master test"));
     let deadline = Instant::now() + Duration::from_secs(300);
     let status = loop {
         if let Some(s) = child.try_wait().unwrap() {

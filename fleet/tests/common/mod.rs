@@ -369,6 +369,53 @@ pub fn start_daemon(prefix: &str) -> Proc {
     }
 }
 
+/// Every telemetry sample of a daemon, read by a thread of its own (the subscriber keeps
+/// only 16 samples, about a second at the tests' time scale, so a test that must see
+/// everything of a longer phase cannot read them at its end).
+pub struct TelemetryLog {
+    samples: Arc<Mutex<Vec<shm_ipc::Telemetry>>>,
+    stop: Arc<std::sync::atomic::AtomicBool>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl TelemetryLog {
+    /// Starts recording the telemetry of the daemon on `prefix` (which must be running).
+    pub fn start(prefix: &str) -> Self {
+        let client = shm_ipc::Client::new(&shm_ipc::IpcConfig::new(prefix)).unwrap();
+        let sub = client.subscribe_telemetry().unwrap();
+        let samples = Arc::new(Mutex::new(Vec::new()));
+        let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let (s, st) = (samples.clone(), stop.clone());
+        let thread = std::thread::spawn(move || {
+            let _client = client;
+            while !st.load(std::sync::atomic::Ordering::Relaxed) {
+                if let Ok(Some(t)) = sub.recv_timeout(Duration::from_millis(50)) {
+                    s.lock().unwrap().push(t);
+                }
+            }
+        });
+        Self {
+            samples,
+            stop,
+            thread: Some(thread),
+        }
+    }
+
+    /// The samples so far.
+    pub fn samples(&self) -> Vec<shm_ipc::Telemetry> {
+        self.samples.lock().unwrap().clone()
+    }
+}
+
+impl Drop for TelemetryLog {
+    fn drop(&mut self) {
+        self.stop.store(true, std::sync::atomic::Ordering::Relaxed);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
 /// Starts `wlnav-fleet` for serial `serial` on `prefix`, with an optional config file text.
 pub fn start_bridge(broker: &str, serial: &str, prefix: &str, config: Option<&str>) -> Proc {
     let mut args: Vec<String> = vec![
