@@ -1,23 +1,10 @@
 //! Human-readable renderings of [`Telemetry`]: the one-line-per-tick view and the table view
 //! of `wlnav watch`, mode and fault names (shared with `record` and `demo`).
 
-use shm_ipc::{fault_flags, AbortReason, GoalOutcome, Mode, Telemetry};
+use shm_ipc::{AbortReason, GoalOutcome, Mode, Telemetry};
 
 /// Names of the set fault bits (unknown bits as `bit-N`).
-pub fn fault_names(flags: u32) -> Vec<String> {
-    let mut names: Vec<String> = fault_flags::NAMES
-        .iter()
-        .filter(|(bit, _)| flags & bit != 0)
-        .map(|(_, n)| (*n).to_owned())
-        .collect();
-    let known = fault_flags::NAMES.iter().fold(0, |acc, (bit, _)| acc | bit);
-    for bit in 0..32 {
-        if flags & !known & (1 << bit) != 0 {
-            names.push(format!("bit-{bit}"));
-        }
-    }
-    names
-}
+pub use shm_ipc::fault_flags::names as fault_names;
 
 /// Fault names joined with `,`, or `-` when there are none.
 pub fn fault_text(flags: u32) -> String {

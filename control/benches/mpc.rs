@@ -1,5 +1,6 @@
 //! One full MPC tick (delay compensation, critic derivatives, QP update and
-//! solve, output) at N = 10, 20, 40 with the committed critic and actor
+//! solve, output, and the safety envelope's check of the command, DESIGN §14)
+//! at N = 10, 20, 40 with the committed critic and actor
 //! (`critic-weights/avant635/`; random networks of the paper's sizes when absent, said
 //! on stdout), for both Hessian modes, in closed loop on the simulated machine (0.2 s delay) with
 //! two obstacles. Besides criterion's estimates it prints the median and p99
@@ -7,11 +8,13 @@
 
 use std::time::{Duration, Instant};
 
+use control::delay::DelayCompensator;
+use control::envelope::{self, EnvelopeInput, EnvelopeSettings};
 use control::mlp::PAPER_HIDDEN;
 use control::model::{Goal, MachineParams, State};
 use control::mpc::{Mpc, MpcSettings, Obstacle};
 use control::weights::{self, random_network, NetworkMetadata, NetworkRole, WeightsProblem};
-use control::{Actor, Critic, HessianMode, Plant, PlantConfig};
+use control::{Actor, Critic, HessianMode, Plant, PlantConfig, VelocityCommand};
 use criterion::{criterion_group, criterion_main, Criterion};
 
 const GOAL: Goal = Goal::new(6.0, 4.0, 1.2);
@@ -22,7 +25,11 @@ fn networks() -> (Critic, Actor) {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("..")
         .join(weights::DEFAULT_DIR);
-    match weights::load_networks(&dir, &MachineParams::default(), MpcSettings::default().dt) {
+    match control::networks::load_networks(
+        &dir,
+        &MachineParams::default(),
+        MpcSettings::default().dt,
+    ) {
         Ok(networks) => networks,
         Err(e) if !matches!(e.problem, WeightsProblem::Read { .. }) => panic!("{e}"),
         Err(e) => {
@@ -50,6 +57,11 @@ struct Loop {
     mpc: Mpc<Critic>,
     plant: Plant,
     ticks: usize,
+    /// The envelope's record of the commands sent, and the last one.
+    sent: DelayCompensator,
+    last: VelocityCommand,
+    /// Time spent in the envelope over the ticks so far.
+    envelope: Duration,
 }
 
 impl Loop {
@@ -66,10 +78,14 @@ impl Loop {
         let (critic, actor) = networks();
         let mpc = Mpc::new(p, critic, Some(actor), settings).expect("valid settings");
         let plant = Plant::new(p, PlantConfig::default(), State::zeros()).expect("valid plant");
+        let sent = envelope::command_record(p, settings.delay, settings.dt).expect("valid delay");
         let mut l = Self {
             mpc,
             plant,
             ticks: 0,
+            sent,
+            last: VelocityCommand::ZERO,
+            envelope: Duration::ZERO,
         };
         l.restart();
         l
@@ -78,12 +94,15 @@ impl Loop {
     fn restart(&mut self) {
         self.mpc.reset();
         self.mpc.set_goal(GOAL, &OBSTACLES).expect("valid goal");
-        self.plant = Plant::new(*self.mpc.params(), PlantConfig::default(), State::zeros())
-            .expect("valid plant");
+        let p = *self.mpc.params();
+        self.plant = Plant::new(p, PlantConfig::default(), State::zeros()).expect("valid plant");
+        self.sent = envelope::command_record(p, self.sent.delay(), 0.2).expect("valid delay");
+        self.last = VelocityCommand::ZERO;
         self.ticks = 0;
     }
 
-    /// One tick; returns the time spent in `Mpc::step` only.
+    /// One tick; returns the time spent in `Mpc::step` and the envelope's
+    /// check of its command (the envelope's share is added to `self.envelope`).
     fn tick(&mut self) -> Duration {
         if self.ticks == 150 {
             self.restart();
@@ -92,8 +111,27 @@ impl Loop {
         let start = Instant::now();
         let now = self.ticks as f64 * 0.2;
         let sol = self.mpc.step(&x, now).expect("goal set");
+        let proposed = sol.command;
+        let guard_start = Instant::now();
+        let settings = EnvelopeSettings::default();
+        let cmd = envelope::guard(
+            &EnvelopeInput {
+                params: self.mpc.params(),
+                settings: &settings,
+                sent: &self.sent,
+                now,
+                state: &x,
+                obstacles: &OBSTACLES,
+                dt: 0.2,
+                last: self.last,
+            },
+            proposed,
+        )
+        .command;
+        self.envelope += guard_start.elapsed();
         let elapsed = start.elapsed();
-        let cmd = sol.command;
+        self.sent.record(now, cmd);
+        self.last = cmd;
         self.mpc.sent(now, cmd);
         self.plant.command(cmd).expect("finite command");
         self.plant.advance(0.2);
@@ -107,13 +145,18 @@ fn percentiles(horizon: usize, hessian: HessianMode) {
     for _ in 0..20 {
         l.tick();
     }
+    l.envelope = Duration::ZERO;
     let mut t: Vec<f64> = (0..400).map(|_| l.tick().as_secs_f64() * 1e3).collect();
+    let total: f64 = t.iter().sum();
     t.sort_by(f64::total_cmp);
     println!(
-        "mpc tick N={horizon:2} {hessian:?}: median {:.3} ms, p99 {:.3} ms, max {:.3} ms (400 ticks)",
+        "mpc tick N={horizon:2} {hessian:?}: median {:.3} ms, p99 {:.3} ms, max {:.3} ms (400 ticks; \
+         the envelope {:.3} ms a tick, {:.1} % of the tick)",
         t[t.len() / 2],
         t[(t.len() * 99) / 100],
-        t[t.len() - 1]
+        t[t.len() - 1],
+        l.envelope.as_secs_f64() * 1e3 / 400.0,
+        100.0 * l.envelope.as_secs_f64() * 1e3 / total
     );
 }
 

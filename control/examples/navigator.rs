@@ -23,8 +23,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("..")
         .join(weights::DEFAULT_DIR);
-    let (critic, actor) =
-        weights::load_networks(&dir, &MachineParams::default(), MpcSettings::default().dt)?;
+    let (critic, actor) = control::networks::load_networks(
+        &dir,
+        &MachineParams::default(),
+        MpcSettings::default().dt,
+    )?;
     let networks = (actor, critic);
     let mut settings = NavigatorSettings::default();
     let file = std::env::args().nth(2);

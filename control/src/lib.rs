@@ -15,6 +15,7 @@ pub mod goal_check;
 pub mod mlp;
 pub mod model;
 pub mod mpc;
+pub mod networks;
 pub mod obstacle;
 pub mod planner;
 pub mod plant;

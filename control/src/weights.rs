@@ -21,9 +21,7 @@ use rand_chacha::ChaCha8Rng;
 use safetensors::tensor::{Dtype, TensorView};
 use safetensors::SafeTensors;
 
-use crate::actor::Actor;
 use crate::cost::{CostForm, CostWeights};
-use crate::critic::Critic;
 use crate::encoder::{Encoder, ACTOR_INPUTS, CRITIC_INPUTS, DEFAULT_POS_SCALE, ENCODER_ID};
 use crate::mlp::{Layer, Mlp, MlpError};
 use crate::model::MachineParams;
@@ -523,18 +521,6 @@ pub fn load_for(
         .check_compatible(machine, dt)
         .map_err(|p| WeightsError::new(&w.source, p))?;
     Ok(w)
-}
-
-/// The critic and actor of one machine's weights directory ([`CRITIC_FILE`],
-/// [`ACTOR_FILE`]), both checked with [`load_for`].
-pub fn load_networks(
-    dir: &Path,
-    machine: &MachineParams,
-    dt: f64,
-) -> Result<(Critic, Actor), WeightsError> {
-    let critic = load_for(&dir.join(CRITIC_FILE), NetworkRole::Critic, machine, dt)?;
-    let actor = load_for(&dir.join(ACTOR_FILE), NetworkRole::Actor, machine, dt)?;
-    Ok((Critic::from_weights(critic)?, Actor::from_weights(actor)?))
 }
 
 /// Serialises a network to safetensors bytes.

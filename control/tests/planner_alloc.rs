@@ -20,9 +20,12 @@ fn trained() -> (Actor, Critic) {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("..")
         .join(weights::DEFAULT_DIR);
-    let (critic, actor) =
-        weights::load_networks(&dir, &MachineParams::default(), MpcSettings::default().dt)
-            .expect("the committed weights");
+    let (critic, actor) = control::networks::load_networks(
+        &dir,
+        &MachineParams::default(),
+        MpcSettings::default().dt,
+    )
+    .expect("the committed weights");
     (actor, critic)
 }
 

@@ -32,8 +32,6 @@ use control::progress::{ProgressChecker, ProgressSettings};
 use control::{Goal, MachineParams, State};
 use shm_ipc::{fault_flags, AbortReason, GoalOutcome, RejectCode, ValidRequest, MAX_OBSTACLES};
 
-use crate::ipc::fault_names;
-
 /// Outcomes waiting for their tick; beyond this the oldest are dropped (a flood of goals
 /// ending faster than 5 per second). Documented in the `shm-ipc` crate docs.
 pub const MAX_PENDING_OUTCOMES: usize = 32;
@@ -219,7 +217,7 @@ impl GoalLifecycle {
                 if self.blocking_faults != 0 {
                     return Err(not_ready(format!(
                         "fault active: {}",
-                        fault_names(self.blocking_faults)
+                        shm_ipc::fault_flags::names(self.blocking_faults).join(", ")
                     )));
                 }
                 let goal = Goal::new(goal.x, goal.y, goal.heading);

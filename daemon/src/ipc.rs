@@ -23,9 +23,7 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Duration;
 
-use shm_ipc::{
-    fault_flags, DaemonEndpoint, GoalKind, GoalReply, GoalValidator, RejectCode, ValidRequest,
-};
+use shm_ipc::{DaemonEndpoint, GoalKind, GoalReply, GoalValidator, RejectCode, ValidRequest};
 use tokio::io::unix::{AsyncFd, AsyncFdReadyGuard};
 use tokio::sync::Notify;
 
@@ -44,16 +42,6 @@ pub struct SharedGoals {
 /// The wire form of the model's state (the control layer to the IPC layer).
 pub fn wire_state(x: &control::State) -> shm_ipc::MachineState {
     shm_ipc::MachineState::from_array([x[0], x[1], x[2], x[3], x[4], x[5]])
-}
-
-/// Names of the fault bits ([`fault_flags::NAMES`]), for reject reasons and logs.
-pub fn fault_names(flags: u32) -> String {
-    let names: Vec<&str> = fault_flags::NAMES
-        .iter()
-        .filter(|(bit, _)| flags & bit != 0)
-        .map(|(_, n)| *n)
-        .collect();
-    names.join(", ")
 }
 
 impl SharedGoals {

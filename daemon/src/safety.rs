@@ -15,7 +15,6 @@ use shm_ipc::{fault_flags, AbortReason, Mode};
 use crate::can::{DriveMode, MachineStatus, RxCounters};
 use crate::can_io::{CanSnapshot, RejectKind};
 use crate::goal_lifecycle::{Abort, TickPlan};
-use crate::ipc::fault_names;
 
 /// Why the machine is brought to rest (or kept there) this tick.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -152,7 +151,7 @@ pub fn goal_abort(
     if faults != 0 {
         return Some(Abort::new(
             AbortReason::Fault,
-            format!("fault: {}", fault_names(faults)),
+            format!("fault: {}", fault_flags::names(faults).join(", ")),
         ));
     }
     match status {

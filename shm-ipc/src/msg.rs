@@ -683,6 +683,24 @@ pub mod fault_flags {
         (POSE_REJECTED, "pose-rejected"),
         (ENVELOPE_OVERRIDE, "envelope-override"),
     ];
+
+    /// Names of the bits set in `flags`, in bit order ([`NAMES`]); bits
+    /// without a name as `bit-N` (a newer daemon's). For logs, reject reasons
+    /// and the CLI: one list for all of them.
+    pub fn names(flags: u32) -> Vec<String> {
+        let mut names: Vec<String> = NAMES
+            .iter()
+            .filter(|(bit, _)| flags & bit != 0)
+            .map(|(_, n)| (*n).to_owned())
+            .collect();
+        let known = NAMES.iter().fold(0, |acc, (bit, _)| acc | bit);
+        for bit in 0..32 {
+            if flags & !known & (1 << bit) != 0 {
+                names.push(format!("bit-{bit}"));
+            }
+        }
+        names
+    }
 }
 
 /// Published on `{prefix}/v2/telemetry` by the daemon once per control tick. 2704 bytes,

@@ -2,7 +2,8 @@
 //!
 //! - [`ipopt`]: a small FFI over IPOPT's C interface, and [`nlp`] to assemble
 //!   sparse NLPs from elements; [`collocation`] (Hermite–Simpson) and [`ocp`]:
-//!   the paper's baseline trajectory optimisation and the min-time bound.
+//!   the paper's baseline trajectory optimisation and the min-time bound
+//!   ([`guess`]: their initial guess; [`routes`]: guesses around obstacles).
 //! - [`runner`]: closed-loop runs of the MPC and the actor on the simulated
 //!   plant, the baseline's replay, min-time; scenarios in parallel.
 //! - [`results`]: the results CSV and summary statistics; [`plots`]: SVGs;
@@ -15,6 +16,7 @@
 pub mod clearance;
 pub mod collocation;
 pub mod eval;
+pub mod guess;
 pub mod ipopt;
 pub mod nlp;
 pub mod ocp;

@@ -6,6 +6,7 @@
 //! Variable layout: z = [x₀, u₀, x₁, u₁, …, x_{K−1}, u_{K−1}, x_K] (8K + 6
 //! values), and for min-time the final time T last.
 
+pub use crate::guess::Guess;
 use std::f64::consts::PI;
 use std::time::Duration;
 
@@ -712,16 +713,6 @@ pub fn min_time_nlp(
     nlp.z_lower[t_index] = s.t_min;
     nlp.z_upper[t_index] = s.t_max;
     nlp
-}
-
-/// A trajectory sampled every `dt` (states, and the controls between them),
-/// used as an initial guess for min-time up to `duration`.
-#[derive(Debug, Clone)]
-pub struct Guess {
-    pub states: Vec<State>,
-    pub controls: Vec<Control>,
-    pub dt: f64,
-    pub duration: f64,
 }
 
 fn guess_vector(g: &Guess, k_intervals: usize) -> Vec<f64> {

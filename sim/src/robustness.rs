@@ -462,9 +462,62 @@ pub fn robustness(inp: &Inputs, sweeps: &[Sweep], out: &Path) -> Result<()> {
     let moderate = all_moderate();
     cases.push(moderate);
     let both: Vec<Scenario> = inp.paper.iter().chain(inp.obstacles).cloned().collect();
+    // Each finished case is kept in OUT/NAME/cases/ (its rows and a key of
+    // everything that determines them), so an interrupted run continues
+    // where it stopped: rerun the same command.
+    let cache = out.join(&inp.name).join("cases");
+    std::fs::create_dir_all(&cache).with_context(|| format!("creating {}", cache.display()))?;
     let mut outcomes: Vec<Outcome> = Vec::new();
     for (k, c) in cases.iter().enumerate() {
         let t0 = Instant::now();
+        let key = format!(
+            "{:?} | {:?} | {:?} | {} | {} | {}",
+            c,
+            inp.base.mpc,
+            c.stated_envelope(inp.base.envelope, &inp.base.params),
+            inp.paper_name,
+            inp.nets.source,
+            inp.obstacles
+                .iter()
+                .map(|s| s.name.as_str())
+                .collect::<Vec<_>>()
+                .join(",")
+        );
+        let (rows_file, meta_file) = (
+            cache.join(format!("{k:02}.csv")),
+            cache.join(format!("{k:02}.key")),
+        );
+        if let (Ok(text), Ok(meta)) = (
+            std::fs::read_to_string(&rows_file),
+            std::fs::read_to_string(&meta_file),
+        ) {
+            let mut lines = meta.lines();
+            let stored_key = lines.next().unwrap_or_default();
+            let numbers: Vec<f64> = lines
+                .next()
+                .unwrap_or_default()
+                .split(',')
+                .filter_map(|v| v.parse().ok())
+                .collect();
+            let rows = crate::results::parse(&text, &rows_file.display().to_string())?;
+            if stored_key == key && numbers.len() == 3 && rows.len() == both.len() {
+                let (paper, obstacles) = rows.split_at(inp.paper.len());
+                eprintln!(
+                    "robustness [{}/{}] {}: kept from {}",
+                    k + 1,
+                    cases.len(),
+                    describe(&c.perturbation),
+                    rows_file.display()
+                );
+                outcomes.push(Outcome {
+                    paper: paper.to_vec(),
+                    obstacles: obstacles.to_vec(),
+                    overrides: (numbers[0] as usize, numbers[1] as usize),
+                    wall_s: numbers[2],
+                });
+                continue;
+            }
+        }
         let cfg = EvalConfig {
             methods: vec![Method::Mpc],
             plant: control::plant::PlantConfig {
@@ -492,6 +545,13 @@ pub fn robustness(inp: &Inputs, sweeps: &[Sweep], out: &Path) -> Result<()> {
             ),
             wall_s: t0.elapsed().as_secs_f64(),
         };
+        std::fs::write(&rows_file, crate::results::to_csv(&ev.rows))
+            .with_context(|| format!("writing {}", rows_file.display()))?;
+        std::fs::write(
+            &meta_file,
+            format!("{key}\n{},{},{}\n", o.overrides.0, o.overrides.1, o.wall_s),
+        )
+        .with_context(|| format!("writing {}", meta_file.display()))?;
         let fp = Figures::of(&o.paper, &inp.t_star);
         let fo = Figures::of(&o.obstacles, &HashMap::new());
         eprintln!(

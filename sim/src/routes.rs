@@ -23,7 +23,7 @@ use control::model::{ix, wrap_angle, Control, MachineParams, State};
 use control::obstacle::Obstacle;
 use control::scenario::Scenario;
 
-use crate::ocp::Guess;
+use crate::guess::Guess;
 
 /// Clusters whose side is chosen (2^n assignments).
 pub const MAX_SIDE_CLUSTERS: usize = 3;

@@ -12,7 +12,6 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 use control::model::{converged, Goal, State, SUCCESS_TOLERANCE};
 use control::mpc::{Mpc, MpcSettings};
-use control::weights;
 use control::{Actor, Critic, CriticWorkspace, Plant, PlantConfig};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -138,7 +137,7 @@ pub fn score(
     cfg: &TrainConfig,
     goals: &[Goal],
 ) -> Result<CandidateScore> {
-    let (critic, actor) = weights::load_networks(dir, &cfg.machine, cfg.dt)?;
+    let (critic, actor) = control::networks::load_networks(dir, &cfg.machine, cfg.dt)?;
     let mut times = Vec::with_capacity(goals.len());
     for g in goals {
         if let Some(t) = closed_loop(&critic, &actor, cfg, *g)?.time {
@@ -298,9 +297,9 @@ mod tests {
     fn the_committed_networks_reach_a_paper_goal_in_the_simulators_time() {
         let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
             .join("..")
-            .join(weights::DEFAULT_DIR);
+            .join(control::weights::DEFAULT_DIR);
         let cfg = TrainConfig::default();
-        let (critic, actor) = weights::load_networks(&dir, &cfg.machine, cfg.dt).unwrap();
+        let (critic, actor) = control::networks::load_networks(&dir, &cfg.machine, cfg.dt).unwrap();
         let run = closed_loop(&critic, &actor, &cfg, Goal::new(4.5, 0.0, 0.0)).unwrap();
         let t = run.time.expect("the goal is reached");
         assert!((t - 5.2).abs() < 0.21, "{t} s");

@@ -12,9 +12,6 @@ use crate::model::{Control, MachineParams, State};
 use super::layout::{QpLayout, AXLE_POINTS, OBS_STATES, SOFT_STATES};
 use super::settings::ObstacleConstraint;
 
-/// Most obstacles one goal can carry (DESIGN §6).
-pub const MAX_OBSTACLES: usize = 8;
-
 /// Right-hand sides of the control and state bounds:
 /// ±(ū + Δu) ≤ u_max and ±(x̄_c + Δx_c) − s ≤ max_c.
 pub fn fill_bounds(

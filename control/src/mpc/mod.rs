@@ -35,12 +35,12 @@ pub mod settings;
 pub mod solution;
 mod sqp;
 
-pub use constraints::{Obstacle, MAX_OBSTACLES};
+pub use constraints::Obstacle;
 pub use cost::{QuadraticCost, StageCost};
 pub use dynamics::{Dynamics, LinearDynamics, Rk4Model};
 pub use layout::QpLayout;
 pub use qp::{ClarabelBackend, QpBackend, QpData, QpOutcome, QpStatus};
-pub use settings::{MpcError, MpcSettings, ObstacleConstraint};
+pub use settings::{MpcError, MpcSettings, ObstacleConstraint, MAX_OBSTACLES};
 pub use solution::{FallbackReason, Solution, StepStatus};
 
 use crate::actor::{Actor, ActorWorkspace};

@@ -6,7 +6,8 @@ use serde::{Deserialize, Serialize};
 use crate::critic::HessianMode;
 use crate::model::ModelError;
 
-use super::constraints::MAX_OBSTACLES;
+/// Most obstacles one goal can carry (DESIGN §6).
+pub const MAX_OBSTACLES: usize = 8;
 
 /// How circular obstacles enter the QP (both soft, with an exact L1 slack).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]

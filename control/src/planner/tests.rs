@@ -30,7 +30,7 @@ fn trained() -> (Actor, Critic) {
         .join("..")
         .join(weights::DEFAULT_DIR);
     let (critic, actor) =
-        weights::load_networks(&dir, &MachineParams::default(), MpcSettings::default().dt)
+        crate::networks::load_networks(&dir, &MachineParams::default(), MpcSettings::default().dt)
             .expect("the committed weights");
     (actor, critic)
 }
