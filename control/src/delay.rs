@@ -197,14 +197,16 @@ impl DelayCompensator {
         if duration <= 0.0 {
             return *measured;
         }
-        self.propagate_with(time, measured, &[], time + duration, |_| {})
+        self.propagate_with(time, measured, &[], 1.0, time + duration, |_| {})
     }
 
     /// The state at `end` from the state measured at `time`, with the commands
     /// recorded and then `pending` ((issue time, command), issue times ≥ the
     /// last recorded one and increasing: commands not sent yet, e.g. a
     /// candidate and the stop after it, [`crate::envelope`]); each takes
-    /// effect a delay after its issue. `observe` sees the state after every
+    /// effect a delay after its issue. The machine achieves `gain` × every
+    /// command (1: as commanded; the envelope's bound on the actuator gain),
+    /// within its limits. `observe` sees the state after every
     /// integration sub-step (at most `substep` apart, split at every
     /// activation and ramp end).
     pub fn propagate_with(
@@ -212,6 +214,7 @@ impl DelayCompensator {
         time: f64,
         measured: &State,
         pending: &[(f64, VelocityCommand)],
+        gain: f64,
         end: f64,
         mut observe: impl FnMut(&State),
     ) -> State {
@@ -220,12 +223,24 @@ impl DelayCompensator {
         let max = [p.beta_ddot_max, p.a_max];
         let recorded = self.history.len();
         let count = recorded + pending.len();
+        let achieved = |c: VelocityCommand| {
+            if gain == 1.0 {
+                c
+            } else {
+                VelocityCommand {
+                    beta_dot: gain * c.beta_dot,
+                    v: gain * c.v,
+                }
+                .limited(&p)
+            }
+        };
         let command = |i: usize| {
             if i < recorded {
-                self.history[i]
+                let (t, c) = self.history[i];
+                (t, achieved(c))
             } else {
                 let (t, c) = pending[i - recorded];
-                (t, c.limited(&p))
+                (t, achieved(c.limited(&p)))
             }
         };
         let act = |i: usize| command(i).0 + self.delay;
@@ -389,13 +404,15 @@ mod tests {
         );
         let x = State::new(0.0, 0.0, 0.0, 0.0, 0.0, 0.5);
         let mut seen = 0;
-        let y = c.propagate_with(0.0, &x, &[(0.2, VelocityCommand::ZERO)], 2.0, |_| seen += 1);
+        let y = c.propagate_with(0.0, &x, &[(0.2, VelocityCommand::ZERO)], 1.0, 2.0, |_| {
+            seen += 1
+        });
         assert_eq!(y[ix::V], 0.0);
         // 0.3 s at 0.5 m/s, then 0.5²/2 = 0.125 m of braking.
         assert!((y[ix::X] - 0.275).abs() < 1e-9, "{}", y[ix::X]);
         assert!(seen >= 200, "{seen}");
         // Without pending commands it is propagate_over.
-        let a = c.propagate_with(0.0, &x, &[], 0.3, |_| {});
+        let a = c.propagate_with(0.0, &x, &[], 1.0, 0.3, |_| {});
         assert_eq!(a, c.propagate_over(0.0, &x, 0.3));
     }
 }

@@ -70,6 +70,10 @@ pub struct EnvelopeSettings {
     /// unmodelled velocity lag, an actuator delay longer than the compensated
     /// one. Default 0.
     pub response_lag: f64,
+    /// The machine may achieve up to this many times the commanded
+    /// velocities (an actuator gain above 1; the MPC's online estimate
+    /// corrects its plan, not what is already on its way). Default 1.
+    pub actuator_gain_max: f64,
     /// Prediction sub-step [s], in (0, 0.02]. Default 0.01 (the plant's).
     pub substep: f64,
 }
@@ -85,6 +89,7 @@ impl Default for EnvelopeSettings {
             noise_sigmas: 3.0,
             pose_latency: 0.0,
             response_lag: 0.0,
+            actuator_gain_max: 1.0,
             substep: crate::delay::DEFAULT_SUBSTEP,
         }
     }
@@ -130,6 +135,13 @@ impl EnvelopeSettings {
             if value > 2.0 {
                 return err(name, "must be at most 2 s", value);
             }
+        }
+        if !(self.actuator_gain_max >= 1.0 && self.actuator_gain_max <= 2.0) {
+            return err(
+                "actuator_gain_max",
+                "must be in [1, 2]",
+                self.actuator_gain_max,
+            );
         }
         if !(self.substep > 0.0 && self.substep <= 0.02) {
             return err("substep", "must be in (0, 0.02] s", self.substep);
@@ -312,9 +324,14 @@ pub fn predicted_excess(input: &EnvelopeInput, command: VelocityCommand) -> f64 
         }
     };
     observe(input.state);
-    input
-        .sent
-        .propagate_with(input.now, input.state, &pending, end, &mut observe);
+    input.sent.propagate_with(
+        input.now,
+        input.state,
+        &pending,
+        s.actuator_gain_max,
+        end,
+        &mut observe,
+    );
     excess
 }
 
@@ -552,6 +569,43 @@ mod tests {
         let g = guard(&input(&p, &off, &sent, &x, &wall, full), full);
         assert_eq!((g.command, g.choice), (full, Choice::Proposed));
         assert_eq!(x[ix::V], 1.0);
+    }
+
+    #[test]
+    fn a_machine_faster_than_commanded_is_stopped_earlier() {
+        // Commanded 0.8 m/s, achieving 1.2 × that: 0.96 m/s, so it travels
+        // 0.2 × 0.96 + 0.96²/2 (+ the ramp) instead of 0.2 × 0.8 + 0.8²/2.
+        let p = avant();
+        let (sent, x) = driving(0.8, 0.0);
+        let cmd = VelocityCommand {
+            beta_dot: 0.0,
+            v: 0.8,
+        };
+        let wall = [Obstacle::new(1.2, 0.0, 0.5)];
+        let nominal = EnvelopeSettings::default();
+        let fast = EnvelopeSettings {
+            actuator_gain_max: 1.2,
+            ..nominal
+        };
+        let a = predicted_excess(&input(&p, &nominal, &sent, &x, &wall, cmd), cmd);
+        let b = predicted_excess(&input(&p, &fast, &sent, &x, &wall, cmd), cmd);
+        let expected = (0.2 * 0.96 + 0.96 * 0.96 / 2.0) - (0.2 * 0.8 + 0.8 * 0.8 / 2.0);
+        assert!(((a - b) - expected).abs() < 0.03, "{a} {b} vs {expected}");
+        // A circle that the nominal prediction clears by 0.1 m (the excess is
+        // linear in its distance ahead): the faster machine would not.
+        let wall = [Obstacle::new(1.2 + 0.1 - a, 0.0, 0.5)];
+        assert!(!guard(&input(&p, &nominal, &sent, &x, &wall, cmd), cmd).overridden());
+        let g = guard(&input(&p, &fast, &sent, &x, &wall, cmd), cmd);
+        assert!(g.overridden(), "{g:?}");
+        let bad = EnvelopeSettings {
+            actuator_gain_max: 0.5,
+            ..nominal
+        };
+        assert!(bad
+            .validate()
+            .unwrap_err()
+            .to_string()
+            .contains("actuator_gain_max"));
     }
 
     #[test]

@@ -14,6 +14,7 @@
 //! geometry_tolerance = 0.0  # m: how far the true rear axle may be from the configured L_f, L_r
 //! pose_noise_xy = 0.0  # m, 1 σ;  pose_noise_theta = 0.0  # rad, 1 σ
 //! pose_latency = 0.0   # s: uncertainty of the pose's stamp;  response_lag = 0.0  # s
+//! actuator_gain_max = 1.0  # the machine may achieve up to this × the commanded velocities
 //! [controller]
 //! cost = "critic"      # "critic" (the trained network) or "quadratic" (no weights; for bring-up)
 //! planner = "hybrid-astar"  # the global layer (DESIGN §10): "hybrid-astar", "waypoint-graph" or "none"

@@ -156,6 +156,9 @@ struct EnvelopeArgs {
     /// The machine may start a stop this much later than the model says [s].
     #[arg(long, value_name = "S", value_parser = robustness::parse_seconds)]
     response_lag: Option<f64>,
+    /// The machine may achieve up to K × the commanded velocities (K in [1, 2]).
+    #[arg(long, value_name = "K")]
+    actuator_gain_max: Option<f64>,
 }
 
 impl EnvelopeArgs {
@@ -172,6 +175,7 @@ impl EnvelopeArgs {
             pose_noise_theta: sth,
             pose_latency: self.pose_latency_tolerance.unwrap_or(d.pose_latency),
             response_lag: self.response_lag.unwrap_or(d.response_lag),
+            actuator_gain_max: self.actuator_gain_max.unwrap_or(d.actuator_gain_max),
             ..d
         };
         s.validate()?;

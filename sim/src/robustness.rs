@@ -165,7 +165,8 @@ impl Case {
     /// The safety envelope as an integrator who knows these bounds configures
     /// it (DESIGN §14, README "The safety envelope"): the geometry's error
     /// (|ΔL_f| + |ΔL_r|), the pose noise, and an actuator delay beyond the
-    /// compensated one as response lag. The pose's age is known from its stamp
+    /// compensated one as response lag, an actuator gain above 1 as the
+    /// largest gain. The pose's age is known from its stamp
     /// (compensated exactly), so its latency adds no tolerance.
     pub fn stated_envelope(&self, base: EnvelopeSettings, p: &MachineParams) -> EnvelopeSettings {
         let q = &self.perturbation;
@@ -174,6 +175,7 @@ impl Case {
             pose_noise_xy: q.pose_noise_xy,
             pose_noise_theta: q.pose_noise_theta,
             response_lag: (q.delay.unwrap_or(self.compensated) - self.compensated).max(0.0),
+            actuator_gain_max: q.actuator_gain.max(1.0),
             ..base
         }
     }
@@ -760,7 +762,7 @@ pub fn robustness(inp: &Inputs, sweeps: &[Sweep], out: &Path) -> Result<()> {
         "t₀: the unperturbed MPC's time on the same obstacle scenario (no T* for this set here). The all-moderate case needs \
          ≥ 95 % (issue 16) and no run below −{} m (issue 26). Each case runs with the safety envelope's tolerances \
          stated as an integrator who knows these bounds would (`Case::stated_envelope`: geometry |ΔL_f| + |ΔL_r|, the \
-         pose noise, a delay beyond the compensated one as response lag); an override is a tick whose command the \
+         pose noise, a delay beyond the compensated one as response lag, a gain above 1 as `actuator_gain_max`); an override is a tick whose command the \
          envelope replaced.\n",
         PENETRATION_TOLERANCE
     );
