@@ -723,17 +723,7 @@ const NOT_FAULTS: u32 = fault_flags::STOP_REQUESTED | fault_flags::ENVELOPE_OVER
 /// The names of the set fault bits, as the wire names them ([`fault_flags::NAMES`]); a bit
 /// this build does not know (a newer daemon's) as `bit-N`.
 pub fn fault_names(flags: u32) -> String {
-    let mut names: Vec<String> = fault_flags::NAMES
-        .iter()
-        .filter(|(bit, _)| flags & bit != 0)
-        .map(|(_, n)| (*n).to_owned())
-        .collect();
-    let known = fault_flags::NAMES.iter().fold(0, |acc, (bit, _)| acc | bit);
-    names.extend(
-        (0..32)
-            .filter(|b| flags & !known & (1 << b) != 0)
-            .map(|b| format!("bit-{b}")),
-    );
+    let names = fault_flags::names(flags);
     if names.is_empty() {
         "fault".into()
     } else {
