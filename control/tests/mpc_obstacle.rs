@@ -3,6 +3,8 @@
 //! still reached. The stage cost is a simple attractive quadratic plus
 //! distance to the goal, so the test does not depend on trained weights.
 
+mod common;
+
 use control::model::{goal_distance, Goal, MachineParams, State};
 use control::mpc::{Mpc, MpcSettings, Obstacle, ObstacleConstraint, QuadraticCost, StepStatus};
 use control::obstacle::footprint_clearance;
@@ -119,4 +121,61 @@ fn the_rear_axle_stays_out_when_reversing() {
     assert!(end[0] < -0.15, "did not back up: x_f {:.3}", end[0]);
     let front_only_end = -0.5 - p.l_f - p.l_r;
     assert!(obstacle.clearance_of([front_only_end, 0.0]) < -0.19);
+}
+
+/// Issue 26: the obstacle rows' L1 weight is raised while a QP buys penetration
+/// (its slack beyond the margin, its multipliers at the weight) and starts
+/// again from the configured one with a new goal. A random critic at N = 40
+/// plans through the circles (mpc_alloc sees the discarded plans).
+#[test]
+fn the_obstacle_weight_rises_while_penetration_is_bought_and_resets_with_a_new_goal() {
+    let p = MachineParams::default();
+    let obstacles = [Obstacle::new(3.0, 1.0, 0.8), Obstacle::new(2.0, 4.0, 0.5)];
+    let settings = MpcSettings {
+        horizon: 40,
+        hessian: HessianMode::Exact,
+        // One QP per tick: the solution's slack is the QP that raised it.
+        sqp_iterations: 1,
+        time_budget: 10.0,
+        ..MpcSettings::default()
+    };
+    let mut mpc = Mpc::new(
+        p,
+        common::random_critic(8, 11),
+        Some(common::random_actor(12)),
+        settings,
+    )
+    .unwrap();
+    assert_eq!(mpc.obstacle_weight(), settings.obstacle_slack_weight);
+    mpc.set_goal(Goal::new(4.5, 4.5, 1.0), &obstacles).unwrap();
+    let mut plant = Plant::new(p, PlantConfig::default(), State::zeros()).unwrap();
+    let mut raised = false;
+    for tick in 0..30 {
+        let now = tick as f64 * settings.dt;
+        let before = mpc.obstacle_weight();
+        let sol = mpc.step(&plant.state(), now).unwrap();
+        let (slack, multiplier, command) = (
+            sol.max_obstacle_slack(),
+            sol.obstacle_multiplier,
+            sol.command,
+        );
+        let after = mpc.obstacle_weight();
+        if after > before {
+            // Raised only when bought, tenfold.
+            assert!(slack > settings.obstacle_margin, "slack {slack}");
+            assert!(multiplier >= 0.999 * before, "multiplier {multiplier}");
+            assert_eq!(after, (10.0 * before).min(1e6));
+            raised = true;
+        }
+        mpc.sent(now, command);
+        plant.command(command).unwrap();
+        plant.advance(settings.dt);
+    }
+    assert!(
+        raised,
+        "the weight never rose (weight {})",
+        mpc.obstacle_weight()
+    );
+    mpc.set_goal(Goal::new(-4.0, 0.0, 0.0), &obstacles).unwrap();
+    assert_eq!(mpc.obstacle_weight(), settings.obstacle_slack_weight);
 }
