@@ -78,7 +78,9 @@ impl Loop {
         let (critic, actor) = networks();
         let mpc = Mpc::new(p, critic, Some(actor), settings).expect("valid settings");
         let plant = Plant::new(p, PlantConfig::default(), State::zeros()).expect("valid plant");
-        let sent = envelope::command_record(p, settings.delay, settings.dt).expect("valid delay");
+        let sent =
+            envelope::command_record(p, &EnvelopeSettings::default(), settings.delay, settings.dt)
+                .expect("valid delay");
         let mut l = Self {
             mpc,
             plant,
@@ -96,7 +98,9 @@ impl Loop {
         self.mpc.set_goal(GOAL, &OBSTACLES).expect("valid goal");
         let p = *self.mpc.params();
         self.plant = Plant::new(p, PlantConfig::default(), State::zeros()).expect("valid plant");
-        self.sent = envelope::command_record(p, self.sent.delay(), 0.2).expect("valid delay");
+        self.sent =
+            envelope::command_record(p, &EnvelopeSettings::default(), self.sent.delay(), 0.2)
+                .expect("valid delay");
         self.last = VelocityCommand::ZERO;
         self.ticks = 0;
     }

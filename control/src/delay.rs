@@ -56,6 +56,9 @@ pub struct DelayCompensator {
     delay: f64,
     ramp: f64,
     substep: f64,
+    /// Commands may act up to this much later than `delay` in
+    /// [`Self::propagate_with`]; the history keeps what that needs.
+    late_max: f64,
     /// Commands as (issue time, command), oldest first; only the ones that can
     /// still matter are kept.
     history: VecDeque<(f64, VelocityCommand)>,
@@ -127,6 +130,7 @@ impl DelayCompensator {
             delay,
             ramp,
             substep: DEFAULT_SUBSTEP,
+            late_max: 0.0,
             history: VecDeque::with_capacity(capacity),
         })
     }
@@ -159,8 +163,17 @@ impl DelayCompensator {
     /// Makes room for the command history of delays up to `max_delay`, so that
     /// a later [`Self::set_delay`] does not allocate in a tick.
     pub fn reserve_for(&mut self, max_delay: f64) {
-        let n = (max_delay.max(self.delay) / self.ramp).ceil() as usize + 4;
+        let n = ((max_delay.max(self.delay) + self.late_max) / self.ramp).ceil() as usize + 4;
         self.history.reserve(n.saturating_sub(self.history.len()));
+    }
+
+    /// Keeps the history a prediction with commands acting up to `late` [s]
+    /// after the delay needs ([`Self::propagate_with`]'s `late`); ≥ 0 and
+    /// finite, else ignored. Call [`Self::reserve_for`] after it.
+    pub fn keep_for_late(&mut self, late: f64) {
+        if late.is_finite() && late >= 0.0 {
+            self.late_max = late;
+        }
     }
 
     /// Forgets every command.
@@ -177,7 +190,7 @@ impl DelayCompensator {
         }
         let cmd = cmd.limited(&self.params);
         // An entry is obsolete once the next one has taken effect by `time`.
-        while self.history.len() >= 2 && self.history[1].0 + self.delay <= time {
+        while self.history.len() >= 2 && self.history[1].0 + self.delay + self.late_max <= time {
             self.history.pop_front();
         }
         self.history.push_back((time, cmd));
@@ -197,16 +210,18 @@ impl DelayCompensator {
         if duration <= 0.0 {
             return *measured;
         }
-        self.propagate_with(time, measured, &[], 1.0, time + duration, |_| {})
+        self.propagate_with(time, measured, &[], 1.0, 0.0, time + duration, |_| {})
     }
 
     /// The state at `end` from the state measured at `time`, with the commands
     /// recorded and then `pending` ((issue time, command), issue times ≥ the
     /// last recorded one and increasing: commands not sent yet, e.g. a
     /// candidate and the stop after it, [`crate::envelope`]); each takes
-    /// effect a delay after its issue. The machine achieves `gain` × every
-    /// command (1: as commanded; the envelope's bound on the actuator gain),
-    /// within its limits. `observe` sees the state after every
+    /// effect `delay + late` after its issue (`late` ∈ [0, the history kept
+    /// by [`Self::keep_for_late`]]: a machine slower to respond than the
+    /// compensated delay). The machine achieves `gain` × every command
+    /// saturated at the nominal bounds (1: as commanded; the envelope's bound
+    /// on the actuator gain). `observe` sees the state after every
     /// integration sub-step (at most `substep` apart, split at every
     /// activation and ramp end).
     pub fn propagate_with(
@@ -215,15 +230,28 @@ impl DelayCompensator {
         measured: &State,
         pending: &[(f64, VelocityCommand)],
         gain: f64,
+        late: f64,
         end: f64,
         mut observe: impl FnMut(&State),
     ) -> State {
         let mut x = *measured;
         let p = self.params;
         let max = [p.beta_ddot_max, p.a_max];
+        // The states a machine with this gain reaches: its velocities go up to
+        // gain × the nominal bounds (clamping them at the nominal ones would
+        // predict a stop from 1.2 m/s as one from 1 m/s, 0.22 m short).
+        let reach = MachineParams {
+            beta_dot_max: gain.max(1.0) * p.beta_dot_max,
+            v_max: gain.max(1.0) * p.v_max,
+            ..p
+        };
         let recorded = self.history.len();
         let count = recorded + pending.len();
+        // The low-level controller saturates each command at the nominal
+        // bounds; a machine with actuator gain K then achieves K × that, which
+        // may exceed the nominal bounds (`PlantPerturbation::true_params`).
         let achieved = |c: VelocityCommand| {
+            let c = c.limited(&p);
             if gain == 1.0 {
                 c
             } else {
@@ -231,19 +259,18 @@ impl DelayCompensator {
                     beta_dot: gain * c.beta_dot,
                     v: gain * c.v,
                 }
-                .limited(&p)
             }
         };
         let command = |i: usize| {
-            if i < recorded {
-                let (t, c) = self.history[i];
-                (t, achieved(c))
+            let (t, c) = if i < recorded {
+                self.history[i]
             } else {
-                let (t, c) = pending[i - recorded];
-                (t, achieved(c.limited(&p)))
-            }
+                pending[i - recorded]
+            };
+            (t, achieved(c))
         };
-        let act = |i: usize| command(i).0 + self.delay;
+        let delay = self.delay + late.clamp(0.0, self.late_max);
+        let act = |i: usize| command(i).0 + delay;
         // The command in effect at `time`: the last one activated by then.
         let mut next = (0..count)
             .position(|i| act(i) > time + 1e-12)
@@ -251,7 +278,7 @@ impl DelayCompensator {
         let mut ramps = [Ramp::default(); 2];
         if next > 0 {
             let (t0, cmd) = command(next - 1);
-            let remaining = (t0 + self.delay + self.ramp - time).max(0.0);
+            let remaining = (t0 + delay + self.ramp - time).max(0.0);
             for (c, (&k, target)) in CHANNELS.iter().zip([cmd.beta_dot, cmd.v]).enumerate() {
                 ramps[c] = Ramp::start(time, x[k], target, remaining, max[c]);
             }
@@ -287,7 +314,7 @@ impl DelayCompensator {
                     next_x[k] = r.target;
                 }
             }
-            clamp_state(&p, &mut next_x);
+            clamp_state(&reach, &mut next_x);
             x = next_x;
             t += h;
             observe(&x);
@@ -404,15 +431,21 @@ mod tests {
         );
         let x = State::new(0.0, 0.0, 0.0, 0.0, 0.0, 0.5);
         let mut seen = 0;
-        let y = c.propagate_with(0.0, &x, &[(0.2, VelocityCommand::ZERO)], 1.0, 2.0, |_| {
-            seen += 1
-        });
+        let y = c.propagate_with(
+            0.0,
+            &x,
+            &[(0.2, VelocityCommand::ZERO)],
+            1.0,
+            0.0,
+            2.0,
+            |_| seen += 1,
+        );
         assert_eq!(y[ix::V], 0.0);
         // 0.3 s at 0.5 m/s, then 0.5²/2 = 0.125 m of braking.
         assert!((y[ix::X] - 0.275).abs() < 1e-9, "{}", y[ix::X]);
         assert!(seen >= 200, "{seen}");
         // Without pending commands it is propagate_over.
-        let a = c.propagate_with(0.0, &x, &[], 1.0, 0.3, |_| {});
+        let a = c.propagate_with(0.0, &x, &[], 1.0, 0.0, 0.3, |_| {});
         assert_eq!(a, c.propagate_over(0.0, &x, 0.3));
     }
 }

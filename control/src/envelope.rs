@@ -3,8 +3,10 @@
 //! The MPC is not the safety function. Before a command leaves the loop, [`guard`]
 //! predicts the machine's motion under it: the commands already sent that act
 //! within the actuator delay, then this command until the next tick, then a full
-//! stop at the machine's braking limits (β̈_max, a_max), started
-//! `response_lag` late. Both axle points are checked on the integration
+//! stop at the machine's braking limits (β̈_max, a_max); once with every command
+//! acting after the delay and once with every command acting `response_lag`
+//! later, at up to `actuator_gain_max` × the commanded velocities. Both axle
+//! points are checked on the integration
 //! sub-steps ([`DelayCompensator::propagate_with`], the model the delay
 //! compensation uses). If the prediction comes closer to a circle than the
 //! protective margin — and closer than stopping now would — the command is
@@ -66,9 +68,9 @@ pub struct EnvelopeSettings {
     /// Uncertainty of the pose's timestamp once its age is compensated [s].
     /// Default 0.
     pub pose_latency: f64,
-    /// The machine may begin a stop this much later than the model says [s]:
-    /// unmodelled velocity lag, an actuator delay longer than the compensated
-    /// one. Default 0.
+    /// The machine may respond to every command up to this much later than the
+    /// compensated delay says [s]: unmodelled velocity lag, an actuator delay
+    /// longer than the compensated one. Default 0.
     pub response_lag: f64,
     /// The machine may achieve up to this many times the commanded
     /// velocities (an actuator gain above 1; the MPC's online estimate
@@ -218,15 +220,18 @@ pub fn stop_command(
 }
 
 /// The loop's own record of the commands it sent, for [`EnvelopeInput::sent`]:
-/// they act after `delay`, with room reserved for any delay the online estimate
-/// can take ([`crate::delay_estimate::MAX_DELAY`]), so that raising it later
-/// does not allocate in a tick.
+/// they act after `delay` (or up to `settings.response_lag` later), with room
+/// reserved for any delay the online estimate can take
+/// ([`crate::delay_estimate::MAX_DELAY`]), so that raising it later does not
+/// allocate in a tick.
 pub fn command_record(
     p: MachineParams,
+    settings: &EnvelopeSettings,
     delay: f64,
     dt: f64,
 ) -> Result<DelayCompensator, crate::delay::DelayError> {
     let mut sent = DelayCompensator::new(p, delay, dt)?;
+    sent.keep_for_late(settings.response_lag);
     sent.reserve_for(crate::delay_estimate::MAX_DELAY);
     Ok(sent)
 }
@@ -295,8 +300,9 @@ impl Guarded {
 }
 
 /// Smallest clearance beyond the margins [m] of both axle points over the
-/// prediction: `command` sent now, a stop sent a tick later (and
-/// `response_lag` late), until at rest.
+/// prediction: `command` sent now, a stop sent a tick later, until at rest;
+/// with the commands acting after the delay and, if `response_lag` > 0, also
+/// that much later.
 pub fn predicted_excess(input: &EnvelopeInput, command: VelocityCommand) -> f64 {
     let EnvelopeInput {
         params: p,
@@ -307,12 +313,12 @@ pub fn predicted_excess(input: &EnvelopeInput, command: VelocityCommand) -> f64 
         return f64::INFINITY;
     }
     let margins = s.margins(p);
-    let stop_at = input.now + input.dt + s.response_lag;
+    let stop_at = input.now + input.dt;
     // The stop acts a delay after it is sent; from the fastest the machine can
-    // go, it is at rest within the longer of the two braking times (plus the
-    // ramp of the model's response).
-    let braking = (p.v_max / p.a_max).max(p.beta_dot_max / p.beta_ddot_max) + input.dt;
-    let end = stop_at + input.sent.delay() + braking;
+    // go (gain × the bounds), it is at rest within the longer of the two
+    // braking times (plus the ramp of the model's response).
+    let braking =
+        s.actuator_gain_max * (p.v_max / p.a_max).max(p.beta_dot_max / p.beta_ddot_max) + input.dt;
     let pending = [(input.now, command), (stop_at, VelocityCommand::ZERO)];
     let mut excess = f64::INFINITY;
     let mut observe = |x: &State| {
@@ -324,14 +330,23 @@ pub fn predicted_excess(input: &EnvelopeInput, command: VelocityCommand) -> f64 
         }
     };
     observe(input.state);
-    input.sent.propagate_with(
-        input.now,
-        input.state,
-        &pending,
-        s.actuator_gain_max,
-        end,
-        &mut observe,
-    );
+    // The machine responds after the delay, or up to `response_lag` later:
+    // both ends are predicted (every command, those already sent included,
+    // acts late in the second; the prediction is not monotone in the delay,
+    // so neither end alone bounds the other).
+    let lates = [0.0, s.response_lag];
+    for &late in &lates[..if s.response_lag > 0.0 { 2 } else { 1 }] {
+        let end = stop_at + input.sent.delay() + late + braking;
+        input.sent.propagate_with(
+            input.now,
+            input.state,
+            &pending,
+            s.actuator_gain_max,
+            late,
+            end,
+            &mut observe,
+        );
+    }
     excess
 }
 
@@ -606,6 +621,58 @@ mod tests {
             .unwrap_err()
             .to_string()
             .contains("actuator_gain_max"));
+    }
+
+    #[test]
+    fn a_machine_beyond_its_nominal_speed_is_predicted_to_brake_from_there() {
+        // Commanded 1 m/s (v_max), achieving 1.2 m/s: a stop now brakes from
+        // 1.2 m/s at a_max = 1 m/s², 1.2²/2 = 0.72 m, not the nominal 0.5 m
+        // (clamping the prediction at v_max hid 0.22 m: wall029 at gain 1.2
+        // went 0.087 m into a circle).
+        let p = avant();
+        let (sent, mut x) = driving(1.0, 0.0);
+        x[ix::V] = 1.2;
+        let wall = [Obstacle::new(1.5, 0.0, 0.5)];
+        let fast = EnvelopeSettings {
+            actuator_gain_max: 1.2,
+            ..EnvelopeSettings::default()
+        };
+        let stop = VelocityCommand::ZERO;
+        let e = predicted_excess(&input(&p, &fast, &sent, &x, &wall, stop), stop);
+        let expected = 1.0 - 1.2 * 1.2 / (2.0 * p.a_max) - fast.margin;
+        assert!((e - expected).abs() < 2e-3, "{e} vs {expected}");
+    }
+
+    #[test]
+    fn a_late_response_is_predicted_for_every_command_already_sent() {
+        // Driving at 1 m/s with no compensated delay; a stop was sent a tick
+        // ago. A machine that responds on time is braking (0.5 m to rest);
+        // one that responds up to 0.4 s late still drives at 1 m/s until the
+        // stop sent at −0.2 s acts at +0.2 s: 0.2 + 0.5 m.
+        let p = avant();
+        let late = EnvelopeSettings {
+            response_lag: 0.4,
+            ..EnvelopeSettings::default()
+        };
+        let mut sent = command_record(p, &late, 0.0, 0.2).unwrap();
+        for k in -8..-1 {
+            sent.record(
+                0.2 * k as f64,
+                VelocityCommand {
+                    beta_dot: 0.0,
+                    v: 1.0,
+                },
+            );
+        }
+        sent.record(-0.2, VelocityCommand::ZERO);
+        let x = State::new(0.0, 0.0, 0.0, 0.0, 0.0, 1.0);
+        let wall = [Obstacle::new(1.5, 0.0, 0.5)];
+        let stop = VelocityCommand::ZERO;
+        let on_time = EnvelopeSettings::default();
+        let a = predicted_excess(&input(&p, &on_time, &sent, &x, &wall, stop), stop);
+        let b = predicted_excess(&input(&p, &late, &sent, &x, &wall, stop), stop);
+        assert!((a - (1.0 - 0.5 - on_time.margin)).abs() < 2e-3, "{a}");
+        assert!((b - (1.0 - 0.7 - late.margin)).abs() < 2e-3, "{b}");
     }
 
     #[test]

@@ -81,8 +81,16 @@ fn tick_allocates_only_inside_clarabel() {
             .unwrap();
             mpc.set_goal(Goal::new(4.5, 4.5, 1.0), &obstacles).unwrap();
             let mut plant = Plant::new(p, PlantConfig::default(), State::zeros()).unwrap();
-            let mut sent = envelope::command_record(p, settings.delay, settings.dt).unwrap();
-            let envelope_settings = EnvelopeSettings::default();
+            // Stated tolerances exercise every path of the prediction (a late
+            // response keeps a longer command history).
+            let envelope_settings = EnvelopeSettings {
+                response_lag: 0.3,
+                actuator_gain_max: 1.2,
+                ..EnvelopeSettings::default()
+            };
+            let mut sent =
+                envelope::command_record(p, &envelope_settings, settings.delay, settings.dt)
+                    .unwrap();
             let mut last = VelocityCommand::ZERO;
             let ticks = 30;
             let (mut total, mut solves) = (0, 0);

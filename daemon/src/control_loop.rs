@@ -155,8 +155,9 @@ impl ControlLoop {
         let period = ctx.config.period();
         let pose_gate = PoseGate::new(ctx.config.pose_gate());
         // The configuration was validated: delay ≥ 0, dt > 0.
-        let sent = envelope::command_record(params, ctx.config.mpc.delay, period)
-            .unwrap_or_else(|e| panic!("validated configuration: {e}"));
+        let sent =
+            envelope::command_record(params, &ctx.config.envelope, ctx.config.mpc.delay, period)
+                .unwrap_or_else(|e| panic!("validated configuration: {e}"));
         Self {
             ctx,
             controller,

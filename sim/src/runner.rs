@@ -430,7 +430,8 @@ pub fn run_mpc(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run> 
     // The envelope's own record of the commands sent (as the daemon's loop
     // keeps one), acting after the longer of the configured and the estimated
     // delay.
-    let mut sent = envelope::command_record(cfg.params, settings.delay, settings.dt)?;
+    let mut sent =
+        envelope::command_record(cfg.params, &cfg.envelope, settings.delay, settings.dt)?;
     let mut last = VelocityCommand::ZERO;
     let mut overrides = 0;
     let (mut penetrating_plans, mut multiplier_max) = (0, 0.0f64);
