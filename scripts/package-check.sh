@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # Package check (issue 18), run by scripts/test.sh after the tests: builds the amd64
-# Debian package with cargo-deb, installs it, checks what it installed (files, conffile,
-# user and group, unit not enabled, `systemd-analyze verify`, `wlnavd --check-config`
+# Debian package with cargo-deb, installs it, checks what it installed (files, conffiles,
+# user and group, units not enabled, `systemd-analyze verify` of both units (wlnavd and
+# the fleet link wlnav-fleet), `wlnav-fleet --check-config` of its installed configuration,
+# `wlnavd --check-config`
 # of the installed configuration and weights as user wlnav; the same under
 # `qemu-x86_64-static -cpu Haswell`, the oldest CPU the x86-64-v3 baseline claims; the
 # installed daemon, run as user wlnav, reached by a client of another user in group wlnav
@@ -48,7 +50,7 @@ bin_dir=${WLNAV_PACKAGE_BIN_DIR:-target/debug}
 stage=target/package-check
 rm -rf "$stage"
 mkdir -p "$stage/release"
-for b in wlnavd wlnav; do
+for b in wlnavd wlnav wlnav-fleet; do
   [ -x "$bin_dir/$b" ] || fail "$bin_dir/$b missing (cargo test --workspace builds it)"
   cp "$bin_dir/$b" "$stage/release/"
 done
@@ -86,7 +88,9 @@ snapshot > "$before"
 
 dpkg -i "$deb" || fail "dpkg -i $deb"
 
-for f in /usr/bin/wlnavd /usr/bin/wlnav /lib/systemd/system/wlnavd.service \
+for f in /usr/bin/wlnavd /usr/bin/wlnav /usr/bin/wlnav-fleet /lib/systemd/system/wlnavd.service \
+  /lib/systemd/system/wlnav-fleet.service /etc/wlnav/wlnav-fleet.toml \
+  /usr/share/doc/wlnavd/wlnav-fleet.md \
   /etc/wlnav/wlnavd.toml /usr/lib/sysusers.d/wlnavd.conf /usr/lib/tmpfiles.d/wlnavd.conf \
   /usr/share/wlnav/critic-weights/avant635/critic.safetensors \
   /usr/share/wlnav/critic-weights/avant635/actor.safetensors \
@@ -95,19 +99,51 @@ for f in /usr/bin/wlnavd /usr/bin/wlnav /lib/systemd/system/wlnavd.service \
   /usr/share/doc/wlnavd/examples/wlnavd.service.d/realtime.conf; do
   [ -e "$f" ] || fail "not installed: $f"
 done
-dpkg-query -W -f='${Conffiles}\n' "$PKG" | grep -q '^ /etc/wlnav/wlnavd.toml ' ||
-  fail "/etc/wlnav/wlnavd.toml is not a conffile"
+for c in /etc/wlnav/wlnavd.toml /etc/wlnav/wlnav-fleet.toml; do
+  dpkg-query -W -f='${Conffiles}\n' "$PKG" | grep -q "^ $c " || fail "$c is not a conffile"
+done
 getent passwd wlnav >/dev/null || fail "user wlnav not created (sysusers.d)"
 getent group wlnav >/dev/null || fail "group wlnav not created (sysusers.d)"
 if ls /etc/systemd/system/*.wants/wlnavd.service >/dev/null 2>&1; then
   fail "the package enabled wlnavd.service (it must not: CAN may not exist yet)"
 fi
-
-verify=$(systemd-analyze verify /lib/systemd/system/wlnavd.service 2>&1) ||
-  fail "systemd-analyze verify /lib/systemd/system/wlnavd.service:\n$verify"
-if echo "$verify" | grep -q 'wlnavd.service'; then
-  fail "systemd-analyze verify warns about the unit:\n$verify"
+if ls /etc/systemd/system/*.wants/wlnav-fleet.service >/dev/null 2>&1; then
+  fail "the package enabled wlnav-fleet.service (it must not: the broker and serial number are the site's)"
 fi
+
+# Both units (systemd-analyze comes with systemd, which the package depends on). It checks
+# that the binaries of ExecStart=/ExecStartPre= exist and that every setting is known;
+# any line naming the unit is a warning about it, and fails the check.
+command -v systemd-analyze >/dev/null || fail "systemd-analyze missing (package systemd, a dependency of $PKG)"
+for unit in wlnavd.service wlnav-fleet.service; do
+  verify=$(systemd-analyze verify /lib/systemd/system/$unit 2>&1) ||
+    fail "systemd-analyze verify /lib/systemd/system/$unit:\n$verify"
+  if echo "$verify" | grep -q "$unit"; then
+    fail "systemd-analyze verify warns about $unit:\n$verify"
+  fi
+done
+# The fleet link's unit: started after the daemon, as user wlnav, with the conffile.
+fleet_unit=/lib/systemd/system/wlnav-fleet.service
+grep -qx 'After=wlnavd.service.*' $fleet_unit || fail "$fleet_unit: no After=wlnavd.service"
+grep -qx 'User=wlnav' $fleet_unit || fail "$fleet_unit: does not run as user wlnav"
+grep -q '^ExecStart=/usr/bin/wlnav-fleet .*--config /etc/wlnav/wlnav-fleet.toml' $fleet_unit ||
+  fail "$fleet_unit: ExecStart= does not pass --config /etc/wlnav/wlnav-fleet.toml"
+/usr/bin/wlnav-fleet --help | grep -q -- '--serial-number' || fail "/usr/bin/wlnav-fleet --help"
+# As the unit's ExecStartPre does: the service user reads and checks the configuration.
+out=$(runuser -u wlnav -- /usr/bin/wlnav-fleet --config /etc/wlnav/wlnav-fleet.toml --check-config 2>&1) ||
+  fail "wlnav-fleet --check-config of /etc/wlnav/wlnav-fleet.toml (as user wlnav):\n$out"
+# ... and refuses a broken one, saying where.
+bad=$(mktemp --suffix=.toml)
+printf 'state_interval = "often"\n' > "$bad"
+chmod 644 "$bad"
+set +e
+out=$(runuser -u wlnav -- /usr/bin/wlnav-fleet --config "$bad" --check-config 2>&1)
+code=$?
+set -e
+rm -f "$bad"
+[ $code -ne 0 ] || fail "wlnav-fleet --check-config accepted a configuration with state_interval = \"often\""
+echo "$out" | grep -q 'state_interval' || fail "wlnav-fleet --check-config refused a bad configuration without naming the key:\n$out"
+echo "package-check: wlnav-fleet installed: unit verified (After=wlnavd.service, user wlnav), --help runs, --check-config passes on /etc/wlnav/wlnav-fleet.toml as user wlnav and refuses a bad file"
 
 /usr/bin/wlnavd --config /etc/wlnav/wlnavd.toml --print-config |
   grep -q '^critic = "/usr/share/wlnav/critic-weights/avant635/critic.safetensors"' ||
@@ -133,7 +169,10 @@ rm -f "$other"
 qemu-x86_64-static -cpu Haswell /usr/bin/wlnavd --config /etc/wlnav/wlnavd.toml --check-config \
   >/dev/null 2>"$stage/haswell.log" ||
   fail "the packaged wlnavd --check-config under qemu-x86_64-static -cpu Haswell:\n$(grep -v "TCG doesn't support" "$stage/haswell.log" | tail -n 20)"
-echo "package-check: the packaged wlnavd --check-config passes under qemu-x86_64-static -cpu Haswell"
+qemu-x86_64-static -cpu Haswell /usr/bin/wlnav-fleet --config /etc/wlnav/wlnav-fleet.toml --check-config \
+  >/dev/null 2>"$stage/haswell-fleet.log" ||
+  fail "the packaged wlnav-fleet --check-config under qemu-x86_64-static -cpu Haswell:\n$(grep -v "TCG doesn't support" "$stage/haswell-fleet.log" | tail -n 20)"
+echo "package-check: the packaged wlnavd and wlnav-fleet --check-config pass under qemu-x86_64-static -cpu Haswell"
 
 # Group access (issue 28): the daemon as user wlnav (as the unit runs it; here on the
 # simulated machine, faster than real time), a client of another user in group wlnav sends
@@ -181,12 +220,17 @@ echo "package-check: $MEMBER (group wlnav) reached a goal and read telemetry of 
 dpkg -r "$PKG" || fail "dpkg -r $PKG"
 snapshot > "$after"
 # After removal only the conffile (and its directory) may remain.
-added=$(comm -13 "$before" "$after" | grep -v -x -e /etc/wlnav -e /etc/wlnav/wlnavd.toml || true)
+added=$(comm -13 "$before" "$after" | grep -v -x -e /etc/wlnav -e /etc/wlnav/wlnavd.toml \
+  -e /etc/wlnav/wlnav-fleet.toml || true)
 removed=$(comm -23 "$before" "$after" || true)
 [ -z "$added" ] || fail "left behind after dpkg -r:\n$added"
 [ -z "$removed" ] || fail "missing after install and removal (files the package must not touch):\n$removed"
-[ -f /etc/wlnav/wlnavd.toml ] || fail "dpkg -r removed the conffile"
+for c in /etc/wlnav/wlnavd.toml /etc/wlnav/wlnav-fleet.toml; do
+  [ -f $c ] || fail "dpkg -r removed the conffile $c"
+done
 
 dpkg -P "$PKG" >/dev/null || fail "dpkg -P $PKG"
-[ ! -e /etc/wlnav/wlnavd.toml ] || fail "dpkg -P left /etc/wlnav/wlnavd.toml"
-echo "package-check: OK in $(($(date +%s) - started)) s (install, verify, check-config, Haswell, group access, remove: only the conffile left, purge)"
+for c in /etc/wlnav/wlnavd.toml /etc/wlnav/wlnav-fleet.toml; do
+  [ ! -e $c ] || fail "dpkg -P left $c"
+done
+echo "package-check: OK in $(($(date +%s) - started)) s (install, verify, check-config, fleet link, Haswell, group access, remove: only the conffiles left, purge)"

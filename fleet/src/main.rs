@@ -13,20 +13,41 @@ use wlnav_fleet::order::Identity;
 #[command(name = "wlnav-fleet", version)]
 struct Args {
     /// The MQTT broker, HOST:PORT (e.g. localhost:1883).
-    #[arg(long, value_name = "HOST:PORT")]
-    broker: String,
+    #[arg(
+        long,
+        value_name = "HOST:PORT",
+        required_unless_present = "check_config"
+    )]
+    broker: Option<String>,
     /// The manufacturer in topics and headers.
-    #[arg(long)]
-    manufacturer: String,
+    #[arg(long, required_unless_present = "check_config")]
+    manufacturer: Option<String>,
     /// The vehicle's serial number in topics and headers.
-    #[arg(long = "serial-number")]
-    serial_number: String,
+    #[arg(long = "serial-number", required_unless_present = "check_config")]
+    serial_number: Option<String>,
     /// The daemon's service prefix (wlnavd --prefix).
-    #[arg(long)]
-    prefix: String,
+    #[arg(long, required_unless_present = "check_config")]
+    prefix: Option<String>,
     /// Configuration file (TOML; every key optional).
     #[arg(long, value_name = "FILE")]
     config: Option<PathBuf>,
+    /// Check the configuration (and its site file) and the flags given, then exit
+    /// (0 = valid) without connecting to anything. The other flags are optional with it.
+    #[arg(long)]
+    check_config: bool,
+}
+
+/// `--broker HOST:PORT` split; the host without IPv6 brackets.
+fn broker_address(broker: &str) -> anyhow::Result<(String, u16)> {
+    let (host, port) = broker
+        .rsplit_once(':')
+        .context("--broker must be HOST:PORT")?;
+    let port: u16 = port
+        .parse()
+        .context("--broker: the port must be a number")?;
+    let host = host.trim_start_matches('[').trim_end_matches(']');
+    anyhow::ensure!(!host.is_empty(), "--broker: empty host");
+    Ok((host.to_owned(), port))
 }
 
 /// A topic level: non-empty, without `/`, `+`, `#`.
@@ -49,34 +70,47 @@ fn main() -> anyhow::Result<()> {
         .init();
     shm_ipc::iceoryx2::prelude::set_log_level(shm_ipc::iceoryx2::prelude::LogLevel::Error);
     let args = Args::parse();
-    let (host, port) = args
-        .broker
-        .rsplit_once(':')
-        .context("--broker must be HOST:PORT")?;
-    let port: u16 = port
-        .parse()
-        .context("--broker: the port must be a number")?;
-    anyhow::ensure!(!host.is_empty(), "--broker: empty host");
-    topic_level("--manufacturer", &args.manufacturer)?;
-    topic_level("--serial-number", &args.serial_number)?;
-    shm_ipc::validate_prefix(&args.prefix)?;
+    let broker = args.broker.as_deref().map(broker_address).transpose()?;
+    if let Some(m) = &args.manufacturer {
+        topic_level("--manufacturer", m)?;
+    }
+    if let Some(s) = &args.serial_number {
+        topic_level("--serial-number", s)?;
+    }
+    if let Some(p) = &args.prefix {
+        shm_ipc::validate_prefix(p)?;
+    }
     let config = match &args.config {
         Some(p) => Config::load(p)?,
         None => Config::default(),
     };
     // Fail early on a bad site file.
-    config.obstacles()?;
+    let obstacles = config.obstacles()?;
+    if args.check_config {
+        println!(
+            "configuration {} valid: map_id {:?}, {} obstacle circle(s)",
+            args.config
+                .as_deref()
+                .map_or("(defaults)".into(), |p| p.display().to_string()),
+            config.map_id,
+            obstacles.len()
+        );
+        return Ok(());
+    }
+    // clap requires these without --check-config.
+    let ((host, port), manufacturer, serial_number, prefix) =
+        match (broker, args.manufacturer, args.serial_number, args.prefix) {
+            (Some(b), Some(m), Some(s), Some(p)) => (b, m, s, p),
+            _ => unreachable!("clap requires --broker, --manufacturer, --serial-number, --prefix"),
+        };
     let options = Options {
-        host: host
-            .trim_start_matches('[')
-            .trim_end_matches(']')
-            .to_owned(),
+        host,
         port,
         identity: Identity {
-            manufacturer: args.manufacturer,
-            serial_number: args.serial_number,
+            manufacturer,
+            serial_number,
         },
-        prefix: args.prefix,
+        prefix,
         config,
     };
     let runtime = tokio::runtime::Builder::new_current_thread()
