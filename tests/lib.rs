@@ -19,6 +19,11 @@ use std::time::Duration;
 use shm_ipc::{Client, IpcConfig, Telemetry, TelemetrySubscriber};
 use wlnav_cli::daemon_process::DaemonProcess;
 
+/// The one factor for wall-clock limits of every crate's tests (`WLNAV_TIMING_SCALE`;
+/// emulation: scripts/cross-check.sh). [`SimDaemon`] applies it to the daemon's time scale
+/// and to its own timeouts; tests apply it to theirs.
+pub mod timing_scale;
+
 /// Paths of the two binaries under test.
 #[derive(Debug, Clone)]
 pub struct Binaries {
@@ -184,7 +189,8 @@ pub struct SimDaemon {
 
 impl SimDaemon {
     /// Starts `wlnavd --sim --prefix <unique> --time-scale <scale> --cost <cost()>` and waits
-    /// until it is ready (idle). Its log goes to a file in the temp directory, shown on
+    /// until it is ready (idle). On a slower CPU the daemon's clock runs slower by
+    /// `WLNAV_TIMING_SCALE` ([`timing_scale::daemon_time_scale`]). Its log goes to a file in the temp directory, shown on
     /// failure.
     pub fn start(test: &str, time_scale: f64) -> Self {
         Self::start_with(test, time_scale, &[])
@@ -201,20 +207,22 @@ impl SimDaemon {
         ));
         let mut args: Vec<OsString> = vec!["--cost".into(), cost().into()];
         args.extend(extra.iter().map(OsString::from));
+        let time_scale = timing_scale::daemon_time_scale(time_scale);
         let scale = (time_scale != 1.0).then_some(time_scale);
         let mut process = DaemonProcess::spawn_sim(&bins.wlnavd, &prefix, scale, &args, Some(&log))
             .expect("spawn wlnavd");
         let config = IpcConfig::new(prefix);
         // The daemon creates the services; the client waits for them.
-        let client = match process.connect(&config, Duration::from_secs(60)) {
+        let client = match process.connect(&config, timing_scale::real(Duration::from_secs(60))) {
             Ok(c) => c,
             Err(e) => panic!("wlnavd did not start: {e:#}"),
         };
         let telemetry = client.subscribe_telemetry().expect("subscribe");
-        let first = match process.wait_ready(&telemetry, Duration::from_secs(60)) {
-            Ok(t) => t,
-            Err(e) => panic!("wlnavd did not start: {e:#}"),
-        };
+        let first =
+            match process.wait_ready(&telemetry, timing_scale::real(Duration::from_secs(60))) {
+                Ok(t) => t,
+                Err(e) => panic!("wlnavd did not start: {e:#}"),
+            };
         Self {
             process,
             client,
@@ -229,8 +237,10 @@ impl SimDaemon {
         &self.config.prefix
     }
 
-    /// The next telemetry sample, panicking after `timeout` without one.
+    /// The next telemetry sample, panicking after `timeout` (times `WLNAV_TIMING_SCALE`)
+    /// without one.
     pub fn next(&self, timeout: Duration) -> Telemetry {
+        let timeout = timing_scale::real(timeout);
         match self.telemetry.recv_timeout(timeout).expect("telemetry") {
             Some(t) => t,
             None => panic!(
@@ -244,7 +254,7 @@ impl SimDaemon {
     pub fn stop(mut self) {
         let (status, killed) = self
             .process
-            .terminate(Duration::from_secs(10))
+            .terminate(timing_scale::real(Duration::from_secs(10)))
             .expect("terminate");
         assert!(
             !killed && status.success(),

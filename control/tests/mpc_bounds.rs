@@ -8,6 +8,11 @@ use control::model::{ix, Goal, MachineParams, State};
 use control::mpc::{Mpc, MpcSettings, QuadraticCost, Solution, StageCost, StepStatus};
 use control::{HessianMode, Plant, PlantConfig};
 
+/// The solver's wall-clock budget is a timing limit: times `WLNAV_TIMING_SCALE` (the shared
+/// helper; emulation: scripts/cross-check.sh).
+#[path = "../../tests/timing_scale.rs"]
+mod timing_scale;
+
 fn check_tick(p: &MachineParams, s: &MpcSettings, sol: &Solution) -> f64 {
     let umax = p.control_max();
     for (k, u) in sol.controls.iter().enumerate() {
@@ -107,6 +112,7 @@ fn control_bounds_hard_state_bounds_paid() {
             horizon: 10,
             hessian,
             delay: 0.0,
+            time_budget: timing_scale::secs(MpcSettings::default().time_budget),
             ..MpcSettings::default()
         };
         let critic = common::random_critic(8, 5);
@@ -122,6 +128,7 @@ fn control_bounds_hard_state_bounds_paid() {
     let s = MpcSettings {
         horizon: 20,
         delay: 0.0,
+        time_budget: timing_scale::secs(MpcSettings::default().time_budget),
         ..MpcSettings::default()
     };
     let mpc = Mpc::new(p, pull, None, s).unwrap();

@@ -97,14 +97,14 @@ fn ready_then_watchdog_on_healthy_ticks_only() {
     d.wait_for(Duration::from_secs(30), "tracking", |t| {
         t.mode() == Ok(Mode::Tracking)
     });
-    std::thread::sleep(Duration::from_millis(500));
+    std::thread::sleep(timing_scale::real(Duration::from_millis(500)));
     stall.store(true, Ordering::SeqCst);
-    let deadline = Instant::now() + Duration::from_secs(20);
+    let deadline = Instant::now() + timing_scale::real(Duration::from_secs(20));
     while window.lock().unwrap().is_none() {
         assert!(Instant::now() < deadline, "the loop never stalled");
         std::thread::sleep(Duration::from_millis(20));
     }
-    std::thread::sleep(Duration::from_millis(1000));
+    std::thread::sleep(timing_scale::real(Duration::from_millis(1000)));
     let report = d.stop();
     done.store(true, Ordering::SeqCst);
     collector.join().unwrap();
@@ -140,14 +140,15 @@ fn ready_then_watchdog_on_healthy_ticks_only() {
         during.len()
     );
     // Before and after the stall: one per healthy tick (period 50 ms real at scale 4).
-    let period = Duration::from_secs_f64(0.2 / TIME_SCALE);
+    let period = Duration::from_secs_f64(0.2 / time_scale());
     let before = watchdogs.iter().filter(|t| **t < stall_start).count();
+    let window_after = timing_scale::real(Duration::from_millis(900));
     let after = watchdogs
         .iter()
-        .filter(|t| **t > stall_end && **t < stall_end + Duration::from_millis(900))
+        .filter(|t| **t > stall_end && **t < stall_end + window_after)
         .count();
     assert!(before >= 10, "only {before} watchdogs before the stall");
-    let expected_after = (0.9 / period.as_secs_f64()) as usize;
+    let expected_after = (window_after.as_secs_f64() / period.as_secs_f64()) as usize;
     assert!(
         after + 3 >= expected_after,
         "{after} watchdogs in 0.9 s after the stall, expected about {expected_after}"

@@ -17,6 +17,8 @@ use common::*;
 use shm_ipc::Pose2;
 
 fn soak(ticks: u64, time_scale: f64) {
+    // On a slower CPU (WLNAV_TIMING_SCALE) the daemon's clock runs slower by that factor.
+    let time_scale = timing_scale::daemon_time_scale(time_scale);
     let mut config = sim_config("soak");
     config.sim.time_scale = time_scale;
     config.control.max_ticks = ticks;

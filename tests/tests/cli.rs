@@ -115,7 +115,7 @@ fn goal_cancel_and_watch_through_the_cli() {
     assert_eq!(o.status.code(), Some(0), "{}", text(&o));
     assert!(text(&o).contains("cancel: accepted"), "{}", text(&o));
     // The goal is dropped and the machine comes to rest.
-    let deadline = std::time::Instant::now() + Duration::from_secs(10);
+    let deadline = std::time::Instant::now() + e2e::timing_scale::real(Duration::from_secs(10));
     loop {
         let t = d.next(Duration::from_secs(2));
         if t.tick > before_cancel
@@ -177,7 +177,9 @@ fn demo_drives_the_loading_cycle_and_stops_the_daemon() {
     let svg = dir.join("demo.svg");
     let rec = dir.join("demo.mcap");
     let o = Command::new(&binaries().wlnav)
-        .args(["demo", "--time-scale", "4", "--cost", &e2e::cost()])
+        .args(["demo", "--time-scale"])
+        .arg(e2e::timing_scale::daemon_time_scale(4.0).to_string())
+        .args(["--cost", &e2e::cost()])
         .arg("--out")
         .arg(&svg)
         .arg("--record")
@@ -222,7 +224,7 @@ fn wait_in_background(prefix: &str, goal: &[&str], obstacles: &[&str]) -> std::p
 /// Waits until the daemon's telemetry shows the goal at (`x`, `y`) being tracked (so a
 /// goal still active from before is not mistaken for the one just sent).
 fn wait_tracking(d: &SimDaemon, x: f64, y: f64) {
-    let deadline = std::time::Instant::now() + Duration::from_secs(20);
+    let deadline = std::time::Instant::now() + e2e::timing_scale::real(Duration::from_secs(20));
     loop {
         let t = d.next(Duration::from_secs(2));
         let ours = t

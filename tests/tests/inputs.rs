@@ -65,7 +65,7 @@ fn a_process_holding_every_client_slot_cannot_keep_a_stop_out() {
     let p = d.prefix().to_owned();
     let o = wlnav(&["--prefix", &p, "goal", "8", "0", "0"]);
     assert_eq!(o.status.code(), Some(0), "{}", text(&o));
-    let deadline = Instant::now() + Duration::from_secs(20);
+    let deadline = Instant::now() + e2e::timing_scale::real(Duration::from_secs(20));
     loop {
         let t = d.next(Duration::from_secs(2));
         if t.mode() == Ok(Mode::Tracking) && t.state.v_f > 0.3 {
@@ -88,7 +88,7 @@ fn a_process_holding_every_client_slot_cannot_keep_a_stop_out() {
     let o = wlnav(&["--prefix", &p, "stop"]);
     assert_eq!(o.status.code(), Some(0), "{}", text(&o));
     assert!(text(&o).contains("stop: accepted"), "{}", text(&o));
-    let deadline = Instant::now() + Duration::from_secs(10);
+    let deadline = Instant::now() + e2e::timing_scale::real(Duration::from_secs(10));
     loop {
         let t = d.next(Duration::from_secs(2));
         if t.goal_active == 0 && t.command.v == 0.0 && t.state.v_f.abs() < 0.05 {

@@ -161,7 +161,7 @@ fn drive(d: &SimDaemon) -> u64 {
         .output()
         .expect("run wlnav");
     assert_eq!(o.status.code(), Some(0), "{}", text(&o));
-    let deadline = Instant::now() + Duration::from_secs(30);
+    let deadline = Instant::now() + e2e::timing_scale::real(Duration::from_secs(30));
     loop {
         let t = d.next(Duration::from_secs(3));
         if t.mode() == Ok(Mode::Tracking) && t.state.v_f > 0.3 {
@@ -216,7 +216,7 @@ fn stop_gets_through(d: &SimDaemon, driving_tick: u64) -> String {
     let first_stopping = match seen.iter().find(|t| stopping(t)) {
         Some(t) => *t,
         None => {
-            let deadline = Instant::now() + Duration::from_secs(5);
+            let deadline = Instant::now() + e2e::timing_scale::real(Duration::from_secs(5));
             loop {
                 let t = d.next(Duration::from_secs(2));
                 if stopping(&t) {
@@ -241,7 +241,7 @@ fn stop_gets_through(d: &SimDaemon, driving_tick: u64) -> String {
         first_stopping.tick
     );
     // And it really comes to rest, the stop latched.
-    let deadline = Instant::now() + Duration::from_secs(15);
+    let deadline = Instant::now() + e2e::timing_scale::real(Duration::from_secs(15));
     loop {
         let t = d.next(Duration::from_secs(2));
         if t.goal_active == 0 && t.command.v == 0.0 && t.state.v_f.abs() < 0.05 {
@@ -315,7 +315,7 @@ fn a_process_serving_the_goal_service_first_is_named_in_the_refusal() {
         .stderr(Stdio::piped())
         .spawn()
         .expect("spawn wlnavd");
-    let deadline = Instant::now() + Duration::from_secs(60);
+    let deadline = Instant::now() + e2e::timing_scale::real(Duration::from_secs(60));
     let status = loop {
         if let Some(s) = child.try_wait().unwrap() {
             break s;

@@ -11,14 +11,10 @@ use crate::obstacle::{footprint_clearance, AxlePoint};
 use crate::weights;
 
 /// Wall-clock limits are multiplied by `WLNAV_TIMING_SCALE` (default 1; the one factor
-/// for emulation, set by scripts/cross-check.sh for the tests under qemu).
-fn timing_scale() -> f64 {
-    std::env::var("WLNAV_TIMING_SCALE")
-        .ok()
-        .and_then(|s| s.parse::<f64>().ok())
-        .filter(|s| *s >= 1.0)
-        .unwrap_or(1.0)
-}
+/// for emulation, set by scripts/cross-check.sh for the tests under qemu): the shared
+/// helper of every crate's tests.
+#[path = "../../../tests/timing_scale.rs"]
+mod timing_scale;
 
 fn params() -> MachineParams {
     MachineParams::default()
@@ -252,7 +248,7 @@ fn an_enclosed_goal_has_no_route_and_aborts_on_the_first_tick() {
         let report = nav.last_plan().unwrap();
         assert_eq!(report.outcome, PlanOutcome::NoRoute);
         assert!(
-            report.duration.as_secs_f64() < 0.5 * timing_scale(),
+            report.duration.as_secs_f64() < timing_scale::secs(0.5),
             "{report:?}"
         );
         assert_eq!(

@@ -17,8 +17,18 @@ use wlnavd::sim::{SimHandle, SimLog};
 use wlnavd::{DaemonError, RunOptions, RunReport, ShutdownHandle};
 
 /// Time scale of the e2e tests: 1 real second = 4 daemon seconds (the MPC's solve
-/// time, unscaled, must fit in 50 ms of real time even on a busy 2-core machine).
+/// time, unscaled, must fit in 50 ms of real time even on a busy 2-core machine). On a
+/// slower CPU divided by `WLNAV_TIMING_SCALE`: [`time_scale`].
 pub const TIME_SCALE: f64 = 4.0;
+
+/// The one factor for wall-clock limits (`WLNAV_TIMING_SCALE`; emulation).
+#[path = "../../../tests/timing_scale.rs"]
+pub mod timing_scale;
+
+/// The daemon's time scale on this CPU: [`TIME_SCALE`] / `WLNAV_TIMING_SCALE`.
+pub fn time_scale() -> f64 {
+    timing_scale::daemon_time_scale(TIME_SCALE)
+}
 
 /// A service prefix no other test (or process) uses.
 pub fn unique_prefix(name: &str) -> String {
@@ -34,7 +44,7 @@ pub fn unique_prefix(name: &str) -> String {
 pub fn sim_config(name: &str) -> Config {
     let mut c = Config::default();
     c.controller.cost = CostKind::Quadratic;
-    c.sim.time_scale = TIME_SCALE;
+    c.sim.time_scale = time_scale();
     c.ipc.prefix = unique_prefix(name);
     c.validate().unwrap();
     c
@@ -80,7 +90,7 @@ impl Running {
     /// Sends a goal until the daemon accepts it (it rejects goals until its first
     /// pose and machine state arrived).
     pub fn goal(&self, x: f64, y: f64, heading: f64) {
-        let deadline = Instant::now() + Duration::from_secs(20);
+        let deadline = Instant::now() + timing_scale::real(Duration::from_secs(20));
         loop {
             match self
                 .client
@@ -101,7 +111,7 @@ impl Running {
     /// Sends one goal request (waiting until the daemon has seen its first data, when it
     /// still rejects everything as not ready); its id and the reply.
     pub fn request_goal(&self, goal: Pose2, obstacles: &[Obstacle]) -> (u64, GoalReply) {
-        let deadline = Instant::now() + Duration::from_secs(20);
+        let deadline = Instant::now() + timing_scale::real(Duration::from_secs(20));
         loop {
             let id = self.client.next_request_id();
             let req = GoalRequest::set_goal(id, goal, obstacles).expect("≤ 8 obstacles");
@@ -135,14 +145,14 @@ impl Running {
     }
 
     /// Telemetry samples until `pred` holds (returns all samples seen, the matching
-    /// one last) or the real-time `timeout` passes (panics).
+    /// one last) or the real-time `timeout` (times `WLNAV_TIMING_SCALE`) passes (panics).
     pub fn wait_for(
         &self,
         timeout: Duration,
         what: &str,
         mut pred: impl FnMut(&Telemetry) -> bool,
     ) -> Vec<Telemetry> {
-        let deadline = Instant::now() + timeout;
+        let deadline = Instant::now() + timing_scale::real(timeout);
         let mut seen = Vec::new();
         loop {
             while let Some(t) = self.telemetry.try_recv().unwrap() {
