@@ -10,6 +10,9 @@ use control::mpc::{Mpc, MpcSettings, Obstacle, ObstacleConstraint, QuadraticCost
 use control::obstacle::footprint_clearance;
 use control::{HessianMode, Plant, PlantConfig};
 
+#[path = "../../tests/timing_scale.rs"]
+mod timing_scale;
+
 fn attractive() -> QuadraticCost {
     let mut c = QuadraticCost::diagonal([0.2, 0.2, 0.5, 0.1, 0.5, 0.5], [0.5, 0.5]);
     c.q_pos = 2.0;
@@ -27,6 +30,12 @@ fn drive(
     ticks: usize,
 ) -> (f64, State) {
     let p = MachineParams::default();
+    // The solver's wall-clock budget is a timing limit (WLNAV_TIMING_SCALE; under qemu
+    // a QP hit the unscaled 0.1 s: MaxTime, Fallback(QpFailed)).
+    let settings = MpcSettings {
+        time_budget: timing_scale::secs(settings.time_budget),
+        ..settings
+    };
     let mut mpc = Mpc::new(p, attractive(), None, settings).unwrap();
     mpc.set_goal(goal, &[obstacle]).unwrap();
     let mut plant = Plant::new(p, plant_config, start).unwrap();
