@@ -59,10 +59,13 @@ fi
 
 # The Jetson's build (issue 28): arm64 binaries, the control, shm-ipc, daemon and e2e
 # tests under qemu, the examples against an arm64 daemon, the arm64 package. Opt-in
-# (WLNAV_CROSS_CHECK=1) until it has passed a whole run: its arm64 build passed (48 min
-# beside three other engineers' builds), its test and package steps have not run yet.
+# (WLNAV_CROSS_CHECK=1): it does not fit CI's budget (the test command ~35 min, at most
+# 45 with it). Measured 2026-12-03 (README, "The Jetson"): the arm64 build from scratch
+# alone is 2956 s user + 59 s sys of CPU (47 min wall beside other builds; >= 25 min on two
+# free cores), the control suite under qemu about 2.5 min, the daemon and e2e suites longer
+# (their daemons run 5x slower under WLNAV_TIMING_SCALE=5). Any failure in it is fatal.
 if [ $# -eq 0 ] && [ "${WLNAV_CROSS_CHECK:-0}" = 1 ]; then
   bash scripts/cross-check.sh
 else
-  echo "test.sh: cross check not run (WLNAV_CROSS_CHECK=1 and no arguments run it)"
+  echo "test.sh: cross check not run (opt-in: WLNAV_CROSS_CHECK=1 and no arguments run it, about 35 min more)"
 fi
