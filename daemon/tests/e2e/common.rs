@@ -45,6 +45,9 @@ pub fn sim_config(name: &str) -> Config {
     let mut c = Config::default();
     c.controller.cost = CostKind::Quadratic;
     c.sim.time_scale = time_scale();
+    // The solver's wall-clock budget (also the start-up self-test's) is a timing limit:
+    // under qemu two daemons starting at once missed the unscaled 0.1 s and never served.
+    c.mpc.time_budget = timing_scale::secs(c.mpc.time_budget);
     c.ipc.prefix = unique_prefix(name);
     c.validate().unwrap();
     c
