@@ -207,6 +207,20 @@ impl SimDaemon {
         ));
         let mut args: Vec<OsString> = vec!["--cost".into(), cost().into()];
         args.extend(extra.iter().map(OsString::from));
+        // On a slower CPU the solver's wall-clock budget (also the start-up self-test's) is
+        // a timing limit too: wlnavd's default mpc.time_budget, 0.1 s, times the factor, in
+        // a configuration of its own (only without one of the test's: a test giving
+        // --config sets its own budget).
+        if timing_scale::factor() > 1.0 && !extra.contains(&"--config") {
+            let budget = log.with_extension("toml");
+            std::fs::write(
+                &budget,
+                format!("[mpc]\ntime_budget = {}\n", timing_scale::secs(0.1)),
+            )
+            .expect("write the budget configuration");
+            args.push("--config".into());
+            args.push(budget.into());
+        }
         let time_scale = timing_scale::daemon_time_scale(time_scale);
         let scale = (time_scale != 1.0).then_some(time_scale);
         let mut process = DaemonProcess::spawn_sim(&bins.wlnavd, &prefix, scale, &args, Some(&log))
