@@ -3,22 +3,25 @@
 //! at N = 10, 20, 40 with the committed critic and actor
 //! (`critic-weights/avant635/`; random networks of the paper's sizes when absent, said
 //! on stdout), for both Hessian modes, in closed loop on the simulated machine (0.2 s delay) with
-//! two obstacles. Besides criterion's estimates it prints the median and p99
-//! of 400 ticks per configuration.
+//! 0, 2 and 8 circles (issue 30; criterion times the 2-circle case). Besides
+//! criterion's estimates it prints the median and p99 of 400 ticks per
+//! configuration and the tick's split into the critic's derivatives, the rest
+//! of the QP's assembly, and the QP solve (medians).
 
 use std::time::{Duration, Instant};
 
+use clarabel::solver::DefaultSettings;
 use control::delay::DelayCompensator;
 use control::envelope::{self, EnvelopeInput, EnvelopeSettings};
 use control::mlp::PAPER_HIDDEN;
-use control::model::{Goal, MachineParams, State};
-use control::mpc::{Mpc, MpcSettings, Obstacle};
+use control::model::{MachineParams, State};
+use control::mpc::{ClarabelBackend, Mpc, MpcSettings, Obstacle, Rk4Model};
 use control::weights::{self, random_network, NetworkMetadata, NetworkRole, WeightsProblem};
 use control::{Actor, Critic, HessianMode, Plant, PlantConfig, VelocityCommand};
 use criterion::{criterion_group, criterion_main, Criterion};
 
-const GOAL: Goal = Goal::new(6.0, 4.0, 1.2);
-const OBSTACLES: [Obstacle; 2] = [Obstacle::new(3.0, 1.0, 0.8), Obstacle::new(1.0, 4.0, 0.6)];
+mod workload;
+use workload::{CIRCLES, GOAL};
 
 /// The committed networks, or random ones of the paper's sizes.
 fn networks() -> (Critic, Actor) {
@@ -55,6 +58,7 @@ fn networks() -> (Critic, Actor) {
 /// An MPC and the machine it drives; restarts from the origin every 150 ticks.
 struct Loop {
     mpc: Mpc<Critic>,
+    obstacles: &'static [Obstacle],
     plant: Plant,
     ticks: usize,
     /// The envelope's record of the commands sent, and the last one.
@@ -65,24 +69,34 @@ struct Loop {
 }
 
 impl Loop {
-    fn new(horizon: usize, hessian: HessianMode) -> Self {
-        Self::with(MpcSettings {
-            horizon,
-            hessian,
-            ..MpcSettings::default()
-        })
+    fn new(horizon: usize, hessian: HessianMode, circles: usize) -> Self {
+        Self::with(
+            MpcSettings {
+                horizon,
+                hessian,
+                ..MpcSettings::default()
+            },
+            &CIRCLES[..circles],
+        )
     }
 
-    fn with(settings: MpcSettings) -> Self {
+    fn with(settings: MpcSettings, obstacles: &'static [Obstacle]) -> Self {
         let p = MachineParams::default();
         let (critic, actor) = networks();
         let mpc = Mpc::new(p, critic, Some(actor), settings).expect("valid settings");
+        Self::around(mpc, obstacles)
+    }
+
+    fn around(mpc: Mpc<Critic>, obstacles: &'static [Obstacle]) -> Self {
+        let p = *mpc.params();
+        let settings = *mpc.settings();
         let plant = Plant::new(p, PlantConfig::default(), State::zeros()).expect("valid plant");
         let sent =
             envelope::command_record(p, &EnvelopeSettings::default(), settings.delay, settings.dt)
                 .expect("valid delay");
         let mut l = Self {
             mpc,
+            obstacles,
             plant,
             ticks: 0,
             sent,
@@ -95,7 +109,7 @@ impl Loop {
 
     fn restart(&mut self) {
         self.mpc.reset();
-        self.mpc.set_goal(GOAL, &OBSTACLES).expect("valid goal");
+        self.mpc.set_goal(GOAL, self.obstacles).expect("valid goal");
         let p = *self.mpc.params();
         self.plant = Plant::new(p, PlantConfig::default(), State::zeros()).expect("valid plant");
         self.sent =
@@ -125,7 +139,7 @@ impl Loop {
                 sent: &self.sent,
                 now,
                 state: &x,
-                obstacles: &OBSTACLES,
+                obstacles: self.obstacles,
                 dt: 0.2,
                 last: self.last,
             },
@@ -144,17 +158,34 @@ impl Loop {
     }
 }
 
-fn percentiles(horizon: usize, hessian: HessianMode) {
-    let mut l = Loop::new(horizon, hessian);
+fn percentiles(horizon: usize, hessian: HessianMode, circles: usize) {
+    let mut l = Loop::new(horizon, hessian, circles);
     for _ in 0..20 {
         l.tick();
     }
     l.envelope = Duration::ZERO;
-    let mut t: Vec<f64> = (0..400).map(|_| l.tick().as_secs_f64() * 1e3).collect();
+    let (mut t, mut derivatives, mut assembly, mut qp) = (vec![], vec![], vec![], vec![]);
+    for _ in 0..400 {
+        t.push(l.tick().as_secs_f64() * 1e3);
+        let sol = l.mpc.solution();
+        derivatives.push(sol.derivatives_time.as_secs_f64() * 1e3);
+        assembly.push(sol.assembly_time.as_secs_f64() * 1e3);
+        qp.push(sol.qp_time.as_secs_f64() * 1e3);
+    }
     let total: f64 = t.iter().sum();
+    let median = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let (d, a, q) = (
+        median(&mut derivatives),
+        median(&mut assembly),
+        median(&mut qp),
+    );
     t.sort_by(f64::total_cmp);
     println!(
-        "mpc tick N={horizon:2} {hessian:?}: median {:.3} ms, p99 {:.3} ms, max {:.3} ms (400 ticks; \
+        "mpc tick N={horizon:2} {hessian:?} {circles} circles: median {:.3} ms, p99 {:.3} ms, max {:.3} ms \
+         (400 ticks; medians: critic derivatives {d:.3}, assembly {a:.3}, QP {q:.3} ms; \
          the envelope {:.3} ms a tick, {:.1} % of the tick)",
         t[t.len() / 2],
         t[(t.len() * 99) / 100],
@@ -198,53 +229,67 @@ fn probe() {
             t.elapsed().as_secs_f64() * 1e6 / 2000.0
         );
     }
+    // Clarabel's settings, changed from the MPC's (`ClarabelBackend::settings`).
+    type Tweak = fn(&mut DefaultSettings<f64>);
+    let tweaks: [(&str, Tweak); 7] = [
+        ("default", |_| {}),
+        ("tol 1e-7 + refinement", |s| {
+            (s.tol_gap_abs, s.tol_gap_rel, s.tol_feas) = (1e-7, 1e-7, 1e-7);
+            s.iterative_refinement_enable = true;
+        }),
+        ("tol 1e-5", |s| {
+            (s.tol_gap_abs, s.tol_gap_rel, s.tol_feas) = (1e-5, 1e-5, 1e-5)
+        }),
+        ("tol 1e-4", |s| {
+            (s.tol_gap_abs, s.tol_gap_rel, s.tol_feas) = (1e-4, 1e-4, 1e-4)
+        }),
+        ("no equilibration", |s| s.equilibrate_enable = false),
+        ("max step 0.995", |s| s.max_step_fraction = 0.995),
+        ("static regularisation 1e-7", |s| {
+            s.static_regularization_constant = 1e-7
+        }),
+    ];
     for horizon in [10, 20, 40] {
-        for (name, s) in [
-            (
-                "default",
-                MpcSettings {
-                    horizon,
-                    ..MpcSettings::default()
+        for (name, tweak) in tweaks {
+            let settings = MpcSettings {
+                horizon,
+                ..MpcSettings::default()
+            };
+            let p = MachineParams::default();
+            let (critic, actor) = networks();
+            let mpc = Mpc::with_parts(
+                p,
+                critic,
+                Rk4Model { params: p },
+                Some(actor),
+                settings,
+                |layout, data, settings| {
+                    let mut s = ClarabelBackend::settings(settings)?;
+                    tweak(&mut s);
+                    ClarabelBackend::with_settings(layout, data, s)
                 },
-            ),
-            (
-                "2 slots",
-                MpcSettings {
-                    horizon,
-                    max_obstacles: 2,
-                    ..MpcSettings::default()
-                },
-            ),
-            (
-                "tol 1e-7 + refinement",
-                MpcSettings {
-                    horizon,
-                    qp_tolerance: 1e-7,
-                    qp_iterative_refinement: true,
-                    ..MpcSettings::default()
-                },
-            ),
-            (
-                "no equil",
-                MpcSettings {
-                    horizon,
-                    qp_equilibrate: false,
-                    ..MpcSettings::default()
-                },
-            ),
-        ] {
-            let mut l = Loop::with(s);
-            let (mut tot, mut qp, mut it) = (vec![], vec![], 0);
+            )
+            .expect("valid settings");
+            let mut l = Loop::around(mpc, &CIRCLES[..2]);
+            let (mut tot, mut qp, mut it, mut cost) = (vec![], vec![], 0, 0.0);
             for _ in 0..200 {
                 let t = l.tick();
                 let sol = l.mpc.solution();
                 tot.push(t.as_secs_f64() * 1e3);
                 qp.push(sol.qp_time.as_secs_f64() * 1e3);
                 it += sol.qp_iterations;
+                cost += sol.cost;
             }
             tot.sort_by(f64::total_cmp);
             qp.sort_by(f64::total_cmp);
-            println!("N={horizon} {name}: tick median {:.3} ms, qp median {:.3} ms, mean QP iterations {:.1}", tot[100], qp[100], it as f64 / 200.0);
+            println!(
+                "N={horizon} {name}: tick median {:.3} ms, qp median {:.3} ms, mean QP iterations {:.1}, \
+                 mean plan cost {:.3}",
+                tot[100],
+                qp[100],
+                it as f64 / 200.0,
+                cost / 200.0
+            );
         }
     }
 }
@@ -256,7 +301,9 @@ fn bench(c: &mut Criterion) {
     }
     for hessian in [HessianMode::Exact, HessianMode::GaussNewton] {
         for horizon in [10, 20, 40] {
-            percentiles(horizon, hessian);
+            for circles in [0, 2, 8] {
+                percentiles(horizon, hessian, circles);
+            }
         }
     }
     let mut group = c.benchmark_group("mpc_tick");
@@ -266,7 +313,7 @@ fn bench(c: &mut Criterion) {
         .warm_up_time(Duration::from_secs(1));
     for hessian in [HessianMode::Exact, HessianMode::GaussNewton] {
         for horizon in [10, 20, 40] {
-            let mut l = Loop::new(horizon, hessian);
+            let mut l = Loop::new(horizon, hessian, 2);
             group.bench_function(format!("N{horizon}_{hessian:?}"), |b| {
                 b.iter_custom(|iters| (0..iters).map(|_| l.tick()).sum())
             });

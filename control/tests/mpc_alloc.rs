@@ -2,8 +2,9 @@
 //! A counting global allocator counts every allocation during `Mpc::step` and
 //! the safety envelope's check of its command (issue 26), and,
 //! separately, those inside the Clarabel backend's update and solve (through a
-//! wrapping `QpBackend`). One test in this binary, so no other test thread
-//! allocates while we count.
+//! wrapping `QpBackend`). The set of circles within the horizon's reach
+//! changes during the run (issue 30: the QP in use changes with it). One test
+//! in this binary, so no other test thread allocates while we count.
 
 mod common;
 
@@ -52,7 +53,6 @@ impl QpBackend for CountedClarabel {
 #[test]
 fn tick_allocates_only_inside_clarabel() {
     let p = MachineParams::default();
-    let obstacles = [Obstacle::new(3.0, 1.0, 0.8), Obstacle::new(2.0, 4.0, 0.5)];
     for horizon in [10, 20, 40] {
         for hessian in [HessianMode::Exact, HessianMode::GaussNewton] {
             let settings = MpcSettings {
@@ -65,6 +65,16 @@ fn tick_allocates_only_inside_clarabel() {
                 time_budget: 10.0,
                 ..MpcSettings::default()
             };
+            // Two circles within reach from the start, and one 1 m beyond
+            // reach along the diagonal, which enters the QP as the measured
+            // pose is carried 0.42 m a tick along it (the random critic need
+            // not drive anywhere in particular).
+            let ahead = settings.obstacle_reach(&p) + 1.0 + 0.5;
+            let obstacles = [
+                Obstacle::new(3.0, 1.0, 0.8),
+                Obstacle::new(2.0, 4.0, 0.5),
+                Obstacle::new(ahead / 2f64.sqrt(), ahead / 2f64.sqrt(), 0.5),
+            ];
             let mut mpc = Mpc::with_parts(
                 p,
                 common::random_critic(8, 11),
@@ -94,9 +104,15 @@ fn tick_allocates_only_inside_clarabel() {
             let mut last = VelocityCommand::ZERO;
             let ticks = 30;
             let (mut total, mut solves) = (0, 0);
-            let backend_before = mpc.backend().allocations;
+            let in_backends = |mpc: &Mpc<_, _, CountedClarabel>| {
+                mpc.backends().map(|b| b.allocations).sum::<usize>()
+            };
+            let backend_before = in_backends(&mpc);
+            let mut active_counts = Vec::with_capacity(ticks);
             for tick in 0..ticks {
-                let x = plant.state();
+                let mut x = plant.state();
+                x[0] += 0.3 * tick as f64;
+                x[1] += 0.3 * tick as f64;
                 let now = tick as f64 * settings.dt;
                 let before = count();
                 let sol = mpc.step(&x, now).unwrap();
@@ -129,10 +145,16 @@ fn tick_allocates_only_inside_clarabel() {
                 sent.record(now, cmd);
                 last = cmd;
                 total += count() - before;
+                active_counts.push(mpc.active_obstacles().len());
                 plant.command(cmd).unwrap();
                 plant.advance(settings.dt);
             }
-            let clarabel = mpc.backend().allocations - backend_before;
+            let clarabel = in_backends(&mpc) - backend_before;
+            active_counts.dedup();
+            assert!(
+                active_counts.len() >= 2,
+                "N={horizon} {hessian:?}: the circles within reach never changed: {active_counts:?}"
+            );
             eprintln!(
                 "N={horizon} {hessian:?}: {ticks} ticks, {solves} QP solves, {clarabel} allocations inside Clarabel \
                  ({:.1} per solve), {} elsewhere",

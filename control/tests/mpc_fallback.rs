@@ -115,7 +115,7 @@ fn build() -> (Mpc<Poisonable, Rk4Model, Flaky>, Script, Rc<Cell<bool>>) {
         move |l, d, s| {
             Ok(Flaky {
                 inner: ClarabelBackend::new(l, d, s)?,
-                script: s2,
+                script: s2.clone(),
                 nan: vec![],
                 poisoned: false,
             })

@@ -188,3 +188,41 @@ fn the_obstacle_weight_rises_while_penetration_is_bought_and_resets_with_a_new_g
     mpc.set_goal(Goal::new(-4.0, 0.0, 0.0), &obstacles).unwrap();
     assert_eq!(mpc.obstacle_weight(), settings.obstacle_slack_weight);
 }
+
+/// Issue 30: the QP has rows only for the circles within the horizon's reach.
+/// A circle beyond it changes nothing (the same QP as open ground, so the
+/// same commands bit for bit); one within it gets rows.
+#[test]
+fn circles_beyond_reach_get_no_rows_and_change_nothing() {
+    let p = MachineParams::default();
+    let settings = MpcSettings::default();
+    let reach = settings.obstacle_reach(&p);
+    let goal = Goal::new(6.0, 0.0, 0.0);
+    // Behind the start, its edge 0.5 m beyond reach of the front axle.
+    let far = Obstacle::new(-(reach + 0.5 + 1.0), 0.0, 1.0);
+    let near = Obstacle::new(0.0, 3.0, 1.0);
+    let mut open = Mpc::new(p, attractive(), None, settings).unwrap();
+    let mut with_far = Mpc::new(p, attractive(), None, settings).unwrap();
+    open.set_goal(goal, &[]).unwrap();
+    with_far.set_goal(goal, &[far]).unwrap();
+    let x = State::new(0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+    for tick in 0..5 {
+        let now = tick as f64 * settings.dt;
+        let a = open.step(&x, now).unwrap().clone();
+        let b = with_far.step(&x, now).unwrap().clone();
+        assert_eq!(with_far.layout().n_obs, 0);
+        assert!(with_far.active_obstacles().is_empty());
+        assert_eq!(a.command, b.command, "tick {tick}");
+        assert_eq!(a.states, b.states, "tick {tick}");
+        open.sent(now, a.command);
+        with_far.sent(now, b.command);
+    }
+    // Within reach (and the far one still not): one circle's rows, the near one.
+    let mut mpc = Mpc::new(p, attractive(), None, settings).unwrap();
+    mpc.set_goal(goal, &[far, near]).unwrap();
+    mpc.step(&x, 0.0).unwrap();
+    assert_eq!(mpc.layout().n_obs, 1);
+    assert_eq!(mpc.active_obstacles(), &[near]);
+    // The reach covers the horizon at 1.25 × top speed and the rear axle.
+    assert!(reach >= 1.25 * p.v_max * settings.horizon as f64 * settings.dt + p.l_f + p.l_r);
+}

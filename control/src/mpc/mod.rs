@@ -20,6 +20,13 @@
 //! pattern), `cost`, `dynamics`, `constraints`, `qp` (solver backend), `sqp`
 //! (one tick), `solution` (what a tick returns).
 //!
+//! Rows that exist (issue 30): the QP constrains only the circles within the
+//! horizon's reach of the machine ([`reachable_obstacles`]). One QP (layout,
+//! values, solver) per count of such circles, 0 to `max_obstacles`, is built
+//! at start-up; a tick uses the one of its count, so no zero rows are
+//! factored, open ground pays nothing for obstacles, and a change of the set
+//! needs no symbolic factorisation in the tick.
+//!
 //! Allocation: nothing in a tick allocates except inside Clarabel's `solve`
 //! (its timers; counted in `tests/mpc_alloc.rs`).
 
@@ -57,9 +64,11 @@ pub struct Mpc<C: StageCost, D: Dynamics = Rk4Model, B: QpBackend = ClarabelBack
     cost_ws: C::Workspace,
     dynamics: D,
     actor: Option<(Actor, ActorWorkspace)>,
-    layout: QpLayout,
-    backend: B,
-    data: QpData,
+    /// `qps[n]`: the QP with rows for n circles, n = 0..=max_obstacles.
+    qps: Vec<Qp<B>>,
+    /// The circles within reach at this tick (the rows of `qps[n_active]`).
+    active: [Obstacle; MAX_OBSTACLES],
+    n_active: usize,
     delay: DelayCompensator,
     /// Online actuator-gain estimate ([`crate::gain`]), used when
     /// `settings.gain_estimation`.
@@ -85,6 +94,38 @@ pub struct Mpc<C: StageCost, D: Dynamics = Rk4Model, B: QpBackend = ClarabelBack
     /// raised while the QP buys penetration (sqp.rs, `raise_obstacle_weight`).
     obstacle_weight: f64,
     solution: Solution,
+}
+
+/// One QP: its layout, its values and the solver built on them.
+struct Qp<B> {
+    layout: QpLayout,
+    data: QpData,
+    backend: B,
+}
+
+/// The circles a plan over the horizon can come near, in their given order:
+/// those whose edge is within `reach` of the front axle at `x`, where `reach`
+/// covers the horizon at the top speed (soft bounds included), the rear
+/// axle's lever and the largest margin. Writes them to `out` and returns how
+/// many.
+pub fn reachable_obstacles(
+    params: &MachineParams,
+    settings: &MpcSettings,
+    x: &State,
+    obstacles: &[Obstacle],
+    out: &mut [Obstacle; MAX_OBSTACLES],
+) -> usize {
+    let reach = settings.obstacle_reach(params);
+    let q = crate::obstacle::AxlePoint::Front.position(params, x);
+    let mut n = 0;
+    for o in obstacles {
+        // A non-finite pose keeps every circle: the tick falls back anyway.
+        if !(o.clearance_of(q) > reach) && n < MAX_OBSTACLES {
+            out[n] = *o;
+            n += 1;
+        }
+    }
+    n
 }
 
 impl<C: StageCost> Mpc<C> {
@@ -115,14 +156,23 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
         dynamics: D,
         actor: Option<Actor>,
         settings: MpcSettings,
-        make_backend: impl FnOnce(&QpLayout, &QpData, &MpcSettings) -> Result<B, MpcError>,
+        mut make_backend: impl FnMut(&QpLayout, &QpData, &MpcSettings) -> Result<B, MpcError>,
     ) -> Result<Self, MpcError> {
         params.validate()?;
         settings.validate()?;
         let n = settings.horizon;
-        let layout = QpLayout::new(n, settings.max_obstacles, settings.obstacle_constraint);
-        let data = nominal_data(&layout, &params, &settings, &dynamics);
-        let backend = make_backend(&layout, &data, &settings)?;
+        let qps = (0..=settings.max_obstacles)
+            .map(|n_obs| {
+                let layout = QpLayout::new(n, n_obs, settings.obstacle_constraint);
+                let data = nominal_data(&layout, &params, &settings, &dynamics);
+                let backend = make_backend(&layout, &data, &settings)?;
+                Ok(Qp {
+                    layout,
+                    data,
+                    backend,
+                })
+            })
+            .collect::<Result<Vec<_>, MpcError>>()?;
         let mut delay =
             DelayCompensator::new(params, settings.delay, settings.dt).map_err(|_| {
                 MpcError::Setting {
@@ -145,9 +195,9 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
             cost_ws,
             dynamics,
             actor,
-            layout,
-            backend,
-            data,
+            qps,
+            active: [Obstacle::default(); MAX_OBSTACLES],
+            n_active: 0,
             delay,
             gain: GainEstimator::new(params, settings.delay, settings.dt),
             delay_estimate,
@@ -173,8 +223,9 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
         &self.params
     }
 
+    /// The layout of the QP in use (the last tick's circles within reach).
     pub fn layout(&self) -> &QpLayout {
-        &self.layout
+        &self.qps[self.n_active].layout
     }
 
     pub fn goal(&self) -> Option<Goal> {
@@ -192,12 +243,22 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
 
     /// The values of the last QP built (for diagnostics and tests).
     pub fn qp_data(&self) -> &QpData {
-        &self.data
+        &self.qps[self.n_active].data
     }
 
-    /// The QP backend (e.g. to read multipliers in tests).
+    /// The QP backend in use (e.g. to read multipliers in tests).
     pub fn backend(&self) -> &B {
-        &self.backend
+        &self.qps[self.n_active].backend
+    }
+
+    /// Every QP backend, one per count of circles within reach (0 first).
+    pub fn backends(&self) -> impl Iterator<Item = &B> {
+        self.qps.iter().map(|qp| &qp.backend)
+    }
+
+    /// The circles the last tick's QP constrained (those within reach).
+    pub fn active_obstacles(&self) -> &[Obstacle] {
+        &self.active[..self.n_active]
     }
 
     /// Forgets the goal and the plan, and keeps the command history: the
@@ -261,10 +322,10 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
                 theta: goal.theta,
             });
         }
-        if obstacles.len() > self.layout.n_obs {
+        if obstacles.len() > self.settings.max_obstacles {
             return Err(MpcError::TooManyObstacles {
                 given: obstacles.len(),
-                max: self.layout.n_obs,
+                max: self.settings.max_obstacles,
             });
         }
         for (i, o) in obstacles.iter().enumerate() {

@@ -5,8 +5,8 @@
 
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{
-    DefaultSettingsBuilder, DefaultSolver, IPSolver, NonnegativeConeT, SolverStatus,
-    SupportedConeT, ZeroConeT,
+    DefaultSettings, DefaultSettingsBuilder, DefaultSolver, IPSolver, NonnegativeConeT,
+    SolverStatus, SupportedConeT, ZeroConeT,
 };
 
 use super::layout::QpLayout;
@@ -118,6 +118,36 @@ impl ClarabelBackend {
     /// Builds the solver on `layout`'s pattern with `data` as the nominal values
     /// its equilibration is computed from.
     pub fn new(layout: &QpLayout, data: &QpData, settings: &MpcSettings) -> Result<Self, MpcError> {
+        Self::with_settings(layout, data, Self::settings(settings)?)
+    }
+
+    /// Clarabel's settings for `settings`: no presolve and no zero-dropping
+    /// (data updates need the pattern kept), quiet, the MPC's tolerance,
+    /// iteration and time limits, refinement and equilibration.
+    pub fn settings(settings: &MpcSettings) -> Result<DefaultSettings<f64>, MpcError> {
+        let tol = settings.qp_tolerance;
+        DefaultSettingsBuilder::default()
+            .verbose(false)
+            .presolve_enable(false)
+            .input_sparse_dropzeros(false)
+            .max_iter(settings.qp_max_iterations)
+            .time_limit(settings.time_budget)
+            .tol_gap_abs(tol)
+            .tol_gap_rel(tol)
+            .tol_feas(tol)
+            .iterative_refinement_enable(settings.qp_iterative_refinement)
+            .equilibrate_enable(settings.qp_equilibrate)
+            .build()
+            .map_err(|e| MpcError::QpSetup(e.to_string()))
+    }
+
+    /// [`Self::new`] with Clarabel's settings given (e.g. to measure others:
+    /// `benches/mpc.rs`'s probe).
+    pub fn with_settings(
+        layout: &QpLayout,
+        data: &QpData,
+        s: DefaultSettings<f64>,
+    ) -> Result<Self, MpcError> {
         let p = CscMatrix::new(
             layout.p.rows,
             layout.p.cols,
@@ -134,20 +164,6 @@ impl ClarabelBackend {
         );
         let cones: [SupportedConeT<f64>; 2] =
             [ZeroConeT(layout.n_eq), NonnegativeConeT(layout.n_ineq)];
-        let tol = settings.qp_tolerance;
-        let s = DefaultSettingsBuilder::default()
-            .verbose(false)
-            .presolve_enable(false)
-            .input_sparse_dropzeros(false)
-            .max_iter(settings.qp_max_iterations)
-            .time_limit(settings.time_budget)
-            .tol_gap_abs(tol)
-            .tol_gap_rel(tol)
-            .tol_feas(tol)
-            .iterative_refinement_enable(settings.qp_iterative_refinement)
-            .equilibrate_enable(settings.qp_equilibrate)
-            .build()
-            .map_err(|e| MpcError::QpSetup(e.to_string()))?;
         let solver = DefaultSolver::new(&p, &data.q, &a, &data.b, &cones, s)
             .map_err(|e| MpcError::QpSetup(e.to_string()))?;
         if !solver.is_data_update_allowed() {

@@ -186,6 +186,20 @@ impl MpcSettings {
         }
     }
 
+    /// How far from the front axle [m] a circle's edge can matter to a plan
+    /// over the horizon (issue 30: only those get QP rows): the horizon
+    /// driven at 1.25 × the top speed (the speed bounds are soft, and a
+    /// machine with an actuator gain above 1 goes faster), the rear axle's
+    /// lever L_f + L_r, the larger planned margin, and 0.5 m so that a circle
+    /// enters the QP well before its rows could bind.
+    pub fn obstacle_reach(&self, p: &crate::model::MachineParams) -> f64 {
+        1.25 * p.v_max * self.horizon as f64 * self.dt
+            + p.l_f
+            + p.l_r
+            + self.obstacle_margin.max(self.obstacle_margin_rear)
+            + 0.5
+    }
+
     /// Checks every field; the error names the first bad one.
     pub fn validate(&self) -> Result<(), MpcError> {
         if !(1..=MAX_HORIZON).contains(&self.horizon) {

@@ -77,6 +77,11 @@ pub struct Solution {
     pub obstacle_multiplier: f64,
     /// Wall time of the whole tick.
     pub solve_time: Duration,
+    /// Part of it spent in the critic's derivatives (the cost blocks).
+    pub derivatives_time: Duration,
+    /// Part of it spent assembling the rest of the QP (dynamics' Jacobians,
+    /// bounds, obstacle rows).
+    pub assembly_time: Duration,
     /// Part of it spent in the QP solver (data update and solve).
     pub qp_time: Duration,
 }
@@ -100,6 +105,8 @@ impl Solution {
             slack_cost: 0.0,
             obstacle_multiplier: 0.0,
             solve_time: Duration::ZERO,
+            derivatives_time: Duration::ZERO,
+            assembly_time: Duration::ZERO,
             qp_time: Duration::ZERO,
         }
     }

@@ -16,7 +16,7 @@ use super::layout::{QpLayout, AXLE_POINTS, NU, NX, NZ};
 use super::qp::{QpBackend, QpStatus};
 use super::settings::{MpcError, MpcSettings};
 use super::solution::{FallbackReason, StepStatus};
-use super::{Mpc, Solution};
+use super::{Mpc, Qp, Solution};
 
 /// The linear slack penalties in q (constant).
 pub(super) fn fill_slack_costs(layout: &QpLayout, settings: &MpcSettings, q: &mut [f64]) {
@@ -74,11 +74,21 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
             *measured
         };
         self.solution.initial_state = x_hat;
+        // The QP of this tick: rows for the circles within reach of x̂.
+        self.n_active = super::reachable_obstacles(
+            &self.params,
+            &self.settings,
+            &x_hat,
+            &self.obstacles[..self.n_obstacles],
+            &mut self.active,
+        );
         self.solution.qp_iterations = 0;
         self.solution.sqp_iterations = 0;
         self.solution.step_norm = 0.0;
         self.solution.restarted = false;
         self.solution.qp_time = Duration::ZERO;
+        self.solution.derivatives_time = Duration::ZERO;
+        self.solution.assembly_time = Duration::ZERO;
         self.solution.qp_status = QpStatus::NotRun;
         self.solution.cost = f64::NAN;
 
@@ -236,19 +246,20 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
             return Some(FallbackReason::NonFiniteData);
         }
         let qp_start = Instant::now();
-        if self.backend.update(&self.data).is_err() {
+        let qp = &mut self.qps[self.n_active];
+        if qp.backend.update(&qp.data).is_err() {
             self.solution.qp_status = QpStatus::UpdateFailed;
             return Some(FallbackReason::QpFailed);
         }
-        let outcome = self.backend.solve();
+        let outcome = qp.backend.solve();
         self.solution.qp_time += qp_start.elapsed();
         self.solution.qp_status = outcome.status;
         self.solution.qp_iterations += outcome.iterations;
         if !outcome.status.is_usable() {
             return Some(FallbackReason::QpFailed);
         }
-        let w = self.backend.primal();
-        if !(w.len() == self.layout.n_var && w.iter().all(|v| v.is_finite())) {
+        let w = qp.backend.primal();
+        if !(w.len() == qp.layout.n_var && w.iter().all(|v| v.is_finite())) {
             return Some(FallbackReason::NonFiniteSolution);
         }
         self.take_step();
@@ -260,8 +271,11 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
     /// as x₀. Returns false if any value is not finite.
     fn build_qp(&mut self, x_hat: &State, goal: &Goal) -> bool {
         let s = self.settings;
-        let l = &self.layout;
-        let d = &mut self.data;
+        let Qp {
+            layout: l, data: d, ..
+        } = &mut self.qps[self.n_active];
+        let l = &*l;
+        let derivatives_start = Instant::now();
         let mut cost = 0.0;
         // Cost blocks (paper eq. 19–21).
         let mut der = Derivatives::default();
@@ -327,6 +341,8 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
             }
         }
         self.solution.cost = cost;
+        let assembly_start = Instant::now();
+        self.solution.derivatives_time += assembly_start - derivatives_start;
         // Initial state and linearised dynamics.
         for i in 0..NX {
             d.b[i] = x_hat[i] - self.xs[0][i];
@@ -362,7 +378,7 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
             ..p
         };
         fill_bounds(l, &bounds, &self.xs, &self.us, &mut d.b);
-        let obstacles = &self.obstacles[..self.n_obstacles];
+        let obstacles = &self.active[..self.n_active];
         fill_obstacles(
             l,
             &self.params,
@@ -375,7 +391,9 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
             &mut d.a,
             &mut d.b,
         );
-        d.is_finite()
+        let finite = d.is_finite();
+        self.solution.assembly_time += assembly_start.elapsed();
+        finite
     }
 
     /// Applies α·Δ from the QP solution, projects the controls onto their box
@@ -401,20 +419,22 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
         }
     }
 
-    /// Puts `weight` on every obstacle slack of the QP's q.
+    /// Puts `weight` on every obstacle slack of every QP's q.
     pub(super) fn set_obstacle_weight(&mut self, weight: f64) {
         self.obstacle_weight = weight;
-        if self.layout.n_obs > 0 {
-            for k in 0..self.settings.horizon {
-                self.data.q[self.layout.obstacle_slack(k)] = weight;
+        for qp in &mut self.qps {
+            if qp.layout.n_obs > 0 {
+                for k in 0..qp.layout.horizon {
+                    qp.data.q[qp.layout.obstacle_slack(k)] = weight;
+                }
             }
         }
     }
 
     fn take_step(&mut self) {
         let s = self.settings;
-        let l = &self.layout;
-        let w = self.backend.primal();
+        let qp = &self.qps[self.n_active];
+        let (l, w) = (&qp.layout, qp.backend.primal());
         let alpha = s.step_length;
         let mut norm: f64 = 0.0;
         for k in 0..=s.horizon {
@@ -454,7 +474,7 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
             slack_cost += self.obstacle_weight * v;
         }
         self.solution.slack_cost = slack_cost;
-        let z = self.backend.dual();
+        let z = qp.backend.dual();
         let mut multiplier: f64 = 0.0;
         for k in 0..s.horizon {
             let mut stage = 0.0;
