@@ -19,9 +19,28 @@ venv=target/python-examples
 [ -x "$venv/bin/python" ] || python3 -m venv "$venv"
 "$venv/bin/pip" install -q -r examples/requirements.txt
 
+# WLNAV_TIMING_SCALE > 1 (a slower CPU; the arm64 binaries under qemu, scripts/cross-check.sh):
+# the daemon's solver budget, wlnavd's default mpc.time_budget of 0.1 s (also its start-up
+# self-test's), times that factor, in a copy of the example's configuration (weights
+# paths made absolute, as the copy lives in target/).
+scale=${WLNAV_TIMING_SCALE:-1}
+budget_config() {
+  local name=$1 config=$2 out=target/example-$1.toml
+  if [ -n "$config" ]; then
+    sed "s#\"\.\./#\"$PWD/#" "$config" > "$out"
+  else
+    : > "$out"
+  fi
+  printf '\n[mpc]\ntime_budget = %s\n' "$(python3 -c "print(0.1 * float('$scale'))")" >> "$out"
+  echo "$out"
+}
+
 run() {
   local name=$1 config=$2
   shift 2
+  if [ "$scale" != 1 ]; then
+    config=$(budget_config "$name" "$config")
+  fi
   local prefix="wlnav-example-$name-$$" log="target/example-$name.log"
   local args=(--sim --prefix "$prefix")
   [ -n "$config" ] && args+=(--config "$config")
