@@ -195,7 +195,12 @@ fn the_obstacle_weight_rises_while_penetration_is_bought_and_resets_with_a_new_g
 #[test]
 fn circles_beyond_reach_get_no_rows_and_change_nothing() {
     let p = MachineParams::default();
-    let settings = MpcSettings::default();
+    // No time limit: two solves compared bit for bit must not differ by one
+    // of them timing out on a loaded (or emulated) machine.
+    let settings = MpcSettings {
+        time_budget: 1e3,
+        ..MpcSettings::default()
+    };
     let reach = settings.obstacle_reach(&p);
     let goal = Goal::new(6.0, 0.0, 0.0);
     // Behind the start, its edge 0.5 m beyond reach of the front axle.
