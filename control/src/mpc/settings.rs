@@ -69,8 +69,9 @@ pub struct MpcSettings {
     /// longer (+0.016 m against −0.028 m) but missed `c_obstacles` and one
     /// more goal of obstacles200 (README, "robustness"). ≥ 0.
     pub obstacle_margin_rear: f64,
-    /// Obstacle slots reserved in the QP (its sparsity pattern is fixed), at
-    /// most 8. Default 8.
+    /// Most circles a goal may have, at most 8. Default 8. One QP per count
+    /// 0..=max_obstacles is built at start-up; a tick uses the one of the
+    /// circles within reach ([`MpcSettings::obstacle_reach`]).
     pub max_obstacles: usize,
     /// Estimate the actuator gain online and divide the commands by it
     /// ([`crate::gain`]; DESIGN §12). Default true. On a machine without gain
