@@ -135,7 +135,9 @@ impl Drop for Squatter {
     }
 }
 
-/// The file name of this test binary: the squatter's executable.
+/// The file name of this test binary: the squatter's executable. Under an emulator (the
+/// arm64 check, binfmt_misc and qemu) the holder is named by this path with the emulator
+/// after it (shm-ipc's holders), so the name is found there too.
 fn own_exe_name() -> String {
     std::env::current_exe()
         .unwrap()
