@@ -22,7 +22,7 @@ use clap::{Parser, Subcommand, ValueEnum};
 use control::critic::HessianMode;
 use control::envelope::EnvelopeSettings;
 use control::mpc::{MpcSettings, ObstacleConstraint};
-use control::planner::{NavigatorSettings, PlannerKind};
+use control::planner::{NavigatorSettings, PlannerKind, Tracking};
 use control::plant::PlantConfig;
 use control::scenario;
 use control::MachineParams;
@@ -218,6 +218,10 @@ enum Command {
         /// L1 penalty per metre of obstacle penetration (default: the daemon's).
         #[arg(long)]
         obstacle_slack_weight: Option<f64>,
+        /// Time budget of one tick [s] (default: the daemon's). A larger one makes
+        /// an evaluation on a loaded machine measure the method, not the load.
+        #[arg(long, value_name = "S")]
+        time_budget: Option<f64>,
         /// Plant input delay [s] (compensated by the MPC).
         #[arg(long, default_value_t = 0.0)]
         delay: f64,
@@ -246,6 +250,10 @@ enum Command {
         /// Navigator: distance between subgoals along the path [m].
         #[arg(long)]
         subgoal_spacing: Option<f64>,
+        /// Navigator: follow a planned path with a carrot this far ahead on it [m]
+        /// instead of point subgoals (issue 27).
+        #[arg(long, value_name = "M")]
+        carrot_distance: Option<f64>,
         /// Navigator: clearance margin of the planned route [m].
         #[arg(long)]
         route_margin: Option<f64>,
@@ -375,6 +383,7 @@ fn main() -> Result<()> {
             obstacle_margin,
             obstacle_margin_rear,
             obstacle_slack_weight,
+            time_budget,
             delay,
             lag,
             duration,
@@ -384,6 +393,7 @@ fn main() -> Result<()> {
             planner,
             subgoal_radius,
             subgoal_spacing,
+            carrot_distance,
             route_margin,
             replan_after,
             direct_margin,
@@ -418,6 +428,7 @@ fn main() -> Result<()> {
                 obstacle_margin: obstacle_margin.unwrap_or(d.obstacle_margin),
                 obstacle_margin_rear: obstacle_margin_rear.unwrap_or(d.obstacle_margin_rear),
                 obstacle_slack_weight: obstacle_slack_weight.unwrap_or(d.obstacle_slack_weight),
+                time_budget: time_budget.unwrap_or(d.time_budget),
                 gain_estimation: d.gain_estimation && !no_gain_estimation,
                 delay_estimation: d.delay_estimation && !no_delay_estimation,
                 ..cfg.mpc
@@ -434,6 +445,12 @@ fn main() -> Result<()> {
                     },
                     subgoal_radius: subgoal_radius.unwrap_or(nd.subgoal_radius),
                     subgoal_spacing: subgoal_spacing.unwrap_or(nd.subgoal_spacing),
+                    tracking: if carrot_distance.is_some() {
+                        Tracking::Carrot
+                    } else {
+                        nd.tracking
+                    },
+                    carrot_distance: carrot_distance.unwrap_or(nd.carrot_distance),
                     clearance_margin: route_margin.unwrap_or(nd.clearance_margin),
                     replan_after: replan_after.unwrap_or(nd.replan_after),
                     direct_margin: direct_margin.unwrap_or(nd.direct_margin),

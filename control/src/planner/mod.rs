@@ -19,6 +19,7 @@
 //! milliseconds (bounded by the expansion and node limits; see
 //! `docs/global-layer.md`); `update` without a replan takes microseconds.
 
+pub mod carrot;
 pub mod grid;
 pub mod hybrid_astar;
 pub mod primitives;
@@ -63,10 +64,36 @@ impl PlannerKind {
     }
 }
 
+/// What the MPC is given to drive along a planned path (issue 27).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Tracking {
+    /// Point subgoals every `subgoal_spacing`, each passed within `subgoal_radius`.
+    Subgoals,
+    /// A pose on the path `carrot_distance` ahead of the machine's projection
+    /// onto it, moved every tick ([`carrot`]); the subgoals remain the
+    /// progress markers of the stall logic.
+    Carrot,
+}
+
+impl Tracking {
+    pub fn name(self) -> &'static str {
+        match self {
+            Tracking::Subgoals => "subgoals",
+            Tracking::Carrot => "carrot",
+        }
+    }
+}
+
 /// Everything the navigator is tuned with; `Default` gives the measured best.
 #[derive(Debug, Clone, PartialEq)]
 pub struct NavigatorSettings {
     pub planner: PlannerKind,
+    /// What the MPC drives to along a planned path.
+    pub tracking: Tracking,
+    /// Arc length of path between the machine's projection and the carrot
+    /// [m] (`Tracking::Carrot`). Default 3: beyond what the 2 s horizon covers
+    /// at v_max, so the critic does not brake for it.
+    pub carrot_distance: f64,
     /// A subgoal is passed (the next one becomes the target) when the front
     /// axle is within this distance of it [m]. Default 1.0: before the MPC
     /// slows down for it.
@@ -161,6 +188,8 @@ impl Default for NavigatorSettings {
     fn default() -> Self {
         Self {
             planner: PlannerKind::HybridAStar,
+            tracking: Tracking::Subgoals,
+            carrot_distance: 3.0,
             subgoal_radius: 1.0,
             subgoal_spacing: 2.5,
             progress: ProgressSettings::default(),
@@ -210,6 +239,7 @@ impl NavigatorSettings {
     pub fn validate(&self) -> Result<(), NavError> {
         let positive = [
             ("subgoal_radius", self.subgoal_radius),
+            ("carrot_distance", self.carrot_distance),
             ("subgoal_spacing", self.subgoal_spacing),
             ("progress.timeout", self.progress.timeout),
             ("replan_after", self.replan_after),
@@ -434,7 +464,11 @@ pub struct Navigator {
     networks: Option<Networks>,
     planner: Planner,
     path: Vec<PathPose>,
+    /// The machine's projection onto `path` (`Tracking::Carrot`).
+    path_index: usize,
     route: Vec<Goal>,
+    /// Each route entry's index in `path` (the goal's is `path.len()`).
+    route_path_index: Vec<usize>,
     route_index: usize,
     goal: Option<Goal>,
     checker: ProgressChecker,
@@ -505,7 +539,9 @@ impl Navigator {
             networks,
             planner,
             path: Vec::with_capacity(settings.max_nodes),
+            path_index: 0,
             route: Vec::with_capacity(settings.max_nodes + 1),
+            route_path_index: Vec::with_capacity(settings.max_nodes + 1),
             route_index: 0,
             goal: None,
             checker: ProgressChecker::new(settings.progress),
@@ -616,10 +652,10 @@ impl Navigator {
             self.pending_no_route = false;
             self.advance(x, now);
         }
-        let target = self.route[self.route_index];
+        let (target, final_target) = self.drive_target(x);
         NavStep::Drive {
             target,
-            final_target: self.route_index + 1 == self.route.len(),
+            final_target,
         }
     }
 
@@ -657,7 +693,9 @@ impl Navigator {
     pub fn clear(&mut self) {
         self.goal = None;
         self.route.clear();
+        self.route_path_index.clear();
         self.path.clear();
+        self.path_index = 0;
         self.route_index = 0;
         self.checker = ProgressChecker::new(self.settings.progress);
         self.window_target = None;
@@ -668,16 +706,61 @@ impl Navigator {
         self.aborted = None;
     }
 
-    /// Passes every subgoal within `subgoal_radius` (never the goal).
+    /// Passes every subgoal within `subgoal_radius` (never the goal); with a
+    /// carrot also every subgoal the projection onto the path has passed (a
+    /// carrot may cut a corner at more than the radius from its subgoal).
     fn advance(&mut self, x: &State, now: f64) {
+        let s = &self.settings;
+        let following = s.tracking == Tracking::Carrot && !self.path.is_empty();
+        if following {
+            self.path_index = carrot::project(
+                &self.path,
+                self.path_index,
+                x[ix::X],
+                x[ix::Y],
+                2.0 * s.carrot_distance,
+                s.subgoal_radius,
+            );
+        }
         while self.route_index + 1 < self.route.len() {
             let t = &self.route[self.route_index];
-            if (x[ix::X] - t.x).hypot(x[ix::Y] - t.y) >= self.settings.subgoal_radius {
+            let near = (x[ix::X] - t.x).hypot(x[ix::Y] - t.y) < s.subgoal_radius;
+            let behind = following
+                && self
+                    .route_path_index
+                    .get(self.route_index)
+                    .is_some_and(|&i| i < self.path_index);
+            if !(near || behind) {
                 break;
             }
             self.route_index += 1;
             self.last_progress = now;
         }
+    }
+
+    /// What the MPC drives to: the current route entry, or with a carrot the
+    /// pose `carrot_distance` ahead on the path (the goal once the carrot
+    /// reaches the path's end).
+    fn drive_target(&mut self, x: &State) -> (Goal, bool) {
+        let last = self.route.len() - 1;
+        let s = &self.settings;
+        if s.tracking == Tracking::Carrot && !self.path.is_empty() && self.route_index < last {
+            let world = &self.world;
+            let k = carrot::carrot(
+                &self.path,
+                self.path_index,
+                s.carrot_distance,
+                s.subgoal_radius,
+                |p| line_of_sight_free(world, x, p, s.sample_spacing),
+            );
+            if k + 1 < self.path.len() {
+                let p = &self.path[k];
+                return (Goal::new(p.x, p.y, p.theta), false);
+            }
+            // The carrot has reached the path's end: the last leg is the goal's.
+            self.route_index = last;
+        }
+        (self.route[self.route_index], self.route_index == last)
     }
 
     /// Decides direct or not (unless `force`), plans, writes the route.
@@ -756,12 +839,15 @@ impl Navigator {
                     spacing,
                     self.settings.subgoal_radius,
                     &mut self.route,
+                    &mut self.route_path_index,
                 );
             } else {
                 self.route.clear();
+                self.route_path_index.clear();
                 self.route.push(goal);
             }
             self.route_index = 0;
+            self.path_index = 0;
         }
         report.duration = t0.elapsed();
         self.last_plan = Some(report);
@@ -805,6 +891,7 @@ impl Navigator {
             Some(a) => {
                 self.path.clear();
                 self.route.clear();
+                self.route_path_index.clear();
                 self.route.push(a);
                 self.route.push(*goal);
                 self.route_index = 0;
@@ -848,19 +935,43 @@ impl Navigator {
     }
 }
 
-/// The circle a footprint is deepest inside, and how deep, if any.
+/// Both axle points keep the margin at the poses along the straight line
+/// from `from` to `to`, `spacing` apart, heading along the line (against it
+/// when `reverse`: the rear axle leads) and unarticulated; the pose at `from`
+/// itself only when `with_from`.
+fn line_free(
+    world: &World,
+    from: [f64; 2],
+    to: [f64; 2],
+    reverse: bool,
+    spacing: f64,
+    with_from: bool,
+) -> bool {
+    let (dx, dy) = (to[0] - from[0], to[1] - from[1]);
+    let heading = dy.atan2(dx) + if reverse { std::f64::consts::PI } else { 0.0 };
+    let n = (dx.hypot(dy) / spacing).ceil().max(1.0) as usize;
+    (usize::from(!with_from)..=n).all(|k| {
+        let f = k as f64 / n as f64;
+        world.pose_free(from[0] + f * dx, from[1] + f * dy, heading, 0.0)
+    })
+}
+
+/// The carrot's line of sight: the straight line from the machine's front
+/// axle to the path pose `p` (the machine's own pose is not tested: it may
+/// already be closer than the margin).
+fn line_of_sight_free(world: &World, x: &State, p: &PathPose, spacing: f64) -> bool {
+    let from = [x[ix::X], x[ix::Y]];
+    line_free(world, from, [p.x, p.y], p.direction < 0, spacing, false)
+}
+
 /// Both axle points free along the straight line from the start's front axle
 /// to the goal's, heading along the line and unarticulated, plus both end poses.
 fn straight_corridor_free(world: &World, start: &State, goal: &Goal, spacing: f64) -> bool {
-    let (dx, dy) = (goal.x - start[ix::X], goal.y - start[ix::Y]);
-    let len = dx.hypot(dy);
-    let heading = dy.atan2(dx);
-    let n = (len / spacing).ceil() as usize;
-    let along = (0..=n).all(|k| {
-        let f = if n == 0 { 1.0 } else { k as f64 / n as f64 };
-        world.pose_free(start[ix::X] + f * dx, start[ix::Y] + f * dy, heading, 0.0)
-    });
-    along && world.state_free(start) && world.pose_free(goal.x, goal.y, goal.theta, 0.0)
+    let from = [start[ix::X], start[ix::Y]];
+    line_free(world, from, [goal.x, goal.y], false, spacing, true)
+        && world.state_free(start)
+        && world.pose_free(goal.x, goal.y, goal.theta, 0.0)
 }
+
 #[cfg(test)]
 mod tests;

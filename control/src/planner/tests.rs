@@ -337,6 +337,86 @@ fn subgoals_are_passed_within_the_radius_and_the_last_target_is_the_goal() {
 }
 
 #[test]
+fn a_carrot_leads_along_the_path_passes_the_subgoals_and_ends_at_the_goal() {
+    let settings = NavigatorSettings {
+        tracking: Tracking::Carrot,
+        ..NavigatorSettings::default()
+    };
+    let (lead, r) = (settings.carrot_distance, settings.subgoal_radius);
+    let mut nav = Navigator::new(params(), settings, None).unwrap();
+    let goal = Goal::new(8.0, 0.0, 0.0);
+    let obstacles = wall();
+    nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &obstacles)
+        .unwrap();
+    let path = nav.path().to_vec();
+    assert!(path.len() > 10 && nav.route().len() >= 3);
+    let arc: Vec<f64> = std::iter::once(0.0)
+        .chain(path.windows(2).scan(0.0, |s, w| {
+            *s += (w[1].x - w[0].x).hypot(w[1].y - w[0].y);
+            Some(*s)
+        }))
+        .collect();
+    let mut remaining = nav.remaining_route().len();
+    let mut reached_goal = false;
+    let (mut carrots, mut full_lead) = (0, 0);
+    // The machine driven exactly along the path, one pose per tick.
+    for (i, p) in path.iter().enumerate() {
+        let x = State::new(p.x, p.y, p.theta, p.beta, 0.5, 0.0);
+        let NavStep::Drive {
+            target,
+            final_target,
+        } = nav.update(&x, 0.2 * i as f64)
+        else {
+            panic!("aborted at pose {i}");
+        };
+        assert!(
+            nav.remaining_route().len() <= remaining,
+            "a passed subgoal came back"
+        );
+        remaining = nav.remaining_route().len();
+        if final_target {
+            assert_eq!(target, goal);
+            reached_goal = true;
+            continue;
+        }
+        assert!(
+            !reached_goal,
+            "the goal handed back to a carrot at pose {i}"
+        );
+        // A pose of the path, ahead of the machine by at most the lead.
+        let k = path
+            .iter()
+            .position(|q| Goal::new(q.x, q.y, q.theta) == target)
+            .expect("the carrot is a pose of the path");
+        let ahead = arc[k] - arc[i];
+        assert!(
+            ahead > 0.0 && ahead <= lead + 0.7,
+            "pose {i}: carrot {ahead:.2} m ahead"
+        );
+        // Never nearer than the subgoal radius (but before the path's end),
+        // mostly the full lead (cut short only where the line to it is blocked).
+        if arc[k] < arc[path.len() - 1] - 0.7 {
+            assert!(ahead >= r - 0.7, "pose {i}: carrot {ahead:.2} m ahead");
+        }
+        carrots += 1;
+        full_lead += usize::from(ahead >= lead - 0.6);
+        // Every subgoal the machine has passed along the path is gone.
+        assert!(nav.remaining_route().iter().all(|g| {
+            let j = path
+                .iter()
+                .position(|q| Goal::new(q.x, q.y, q.theta) == *g)
+                .unwrap_or(path.len());
+            j + 1 >= i
+        }));
+    }
+    assert!(reached_goal, "the last targets are the goal");
+    assert!(
+        2 * full_lead > carrots,
+        "{full_lead} of {carrots} carrots at the full lead"
+    );
+}
+
+#[test]
 fn standing_still_aborts_after_the_timeout_but_holding_the_goal_does_not() {
     let mut nav = navigator(PlannerKind::HybridAStar, false);
     let goal = Goal::new(5.0, 0.0, 0.0);

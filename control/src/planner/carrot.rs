@@ -1,0 +1,155 @@
+//! Following a planned path with a carrot (issue 27): instead of handing the
+//! MPC a point subgoal every few metres, which the goal-conditioned critic
+//! treats as a pose to converge to (it slows down for each), the target is a
+//! pose on the path a fixed arc length ahead of the machine's projection onto
+//! it (Nav2's "carrot", pure pursuit's look-ahead point). It moves every
+//! tick, so the critic never sees an intermediate goal close enough to brake
+//! for, except where the machine must stop: a cusp (forward ↔ reverse).
+//!
+//! Pure functions over the path; the navigator keeps the projection index.
+
+use super::PathPose;
+
+/// Whether the path changes direction after pose `i` (forward ↔ reverse):
+/// the machine must come to rest at `path[i]`.
+pub fn is_cusp(path: &[PathPose], i: usize) -> bool {
+    i + 1 < path.len() && i > 0 && (path[i].direction as i32) * (path[i + 1].direction as i32) < 0
+}
+
+fn step(path: &[PathPose], i: usize) -> f64 {
+    (path[i + 1].x - path[i].x).hypot(path[i + 1].y - path[i].y)
+}
+
+/// The machine's progress along the path: the index of the pose nearest to
+/// the front axle (x, y), searched from `from` over at most `window` metres
+/// of arc and never beyond the next cusp, so the index only grows and cannot
+/// jump to a later part of the path that passes close by (a path folding back
+/// over itself at a cusp). A cusp is passed when the front axle is within
+/// `cusp_radius` of it: the index then moves to the pose after it.
+pub fn project(
+    path: &[PathPose],
+    from: usize,
+    x: f64,
+    y: f64,
+    window: f64,
+    cusp_radius: f64,
+) -> usize {
+    if path.is_empty() {
+        return 0;
+    }
+    let from = from.min(path.len() - 1);
+    let distance = |i: usize| (path[i].x - x).hypot(path[i].y - y);
+    let (mut best, mut best_d) = (from, distance(from));
+    let mut arc = 0.0;
+    let mut i = from;
+    while i + 1 < path.len() && !is_cusp(path, i) && arc < window {
+        arc += step(path, i);
+        i += 1;
+        let d = distance(i);
+        if d < best_d {
+            (best, best_d) = (i, d);
+        }
+    }
+    if is_cusp(path, best) && best_d < cusp_radius {
+        best + 1
+    } else {
+        best
+    }
+}
+
+/// The carrot: the index of the pose `distance` metres of arc ahead of
+/// `from`, stopping at the next cusp and at the path's end, then moved back
+/// towards `from` while `visible` refuses it (a straight line from the
+/// machine to a carrot behind a corner would cut through the obstacle the
+/// path goes around), but never closer than `min_distance` of arc.
+pub fn carrot(
+    path: &[PathPose],
+    from: usize,
+    distance: f64,
+    min_distance: f64,
+    mut visible: impl FnMut(&PathPose) -> bool,
+) -> usize {
+    if path.is_empty() {
+        return 0;
+    }
+    let from = from.min(path.len() - 1);
+    let mut arc = 0.0;
+    let mut k = from;
+    while k + 1 < path.len() && !is_cusp(path, k) && arc < distance {
+        arc += step(path, k);
+        k += 1;
+    }
+    while k > from && arc > min_distance && !visible(&path[k]) {
+        k -= 1;
+        arc -= step(path, k);
+    }
+    k
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn pose(x: f64, y: f64, direction: i8) -> PathPose {
+        PathPose {
+            x,
+            y,
+            theta: 0.0,
+            beta: 0.0,
+            direction,
+        }
+    }
+
+    /// Forward along x from 0 to 6 in 0.5 m steps (a cusp at 6), then reverse
+    /// back to 3.
+    fn with_cusp() -> Vec<PathPose> {
+        let mut path: Vec<PathPose> = (0..=12)
+            .map(|k| pose(0.5 * k as f64, 0.0, if k == 0 { 0 } else { 1 }))
+            .collect();
+        path.extend((1..=6).map(|k| pose(6.0 - 0.5 * k as f64, 0.0, -1)));
+        path
+    }
+
+    #[test]
+    fn cusps_are_where_the_direction_flips() {
+        let path = with_cusp();
+        let cusps: Vec<usize> = (0..path.len()).filter(|&i| is_cusp(&path, i)).collect();
+        // Not the start (direction 0 → forward), not the end: the pose at x = 6.
+        assert_eq!(cusps, vec![12]);
+    }
+
+    #[test]
+    fn the_projection_grows_stops_at_a_cusp_and_passes_it_when_near() {
+        let path = with_cusp();
+        // Beside x = 2.1: nearest pose x = 2.0 (index 4).
+        assert_eq!(project(&path, 0, 2.1, 0.3, 10.0, 1.0), 4);
+        // Never backwards: a machine behind its last projection stays there.
+        assert_eq!(project(&path, 4, 0.5, 0.0, 10.0, 1.0), 4);
+        // The window limits the search: 1 m of arc from index 4 reaches x = 3.
+        assert_eq!(project(&path, 4, 5.0, 0.0, 1.0, 1.0), 6);
+        // At x = 4.4 the reverse leg's x = 4.5 (index 15) is as near as the
+        // forward leg's, but the cusp bounds the search: index 9 (x = 4.5).
+        assert_eq!(project(&path, 6, 4.4, 0.0, 10.0, 1.0), 9);
+        // Near the cusp but not within its radius: held at it.
+        assert_eq!(project(&path, 9, 6.0, 1.5, 10.0, 1.0), 12);
+        // Within the radius: onto the reverse leg.
+        assert_eq!(project(&path, 9, 5.9, 0.2, 10.0, 1.0), 13);
+        // Then it follows the reverse leg.
+        assert_eq!(project(&path, 13, 4.0, 0.0, 10.0, 1.0), 16);
+    }
+
+    #[test]
+    fn the_carrot_looks_ahead_stops_at_cusps_and_ends_and_backs_off_behind_corners() {
+        let path = with_cusp();
+        // 2 m ahead of index 2 (x = 1): x = 3 (index 6).
+        assert_eq!(carrot(&path, 2, 2.0, 0.5, |_| true), 6);
+        // Not past the cusp at index 12.
+        assert_eq!(carrot(&path, 10, 3.0, 0.5, |_| true), 12);
+        // On the reverse leg, not past the end.
+        assert_eq!(carrot(&path, 14, 5.0, 0.5, |_| true), path.len() - 1);
+        // Poses beyond x = 2 hidden: the carrot comes back to x = 2.
+        assert_eq!(carrot(&path, 0, 3.0, 0.5, |p| p.x <= 2.0), 4);
+        // Everything hidden: no closer than the minimum (1 m: x = 1).
+        assert_eq!(carrot(&path, 0, 3.0, 1.0, |_| false), 2);
+    }
+}
