@@ -260,6 +260,9 @@ enum Command {
         /// Navigator: seconds without approach before a replan.
         #[arg(long)]
         replan_after: Option<f64>,
+        /// Navigator: Hybrid A*'s heuristic weight (f = g + w h; 1 = optimal routes).
+        #[arg(long, value_name = "W")]
+        heuristic_weight: Option<f64>,
         /// Navigator: clearance the actor's roll-out keeps for "nothing in the way" [m].
         #[arg(long)]
         direct_margin: Option<f64>,
@@ -396,6 +399,7 @@ fn main() -> Result<()> {
             carrot_distance,
             route_margin,
             replan_after,
+            heuristic_weight,
             direct_margin,
             t_star,
             perturbations,
@@ -453,6 +457,7 @@ fn main() -> Result<()> {
                     carrot_distance: carrot_distance.unwrap_or(nd.carrot_distance),
                     clearance_margin: route_margin.unwrap_or(nd.clearance_margin),
                     replan_after: replan_after.unwrap_or(nd.replan_after),
+                    heuristic_weight: heuristic_weight.unwrap_or(nd.heuristic_weight),
                     direct_margin: direct_margin.unwrap_or(nd.direct_margin),
                     ..nd.clone()
                 }),
