@@ -4,7 +4,7 @@
 
 use shm_ipc::{normalize_angle, Obstacle, Pose2, MAX_OBSTACLES};
 
-use crate::vda::{self, Edge, ErrorLevel, InstantActions, Node, Order};
+use crate::vda::{self, Edge, ErrorLevel, InstantActions, Node, Order, OrderIds};
 
 /// Limits on what the bridge accepts (also reported in the factsheet).
 #[derive(Debug, Clone, PartialEq)]
@@ -128,10 +128,10 @@ pub fn parse_order(
 /// The structural checks of an order (after parsing).
 pub fn check_order(order: &Order, limits: &Limits, map_id: &str) -> Result<(), vda::Error> {
     let header_id = order.header.header_id.to_string();
-    let update_id = order.order_update_id.to_string();
+    let update_id = order.ids.order_update_id.to_string();
     let base_refs = [
         ("headerId", header_id.as_str()),
-        ("orderId", order.order_id.as_str()),
+        ("orderId", order.ids.order_id.as_str()),
         ("orderUpdateId", update_id.as_str()),
     ];
     let fail = |what: String, extra: &[(&str, &str)]| {
@@ -140,7 +140,7 @@ pub fn check_order(order: &Order, limits: &Limits, map_id: &str) -> Result<(), v
         validation("order", what, &refs)
     };
     let bad_id = |s: &str| s.is_empty() || s.len() > limits.max_id_len;
-    if bad_id(&order.order_id) {
+    if bad_id(&order.ids.order_id) {
         return Err(fail(
             format!("orderId must have 1..={} bytes", limits.max_id_len),
             &[],
@@ -370,10 +370,9 @@ pub enum Decision {
 /// sequenceId above `last_node_sequence_id`.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct OrderBook {
-    /// The current (or last) order's id; empty before the first.
-    pub order_id: String,
-    /// Its update id.
-    pub order_update_id: u64,
+    /// The current (or last) order's id and update id (empty and 0 before the first), as
+    /// the state reports them.
+    pub ids: OrderIds,
     /// The last node traversed; empty before the first order.
     pub last_node_id: String,
     /// Its sequenceId.
@@ -441,26 +440,26 @@ impl OrderBook {
     /// (`first_node_range`, or the node's allowedDeviationXY when larger).
     pub fn decide(&self, order: &Order, machine: Option<Pose2>, first_node_range: f64) -> Decision {
         let header_id = order.header.header_id.to_string();
-        let update_id = order.order_update_id.to_string();
+        let update_id = order.ids.order_update_id.to_string();
         let refs = [
             ("headerId", header_id.as_str()),
-            ("orderId", order.order_id.as_str()),
+            ("orderId", order.ids.order_id.as_str()),
             ("orderUpdateId", update_id.as_str()),
         ];
         let first = &order.nodes[0];
-        if !self.order_id.is_empty() && order.order_id == self.order_id {
-            if order.order_update_id < self.order_update_id {
+        if !self.ids.order_id.is_empty() && order.ids.order_id == self.ids.order_id {
+            if order.ids.order_update_id < self.ids.order_update_id {
                 return Decision::Reject(vda::Error::new(
                     "orderUpdateError",
                     ErrorLevel::Warning,
                     format!(
                         "orderUpdateId {} is older than the current {}",
-                        order.order_update_id, self.order_update_id
+                        order.ids.order_update_id, self.ids.order_update_id
                     ),
                     &refs,
                 ));
             }
-            if order.order_update_id == self.order_update_id {
+            if order.ids.order_update_id == self.ids.order_update_id {
                 return Decision::Duplicate;
             }
             // An update must begin at the current base's last node.
@@ -485,13 +484,21 @@ impl OrderBook {
             }
             return Decision::Update;
         }
-        if self.is_active() {
+        // The specification's flow: a new order is refused while the machine still executes
+        // one *or waits for an update of its horizon* (base done, horizon left). An order
+        // that ended with an error (`failed`) waits for nothing: a new one is welcome.
+        if !self.failed && self.has_remaining() {
+            let what = if self.is_active() {
+                "is still active"
+            } else {
+                "is still active, waiting for an update of its horizon"
+            };
             return Decision::Reject(vda::Error::new(
                 "orderUpdateError",
                 ErrorLevel::Warning,
                 format!(
-                    "order {} is still active; cancel it first (cancelOrder) or send an update",
-                    self.order_id
+                    "order {} {what}; cancel it first (cancelOrder) or send an update",
+                    self.ids.order_id
                 ),
                 &refs,
             ));
@@ -534,8 +541,7 @@ impl OrderBook {
                 let first = &order.nodes[0];
                 self.last_node_id = first.node_id.clone();
                 self.last_node_sequence_id = first.sequence_id;
-                self.order_id = order.order_id;
-                self.order_update_id = order.order_update_id;
+                self.ids = order.ids;
                 self.nodes = order.nodes;
                 self.edges = order.edges;
                 self.failed = false;
@@ -546,7 +552,7 @@ impl OrderBook {
                 self.edges.retain(|e| e.sequence_id < stitch);
                 self.nodes.extend(order.nodes);
                 self.edges.extend(order.edges);
-                self.order_update_id = order.order_update_id;
+                self.ids.order_update_id = order.ids.order_update_id;
                 self.failed = false;
             }
             Decision::Duplicate | Decision::Reject(_) => {}
@@ -668,6 +674,9 @@ mod tests {
     use super::*;
     use serde_json::json;
 
+    /// A node: (nodeId, sequenceId, released, x, y, allowedDeviationXY).
+    type N<'a> = (&'a str, u64, bool, f64, f64, f64);
+
     fn id() -> Identity {
         Identity {
             manufacturer: "wlnav".into(),
@@ -675,57 +684,69 @@ mod tests {
         }
     }
 
-    fn node(id: &str, seq: u64, released: bool, x: f64, y: f64, dev: f64) -> serde_json::Value {
-        json!({"nodeId": id, "sequenceId": seq, "released": released, "actions": [],
-               "nodePosition": {"x": x, "y": y, "mapId": "site", "allowedDeviationXY": dev}})
-    }
-
-    fn edge(id: &str, seq: u64, released: bool, a: &str, b: &str) -> serde_json::Value {
-        json!({"edgeId": id, "sequenceId": seq, "released": released, "startNodeId": a,
-               "endNodeId": b, "actions": []})
-    }
-
-    fn order_json(order_id: &str, update: u64, nodes: Vec<serde_json::Value>) -> serde_json::Value {
-        let edges: Vec<serde_json::Value> = nodes
+    /// An order's JSON: `nodes`, and an edge between each two (released as its end node).
+    fn order_json(order_id: &str, update: u64, nodes: &[N]) -> serde_json::Value {
+        let ns: Vec<_> = nodes
+            .iter()
+            .map(|(id, seq, released, x, y, dev)| {
+                json!({"nodeId": id, "sequenceId": seq, "released": released, "actions": [],
+                       "nodePosition": {"x": x, "y": y, "mapId": "site", "allowedDeviationXY": dev}})
+            })
+            .collect();
+        let es: Vec<_> = nodes
             .windows(2)
             .map(|w| {
-                let a = w[0]["nodeId"].as_str().unwrap();
-                let b = w[1]["nodeId"].as_str().unwrap();
-                edge(
-                    &format!("{a}-{b}"),
-                    w[0]["sequenceId"].as_u64().unwrap() + 1,
-                    w[1]["released"].as_bool().unwrap(),
-                    a,
-                    b,
-                )
+                json!({"edgeId": format!("{}-{}", w[0].0, w[1].0), "sequenceId": w[0].1 + 1,
+                       "released": w[1].2, "startNodeId": w[0].0, "endNodeId": w[1].0,
+                       "actions": []})
             })
             .collect();
         json!({"headerId": 1, "timestamp": "2024-01-01T00:00:00.000Z", "version": "2.0.0",
                "manufacturer": "wlnav", "serialNumber": "L1", "orderId": order_id,
-               "orderUpdateId": update, "nodes": nodes, "edges": edges})
+               "orderUpdateId": update, "nodes": ns, "edges": es})
     }
 
     fn parse(v: &serde_json::Value) -> Result<Order, vda::Error> {
         parse_order(v.to_string().as_bytes(), &id(), &Limits::default(), "site")
     }
 
+    /// A valid order.
+    fn order(order_id: &str, update: u64, nodes: &[N]) -> Order {
+        parse(&order_json(order_id, update, nodes)).unwrap()
+    }
+
+    /// A book holding `nodes` as a new order "o".
+    fn book_with(nodes: &[N]) -> OrderBook {
+        let mut book = OrderBook::default();
+        book.apply(order("o", 0, nodes), &Decision::New);
+        book
+    }
+
     fn three_nodes() -> Order {
-        parse(&order_json(
+        order(
             "o1",
             0,
-            vec![
-                node("A", 0, true, 0.0, 0.0, 0.5),
-                node("B", 2, true, 3.0, 0.0, 0.5),
-                node("C", 4, true, 6.0, 0.0, 0.0),
+            &[
+                ("A", 0, true, 0.0, 0.0, 0.5),
+                ("B", 2, true, 3.0, 0.0, 0.5),
+                ("C", 4, true, 6.0, 0.0, 0.0),
             ],
-        ))
-        .unwrap()
+        )
     }
 
     fn err_type(r: Result<Order, vda::Error>) -> (String, String) {
         let e = r.unwrap_err();
         (e.error_type, e.error_description.unwrap_or_default())
     }
+
+    fn rejected_as(d: Decision) -> String {
+        match d {
+            Decision::Reject(e) => e.error_type,
+            d => panic!("not rejected: {d:?}"),
+        }
+    }
+
+    const A: N = ("A", 0, true, 0.0, 0.0, 0.0);
 
     #[test]
     fn hostile_orders_are_validation_errors() {
@@ -734,76 +755,71 @@ mod tests {
         assert_eq!(err_type(p(b"{nonsense")).0, "validationError");
         assert_eq!(err_type(p(b"")).0, "validationError");
         // NaN is not JSON; a number beyond f64 is refused by the parser.
-        let good = order_json("o", 0, vec![node("A", 0, true, 0.0, 0.0, 0.0)]).to_string();
+        let good = order_json("o", 0, &[A]).to_string();
         assert!(p(good.as_bytes()).is_ok());
         assert!(p(good.replace("\"x\":0.0", "\"x\":NaN").as_bytes()).is_err());
         assert!(p(good.replace("\"x\":0.0", "\"x\":1e999").as_bytes()).is_err());
         let big = vec![b' '; limits.max_message_len + 1];
         assert!(err_type(p(&big)).1.contains("exceeds"));
-        let mut v = order_json("o", 0, vec![node("A", 0, true, 0.0, 0.0, 0.0)]);
-        v["version"] = json!("1.1.0");
-        assert!(err_type(parse(&v)).1.contains("version"));
-        let mut v = order_json("o", 0, vec![node("A", 0, true, 0.0, 0.0, 0.0)]);
-        v["serialNumber"] = json!("L2");
-        assert!(err_type(parse(&v)).1.contains("L2"));
+        let with = |key: &str, value: serde_json::Value| {
+            let mut v = order_json("o", 0, &[A]);
+            v[key] = value;
+            err_type(parse(&v)).1
+        };
+        assert!(with("version", json!("1.1.0")).contains("version"));
+        assert!(with("serialNumber", json!("L2")).contains("L2"));
         // Missing required array.
-        let mut v = order_json("o", 0, vec![node("A", 0, true, 0.0, 0.0, 0.0)]);
+        let mut v = order_json("o", 0, &[A]);
         v.as_object_mut().unwrap().remove("edges");
         assert!(err_type(parse(&v)).1.contains("schema"));
+        // More nodes than the limit.
+        let many: Vec<N> = (0..=limits.max_nodes as u64)
+            .map(|i| ("n", 2 * i, true, i as f64, 0.0, 0.0))
+            .collect();
+        assert!(err_type(parse(&order_json("o", 0, &many)))
+            .1
+            .contains("limit"));
     }
 
     #[test]
     fn structure_is_checked() {
+        let fails = |nodes: &[N], edit: &dyn Fn(&mut serde_json::Value)| {
+            let mut v = order_json("o", 0, nodes);
+            edit(&mut v);
+            let (ty, text) = err_type(parse(&v));
+            assert_eq!(ty, "validationError", "{text}");
+            text
+        };
+        let none = |_: &mut serde_json::Value| {};
         // sequenceIds out of order.
-        let v = order_json(
-            "o",
-            0,
-            vec![
-                node("A", 0, true, 0.0, 0.0, 0.0),
-                node("B", 4, true, 1.0, 0.0, 0.0),
-            ],
-        );
-        assert!(err_type(parse(&v)).1.contains("out of order"));
+        let ab: [N; 2] = [A, ("B", 4, true, 1.0, 0.0, 0.0)];
+        assert!(fails(&ab, &none).contains("out of order"));
         // Released after horizon.
-        let v = order_json(
-            "o",
-            0,
-            vec![
-                node("A", 0, true, 0.0, 0.0, 0.0),
-                node("B", 2, false, 1.0, 0.0, 0.0),
-                node("C", 4, true, 2.0, 0.0, 0.0),
-            ],
-        );
-        assert!(err_type(parse(&v)).1.contains("released after"));
+        let abc: [N; 3] = [
+            A,
+            ("B", 2, false, 1.0, 0.0, 0.0),
+            ("C", 4, true, 2.0, 0.0, 0.0),
+        ];
+        assert!(fails(&abc, &none).contains("released after"));
         // Wrong map.
-        let mut v = order_json("o", 0, vec![node("A", 0, true, 0.0, 0.0, 0.0)]);
-        v["nodes"][0]["nodePosition"]["mapId"] = json!("elsewhere");
-        assert!(err_type(parse(&v)).1.contains("mapId"));
+        let map = |v: &mut serde_json::Value| v["nodes"][0]["nodePosition"]["mapId"] = json!("x");
+        assert!(fails(&[A], &map).contains("mapId"));
         // Theta out of range, negative deviation.
-        let mut v = order_json("o", 0, vec![node("A", 0, true, 0.0, 0.0, 0.0)]);
-        v["nodes"][0]["nodePosition"]["theta"] = json!(4.0);
-        assert!(err_type(parse(&v)).1.contains("theta"));
-        let v = order_json("o", 0, vec![node("A", 0, true, 0.0, 0.0, -1.0)]);
-        assert!(err_type(parse(&v)).1.contains("deviation"));
+        let theta = |v: &mut serde_json::Value| v["nodes"][0]["nodePosition"]["theta"] = json!(4.0);
+        assert!(fails(&[A], &theta).contains("theta"));
+        assert!(fails(&[("A", 0, true, 0.0, 0.0, -1.0)], &none).contains("deviation"));
         // Node actions are not supported.
-        let mut v = order_json("o", 0, vec![node("A", 0, true, 0.0, 0.0, 0.0)]);
-        v["nodes"][0]["actions"] =
-            json!([{"actionType": "pick", "actionId": "p1", "blockingType": "HARD"}]);
-        assert!(err_type(parse(&v)).1.contains("pick"));
+        let pick = |v: &mut serde_json::Value| {
+            v["nodes"][0]["actions"] =
+                json!([{"actionType": "pick", "actionId": "p1", "blockingType": "HARD"}])
+        };
+        assert!(fails(&[A], &pick).contains("pick"));
         // Edge that does not connect its neighbours.
-        let mut v = order_json(
-            "o",
-            0,
-            vec![
-                node("A", 0, true, 0.0, 0.0, 0.0),
-                node("B", 2, true, 1.0, 0.0, 0.0),
-            ],
-        );
-        v["edges"][0]["endNodeId"] = json!("Z");
-        assert!(err_type(parse(&v)).1.contains("not between"));
+        let ab: [N; 2] = [A, ("B", 2, true, 1.0, 0.0, 0.0)];
+        let z = |v: &mut serde_json::Value| v["edges"][0]["endNodeId"] = json!("Z");
+        assert!(fails(&ab, &z).contains("not between"));
         // Empty order.
-        let v = order_json("o", 0, vec![]);
-        assert!(err_type(parse(&v)).1.contains("at least one node"));
+        assert!(fails(&[], &none).contains("at least one node"));
     }
 
     #[test]
@@ -814,14 +830,9 @@ mod tests {
             book.decide(&o, Some(Pose2::new(0.3, 0.0, 0.0)), 1.0),
             Decision::New
         );
-        match book.decide(&o, Some(Pose2::new(5.0, 0.0, 0.0)), 1.0) {
-            Decision::Reject(e) => assert_eq!(e.error_type, "noRouteError"),
-            d => panic!("{d:?}"),
-        }
-        match book.decide(&o, None, 1.0) {
-            Decision::Reject(e) => assert_eq!(e.error_type, "noRouteError"),
-            d => panic!("{d:?}"),
-        }
+        let far = book.decide(&o, Some(Pose2::new(5.0, 0.0, 0.0)), 1.0);
+        assert_eq!(rejected_as(far), "noRouteError");
+        assert_eq!(rejected_as(book.decide(&o, None, 1.0)), "noRouteError");
     }
 
     #[test]
@@ -848,83 +859,83 @@ mod tests {
     }
 
     #[test]
+    fn heading_deviation_counts_only_for_a_node_with_theta() {
+        let with_theta = |dev_theta: Option<f64>| {
+            let mut v = order_json(
+                "o",
+                0,
+                &[
+                    A,
+                    ("B", 2, true, 3.0, 0.0, 0.5),
+                    ("C", 4, true, 6.0, 0.0, 0.0),
+                ],
+            );
+            v["nodes"][1]["nodePosition"]["theta"] = json!(0.5);
+            if let Some(d) = dev_theta {
+                v["nodes"][1]["nodePosition"]["allowedDeviationTheta"] = json!(d);
+            }
+            let mut book = OrderBook::default();
+            book.apply(parse(&v).unwrap(), &Decision::New);
+            book.target(Pose2::default()).unwrap()
+        };
+        // θ = 0.5 within 0.2 rad: passed only with the heading within it too.
+        let t = with_theta(Some(0.2));
+        assert_eq!((t.pass_through, t.allowed_theta), (true, Some(0.2)));
+        assert!((t.goal.heading - 0.5).abs() < 1e-12);
+        assert!(passed(&t, Pose2::new(2.8, 0.0, 0.6)));
+        assert!(!passed(&t, Pose2::new(2.8, 0.0, 0.0)));
+        assert!(!passed(&t, Pose2::new(2.8, 0.0, 0.8)));
+        // A θ without an allowed heading deviation (absent or 0): the daemon's own test,
+        // at rest.
+        assert!(!with_theta(None).pass_through);
+        assert!(!with_theta(Some(0.0)).pass_through);
+    }
+
+    #[test]
     fn heading_without_theta_follows_the_way() {
-        let mut book = OrderBook::default();
-        let o = parse(&order_json(
-            "o",
-            0,
-            vec![
-                node("A", 0, true, 0.0, 0.0, 0.0),
-                node("B", 2, true, 0.0, 2.0, 0.0),
-            ],
-        ))
-        .unwrap();
-        book.apply(o, &Decision::New);
+        let book = book_with(&[A, ("B", 2, true, 0.0, 2.0, 0.0)]);
         let t = book.target(Pose2::default()).unwrap();
         assert!((t.goal.heading - std::f64::consts::FRAC_PI_2).abs() < 1e-12);
     }
 
     #[test]
     fn a_zero_deviation_node_is_not_passed_through() {
-        let mut book = OrderBook::default();
-        let o = parse(&order_json(
-            "o",
-            0,
-            vec![
-                node("A", 0, true, 0.0, 0.0, 0.0),
-                node("B", 2, true, 2.0, 0.0, 0.0),
-                node("C", 4, true, 4.0, 0.0, 0.0),
-            ],
-        ))
-        .unwrap();
-        book.apply(o, &Decision::New);
+        let book = book_with(&[
+            A,
+            ("B", 2, true, 2.0, 0.0, 0.0),
+            ("C", 4, true, 4.0, 0.0, 0.0),
+        ]);
         assert!(!book.target(Pose2::default()).unwrap().pass_through);
     }
 
     #[test]
     fn horizon_nodes_are_not_driven_and_updates_stitch() {
-        let mut book = OrderBook::default();
-        let o = parse(&order_json(
-            "o",
-            0,
-            vec![
-                node("A", 0, true, 0.0, 0.0, 0.0),
-                node("B", 2, true, 3.0, 0.0, 0.5),
-                node("C", 4, false, 6.0, 0.0, 0.0),
-            ],
-        ))
-        .unwrap();
-        book.apply(o, &Decision::New);
+        let mut book = book_with(&[
+            A,
+            ("B", 2, true, 3.0, 0.0, 0.5),
+            ("C", 4, false, 6.0, 0.0, 0.0),
+        ]);
         let t = book.target(Pose2::default()).unwrap();
         // B is the last released node: the machine stops there, C is horizon.
         assert_eq!((t.node_id.as_str(), t.pass_through), ("B", false));
         assert_eq!(book.remaining_nodes().count(), 2);
 
         // An update that does not start at the last base node is refused.
-        let bad = parse(&order_json(
-            "o",
-            1,
-            vec![
-                node("A", 0, true, 0.0, 0.0, 0.0),
-                node("B", 2, true, 3.0, 0.0, 0.0),
-            ],
-        ))
-        .unwrap();
-        match book.decide(&bad, None, 1.0) {
-            Decision::Reject(e) => assert_eq!(e.error_type, "orderUpdateError"),
-            d => panic!("{d:?}"),
-        }
+        let bad = order("o", 1, &[A, ("B", 2, true, 3.0, 0.0, 0.0)]);
+        assert_eq!(
+            rejected_as(book.decide(&bad, None, 1.0)),
+            "orderUpdateError"
+        );
         // Stitched at B (still untraversed): B becomes intermediate, passed within 0.5 m.
-        let up = parse(&order_json(
+        let up = order(
             "o",
             1,
-            vec![
-                node("B", 2, true, 3.0, 0.0, 0.5),
-                node("C", 4, true, 6.0, 0.0, 0.0),
-                node("D", 6, true, 9.0, 0.0, 0.0),
+            &[
+                ("B", 2, true, 3.0, 0.0, 0.5),
+                ("C", 4, true, 6.0, 0.0, 0.0),
+                ("D", 6, true, 9.0, 0.0, 0.0),
             ],
-        ))
-        .unwrap();
+        );
         assert_eq!(book.decide(&up, None, 1.0), Decision::Update);
         book.apply(up.clone(), &Decision::Update);
         let t = book.target(Pose2::default()).unwrap();
@@ -934,53 +945,59 @@ mod tests {
         // The same update again is a duplicate; an older one an error.
         assert_eq!(book.decide(&up, None, 1.0), Decision::Duplicate);
         let mut old = up.clone();
-        old.order_update_id = 0;
-        assert!(
-            matches!(book.decide(&old, None, 1.0), Decision::Reject(e) if e.error_type == "orderUpdateError")
+        old.ids.order_update_id = 0;
+        assert_eq!(
+            rejected_as(book.decide(&old, None, 1.0)),
+            "orderUpdateError"
         );
         // Another order while this one is active.
-        let other = parse(&order_json(
-            "o2",
-            0,
-            vec![node("B", 0, true, 3.0, 0.0, 0.0)],
-        ))
-        .unwrap();
-        assert!(
-            matches!(book.decide(&other, Some(Pose2::new(3.0, 0.0, 0.0)), 1.0), Decision::Reject(e) if e.error_type == "orderUpdateError")
+        let other = order("o2", 0, &[("B", 0, true, 3.0, 0.0, 0.0)]);
+        let at_b = Some(Pose2::new(3.0, 0.0, 0.0));
+        assert_eq!(
+            rejected_as(book.decide(&other, at_b, 1.0)),
+            "orderUpdateError"
         );
         // After cancel nothing remains; a new order is welcome.
         book.clear();
         assert!(!book.has_remaining());
-        assert_eq!(
-            book.decide(&other, Some(Pose2::new(3.0, 0.0, 0.0)), 1.0),
-            Decision::New
-        );
+        assert_eq!(book.decide(&other, at_b, 1.0), Decision::New);
+    }
+
+    #[test]
+    fn a_machine_waiting_for_an_update_refuses_another_order() {
+        // Base A -> B done, C on the horizon: the machine waits at B for an update.
+        let mut book = book_with(&[
+            A,
+            ("B", 2, true, 3.0, 0.0, 0.0),
+            ("C", 4, false, 6.0, 0.0, 0.0),
+        ]);
+        book.traverse("B", 2);
+        assert!(!book.is_active());
+        let at_b = Some(Pose2::new(3.0, 0.0, 0.0));
+        let other = order("o2", 0, &[("B", 0, true, 3.0, 0.0, 0.0)]);
+        let Decision::Reject(e) = book.decide(&other, at_b, 1.0) else {
+            panic!("accepted while waiting for an update")
+        };
+        assert_eq!(e.error_type, "orderUpdateError");
+        assert!(e
+            .error_description
+            .unwrap()
+            .contains("waiting for an update"));
+        // An order that ended with an error waits for nothing.
+        book.failed = true;
+        assert_eq!(book.decide(&other, at_b, 1.0), Decision::New);
     }
 
     #[test]
     fn update_after_the_base_is_done_stitches_at_the_last_node() {
-        let mut book = OrderBook::default();
-        let o = parse(&order_json(
-            "o",
-            0,
-            vec![
-                node("A", 0, true, 0.0, 0.0, 0.0),
-                node("B", 2, true, 3.0, 0.0, 0.0),
-            ],
-        ))
-        .unwrap();
-        book.apply(o, &Decision::New);
+        let mut book = book_with(&[A, ("B", 2, true, 3.0, 0.0, 0.0)]);
         book.traverse("B", 2);
         assert!(!book.is_active());
-        let up = parse(&order_json(
+        let up = order(
             "o",
             1,
-            vec![
-                node("B", 2, true, 3.0, 0.0, 0.0),
-                node("C", 4, true, 6.0, 0.0, 0.0),
-            ],
-        ))
-        .unwrap();
+            &[("B", 2, true, 3.0, 0.0, 0.0), ("C", 4, true, 6.0, 0.0, 0.0)],
+        );
         assert_eq!(book.decide(&up, None, 1.0), Decision::Update);
         book.apply(up, &Decision::Update);
         assert_eq!(book.target(Pose2::default()).unwrap().node_id, "C");

@@ -148,6 +148,20 @@ pub struct Edge {
     pub actions: Vec<Action>,
 }
 
+/// Which order, and which of its updates, a message is about: `order` names the one it
+/// carries, `state` the one the vehicle executes (or executed last).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "camelCase")]
+pub struct OrderIds {
+    /// Order id, the same across its updates ("" in a state before the first order).
+    pub order_id: String,
+    /// 0, 1, 2, … per update of one order.
+    pub order_update_id: u64,
+    /// Zone set (not used by this vehicle).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub zone_set_id: Option<String>,
+}
+
 /// `order` (master → vehicle).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(rename_all = "camelCase")]
@@ -155,13 +169,9 @@ pub struct Order {
     /// Header.
     #[serde(flatten)]
     pub header: Header,
-    /// Order id; the same across its updates.
-    pub order_id: String,
-    /// 0, 1, 2, … per update of one order.
-    pub order_update_id: u64,
-    /// Zone set (not used by this vehicle).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub zone_set_id: Option<String>,
+    /// orderId, orderUpdateId, zoneSetId.
+    #[serde(flatten)]
+    pub ids: OrderIds,
     /// Nodes, base then horizon.
     pub nodes: Vec<Node>,
     /// Edges between consecutive nodes.
@@ -234,6 +244,31 @@ pub struct EdgeState {
     pub edge_description: Option<String>,
     /// Base or horizon.
     pub released: bool,
+}
+
+impl From<&Node> for NodeState {
+    /// A node of the order as the state lists it while it is still to traverse.
+    fn from(n: &Node) -> Self {
+        Self {
+            node_id: n.node_id.clone(),
+            sequence_id: n.sequence_id,
+            node_description: n.node_description.clone(),
+            node_position: n.node_position.clone(),
+            released: n.released,
+        }
+    }
+}
+
+impl From<&Edge> for EdgeState {
+    /// An edge of the order as the state lists it while it is still to traverse.
+    fn from(e: &Edge) -> Self {
+        Self {
+            edge_id: e.edge_id.clone(),
+            sequence_id: e.sequence_id,
+            edge_description: e.edge_description.clone(),
+            released: e.released,
+        }
+    }
 }
 
 /// `agvPosition`.
@@ -437,13 +472,9 @@ pub struct State {
     /// Header.
     #[serde(flatten)]
     pub header: Header,
-    /// The current or last order ("" if none yet).
-    pub order_id: String,
-    /// Its update id.
-    pub order_update_id: u64,
-    /// Zone set, optional.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub zone_set_id: Option<String>,
+    /// The current or last order and its update ("" and 0 before the first).
+    #[serde(flatten)]
+    pub ids: OrderIds,
     /// Last node reached ("" if none).
     pub last_node_id: String,
     /// Its sequence id (0 if none).

@@ -79,9 +79,13 @@ pub struct Vehicle {
     expected_end: HashSet<u64>,
     retry_at: Option<Duration>,
     paused: bool,
-    /// actionIds of a running cancelOrder / startPause, finished once at rest.
+    /// The actionId of a running cancelOrder, finished once at rest. Meanwhile every
+    /// order is refused (it would be dropped with the cancelled one) and so is another
+    /// cancelOrder.
     cancel_action: Option<String>,
-    pause_action: Option<String>,
+    /// The actionIds of running startPause actions, all finished once at rest with the
+    /// stop latched (or by stopPause).
+    pause_actions: Vec<String>,
     next_id: u64,
     distance_since_last_node: f64,
     last_xy: Option<(f64, f64)>,
@@ -107,7 +111,7 @@ impl Vehicle {
             retry_at: None,
             paused: false,
             cancel_action: None,
-            pause_action: None,
+            pause_actions: Vec::new(),
             next_id: first_request_id.max(1),
             distance_since_last_node: 0.0,
             last_xy: None,
@@ -175,16 +179,37 @@ impl Vehicle {
                 return vec![Effect::PublishState];
             }
             Decision::Duplicate => return Vec::new(),
+            _ if self.cancel_action.is_some() => {
+                let cancel = self.cancel_action.clone().unwrap_or_default();
+                let header_id = order.header.header_id.to_string();
+                let update_id = order.ids.order_update_id.to_string();
+                self.keep_error(vda::Error::new(
+                    "orderUpdateError",
+                    ErrorLevel::Warning,
+                    format!(
+                        "order {} is being cancelled (cancelOrder {cancel} runs until the \
+                         machine is at rest); send orders once it is FINISHED",
+                        self.book.ids.order_id
+                    ),
+                    &[
+                        ("headerId", &header_id),
+                        ("orderId", &order.ids.order_id),
+                        ("orderUpdateId", &update_id),
+                        ("actionId", &cancel),
+                    ],
+                ));
+                return vec![Effect::PublishState];
+            }
             Decision::New => {
-                tracing::info!(order_id = %order.order_id, nodes = order.nodes.len(), "new order");
+                tracing::info!(order_id = %order.ids.order_id, nodes = order.nodes.len(), "new order");
                 self.actions.clear();
                 self.kept_errors.clear();
                 self.distance_since_last_node = 0.0;
             }
             Decision::Update => {
                 tracing::info!(
-                    order_id = %order.order_id,
-                    update = order.order_update_id,
+                    order_id = %order.ids.order_id,
+                    update = order.ids.order_update_id,
                     "order update"
                 );
             }
@@ -223,7 +248,19 @@ impl Vehicle {
             };
             match a.action_type.as_str() {
                 "cancelOrder" => {
-                    if !self.book.has_remaining() && self.goal.is_none() {
+                    if let Some(running) = self.cancel_action.clone() {
+                        state.action_status = ActionStatus::Failed;
+                        state.result_description =
+                            Some(format!("cancelOrder {running} is already running"));
+                        self.keep_error(vda::Error::new(
+                            "noOrderToCancel",
+                            ErrorLevel::Warning,
+                            format!(
+                                "cancelOrder: the order is already being cancelled by {running}"
+                            ),
+                            &[("actionId", &a.action_id)],
+                        ));
+                    } else if !self.book.has_remaining() && self.goal.is_none() {
                         state.action_status = ActionStatus::Failed;
                         state.result_description = Some("no order to cancel".into());
                         self.keep_error(vda::Error::new(
@@ -253,13 +290,13 @@ impl Vehicle {
                     let id = self.next_request_id();
                     effects.push(Effect::Daemon(GoalRequest::stop(id)));
                     state.action_status = ActionStatus::Running;
-                    self.pause_action = Some(a.action_id.clone());
+                    self.pause_actions.push(a.action_id.clone());
                 }
                 "stopPause" => {
                     self.paused = false;
                     let id = self.next_request_id();
                     effects.push(Effect::Daemon(GoalRequest::resume(id)));
-                    if let Some(p) = self.pause_action.take() {
+                    for p in std::mem::take(&mut self.pause_actions) {
                         self.set_action_status(&p, ActionStatus::Finished, None);
                     }
                     self.retry_at = None;
@@ -338,7 +375,7 @@ impl Vehicle {
                 effects.push(Effect::PublishState);
             }
             if t.fault_flags & fault_flags::STOP_REQUESTED != 0 {
-                if let Some(id) = self.pause_action.take() {
+                for id in std::mem::take(&mut self.pause_actions) {
                     self.set_action_status(&id, ActionStatus::Finished, None);
                     effects.push(Effect::PublishState);
                 }
@@ -360,7 +397,7 @@ impl Vehicle {
         let outcome = t.outcome();
         let text = t.outcome_text().to_owned();
         let refs = [
-            ("orderId", self.book.order_id.clone()),
+            ("orderId", self.book.ids.order_id.clone()),
             ("nodeId", goal.node_id.clone()),
             ("sequenceId", goal.sequence_id.to_string()),
         ];
@@ -472,7 +509,7 @@ impl Vehicle {
                         r.reason_text()
                     ),
                     &[
-                        ("orderId", &self.book.order_id.clone()),
+                        ("orderId", &self.book.ids.order_id.clone()),
                         ("nodeId", &goal.node_id),
                     ],
                 ));
@@ -647,9 +684,7 @@ impl Vehicle {
         errors.extend(self.live_errors());
         State {
             header,
-            order_id: self.book.order_id.clone(),
-            order_update_id: self.book.order_update_id,
-            zone_set_id: None,
+            ids: self.book.ids.clone(),
             last_node_id: self.book.last_node_id.clone(),
             last_node_sequence_id: self.book.last_node_sequence_id,
             driving: self.daemon_ok && t.is_some_and(|t| t.state.v_f.abs() >= REST_SPEED),
@@ -657,27 +692,8 @@ impl Vehicle {
             new_base_request: None,
             distance_since_last_node: Some(self.distance_since_last_node),
             operating_mode,
-            node_states: self
-                .book
-                .remaining_nodes()
-                .map(|n| NodeState {
-                    node_id: n.node_id.clone(),
-                    sequence_id: n.sequence_id,
-                    node_description: n.node_description.clone(),
-                    node_position: n.node_position.clone(),
-                    released: n.released,
-                })
-                .collect(),
-            edge_states: self
-                .book
-                .remaining_edges()
-                .map(|e| EdgeState {
-                    edge_id: e.edge_id.clone(),
-                    sequence_id: e.sequence_id,
-                    edge_description: e.edge_description.clone(),
-                    released: e.released,
-                })
-                .collect(),
+            node_states: self.book.remaining_nodes().map(NodeState::from).collect(),
+            edge_states: self.book.remaining_edges().map(EdgeState::from).collect(),
             agv_position: self.position(),
             velocity: self.velocity(),
             action_states: self.actions.clone(),
@@ -1100,7 +1116,7 @@ mod tests {
         let s = v.state(header());
         assert_eq!(status(&s, "c1"), ActionStatus::Finished);
         assert!(s.node_states.is_empty());
-        assert_eq!(s.order_id, "o");
+        assert_eq!(s.ids.order_id, "o");
         // Action states are kept until the next new order.
         assert_eq!(s.action_states.len(), 3);
     }
@@ -1134,5 +1150,101 @@ mod tests {
         let fx = v.on_telemetry(&telemetry(0.0, 0.0, 0.0, Mode::Idle), T);
         assert_eq!(goals(&fx)[0].goal.x, 3.0);
         assert!(v.state(header()).errors.is_empty());
+    }
+
+    fn status(s: &State, id: &str) -> Option<ActionStatus> {
+        s.action_states
+            .iter()
+            .find(|a| a.action_id == id)
+            .map(|a| a.action_status)
+    }
+
+    #[test]
+    fn while_a_cancel_runs_orders_and_another_cancel_are_refused() {
+        let mut v = vehicle();
+        v.on_telemetry(&telemetry(0.0, 0.0, 0.0, Mode::Idle), T);
+        let ab = [("A", 0, 0.0, 0.0, 0.0), ("B", 2, 3.0, 0.0, 0.0)];
+        assert_eq!(goals(&v.on_order(&order("o", 0, &ab), T)).len(), 1);
+        v.on_telemetry(&telemetry(1.0, 0.0, 0.8, Mode::Tracking), T);
+        v.on_instant_actions(&instant(&[("cancelOrder", "c1")]), T);
+        // Still moving: a new order, an update of the cancelled one and a second cancel
+        // are refused; nothing goes to the daemon.
+        let fx = v.on_order(
+            &order("o2", 0, &[("X", 0, 1.2, 0.0, 0.0), ("Y", 2, 4.0, 0.0, 0.0)]),
+            T,
+        );
+        assert!(goals(&fx).is_empty());
+        let fx = v.on_order(
+            &order("o", 1, &[("B", 2, 3.0, 0.0, 0.0), ("C", 4, 6.0, 0.0, 0.0)]),
+            T,
+        );
+        assert!(goals(&fx).is_empty());
+        let fx = v.on_instant_actions(&instant(&[("cancelOrder", "c2")]), T);
+        assert!(goals(&fx).is_empty());
+        let s = v.state(header());
+        assert_eq!(s.ids.order_id, "o");
+        assert_eq!(s.ids.order_update_id, 0);
+        assert_eq!(status(&s, "c1"), Some(ActionStatus::Running));
+        assert_eq!(status(&s, "c2"), Some(ActionStatus::Failed));
+        let refused: Vec<_> = s
+            .errors
+            .iter()
+            .filter(|e| e.error_type == "orderUpdateError")
+            .collect();
+        assert_eq!(refused.len(), 2, "{:?}", s.errors);
+        assert!(refused[0]
+            .error_description
+            .as_deref()
+            .unwrap()
+            .contains("being cancelled"));
+        assert!(s.errors.iter().any(|e| e.error_type == "noOrderToCancel"));
+        // At rest: c1 finishes, the nodes are gone, and a new order is accepted and driven.
+        v.on_telemetry(&telemetry(1.3, 0.0, 0.0, Mode::Idle), T);
+        let s = v.state(header());
+        assert_eq!(status(&s, "c1"), Some(ActionStatus::Finished));
+        assert!(s.node_states.is_empty());
+        let fx = v.on_order(
+            &order("o2", 0, &[("X", 0, 1.2, 0.0, 0.0), ("Y", 2, 4.0, 0.0, 0.0)]),
+            T,
+        );
+        assert_eq!(goals(&fx)[0].goal.x, 4.0);
+        let s = v.state(header());
+        assert_eq!((s.ids.order_id.as_str(), s.node_states.len()), ("o2", 1));
+    }
+
+    #[test]
+    fn every_pending_pause_finishes() {
+        let mut v = vehicle();
+        v.on_telemetry(&telemetry(0.0, 0.0, 0.0, Mode::Idle), T);
+        v.on_order(
+            &order("o", 0, &[("A", 0, 0.0, 0.0, 0.0), ("B", 2, 3.0, 0.0, 0.0)]),
+            T,
+        );
+        v.on_telemetry(&telemetry(1.0, 0.0, 0.8, Mode::Tracking), T);
+        // A master that sends startPause twice before the machine is at rest.
+        v.on_instant_actions(&instant(&[("startPause", "p1")]), T);
+        v.on_instant_actions(&instant(&[("startPause", "p2")]), T);
+        // Both RUNNING while stopping, both FINISHED at rest (the stop latched throughout).
+        for (x, v_f, mode, want) in [
+            (1.2, 0.3, Mode::Stopping, ActionStatus::Running),
+            (1.3, 0.0, Mode::Idle, ActionStatus::Finished),
+        ] {
+            let mut t = telemetry(x, 0.0, v_f, mode);
+            t.fault_flags = fault_flags::STOP_REQUESTED;
+            v.on_telemetry(&t, T);
+            let s = v.state(header());
+            assert_eq!(
+                (status(&s, "p1"), status(&s, "p2")),
+                (Some(want), Some(want))
+            );
+        }
+        // A pause resumed before the machine came to rest finishes with stopPause.
+        v.on_instant_actions(&instant(&[("stopPause", "r1")]), T);
+        v.on_telemetry(&telemetry(1.3, 0.0, 0.4, Mode::Tracking), T);
+        v.on_instant_actions(&instant(&[("startPause", "p3")]), T);
+        v.on_instant_actions(&instant(&[("stopPause", "r2")]), T);
+        let s = v.state(header());
+        assert_eq!(status(&s, "p3"), Some(ActionStatus::Finished));
+        assert_eq!(s.paused, Some(false));
     }
 }
