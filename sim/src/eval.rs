@@ -190,16 +190,19 @@ pub fn navigation_text(ev: &Evaluation) -> String {
         .iter()
         .filter(|n| n.routes.iter().any(|r| r.len() > 1))
         .count();
-    let retries = navs
-        .iter()
-        .flat_map(|n| n.plan_outcome.iter())
-        .filter(|&&o| o == PlanOutcome::Retry)
-        .count();
+    let outcomes = |outcome: PlanOutcome| {
+        navs.iter()
+            .flat_map(|n| n.plan_outcome.iter())
+            .filter(|&&o| o == outcome)
+            .count()
+    };
+    let (retries, back_ups) = (outcomes(PlanOutcome::Retry), outcomes(PlanOutcome::BackUp));
     let replans = navs
         .iter()
         .map(|n| n.plan_ms.len().saturating_sub(1))
         .sum::<usize>()
-        - retries;
+        - retries
+        - back_ups;
     let aborts =
         |r: control::planner::AbortReason| navs.iter().filter(|n| n.abort == Some(r)).count();
     let stats = |v: &[f64]| {
@@ -215,7 +218,7 @@ pub fn navigation_text(ev: &Evaluation) -> String {
         }
     };
     format!(
-        "navigation: {} runs, {routed} with a route, {replans} replans, {retries} retries; aborted no-route {}, no-progress {}\n\
+        "navigation: {} runs, {routed} with a route, {replans} replans, {back_ups} back-ups, {retries} retries; aborted no-route {}, no-progress {}\n\
          navigation: plan {} ({} plans); update {}\n",
         navs.len(),
         aborts(control::planner::AbortReason::NoRoute),

@@ -263,6 +263,10 @@ enum Command {
         /// Navigator: Hybrid A*'s heuristic weight (f = g + w h; 1 = optimal routes).
         #[arg(long, value_name = "W")]
         heuristic_weight: Option<f64>,
+        /// Navigator: the stall ladder's back-up along the machine's own track [m]
+        /// (0: off).
+        #[arg(long, value_name = "M")]
+        back_up: Option<f64>,
         /// Navigator: clearance the actor's roll-out keeps for "nothing in the way" [m].
         #[arg(long)]
         direct_margin: Option<f64>,
@@ -400,6 +404,7 @@ fn main() -> Result<()> {
             route_margin,
             replan_after,
             heuristic_weight,
+            back_up,
             direct_margin,
             t_star,
             perturbations,
@@ -458,6 +463,7 @@ fn main() -> Result<()> {
                     clearance_margin: route_margin.unwrap_or(nd.clearance_margin),
                     replan_after: replan_after.unwrap_or(nd.replan_after),
                     heuristic_weight: heuristic_weight.unwrap_or(nd.heuristic_weight),
+                    back_up_distance: back_up.unwrap_or(nd.back_up_distance),
                     direct_margin: direct_margin.unwrap_or(nd.direct_margin),
                     ..nd.clone()
                 }),

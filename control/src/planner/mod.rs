@@ -119,6 +119,16 @@ pub struct NavigatorSettings {
     pub approach_distance: f64,
     /// Retries per goal. Default 2.
     pub max_retries: usize,
+    /// The stall ladder's second step (issue 27): after a replan that did not
+    /// help (the next stall), back up this far along the machine's own recent
+    /// track — a way it has just driven, so known to be passable — then
+    /// replan from there [m]. 0 turns the step off. Default 0: measured at
+    /// 2.5 (about a body length) on obstacles200 it gained one goal and lost
+    /// two (`docs/global-layer.md`); the ladder's next step (a replan with
+    /// the stall pose made costly) is not built yet.
+    pub back_up_distance: f64,
+    /// Back-ups per goal. Default 1.
+    pub max_back_ups: usize,
     /// Within this pose error of the goal the machine is holding it, not
     /// stalled. Default [`SUCCESS_TOLERANCE`].
     pub reached_tolerance: f64,
@@ -197,6 +207,8 @@ impl Default for NavigatorSettings {
             max_replans: 3,
             approach_distance: 3.0,
             max_retries: 2,
+            back_up_distance: 0.0,
+            max_back_ups: 1,
             reached_tolerance: SUCCESS_TOLERANCE,
             clearance_margin: 0.15,
             direct_margin: 0.3,
@@ -267,6 +279,7 @@ impl NavigatorSettings {
         }
         let non_negative = [
             ("progress.min_approach", self.progress.min_approach),
+            ("back_up_distance", self.back_up_distance),
             ("clearance_margin", self.clearance_margin),
             ("direct_margin", self.direct_margin),
             ("direction_change_penalty", self.direction_change_penalty),
@@ -414,6 +427,9 @@ pub enum PlanOutcome {
     /// A retry after a stall near the goal: the route is the approach pose,
     /// then the goal (`NavigatorSettings::approach_distance`).
     Retry,
+    /// The stall ladder's back-up: the route is a pose on the machine's own
+    /// track `back_up_distance` behind it, then a replan from there.
+    BackUp,
 }
 
 impl PlanOutcome {
@@ -424,6 +440,7 @@ impl PlanOutcome {
             PlanOutcome::Route => "route",
             PlanOutcome::NoRoute => "no-route",
             PlanOutcome::Retry => "retry",
+            PlanOutcome::BackUp => "back-up",
         }
     }
 }
@@ -482,6 +499,11 @@ pub struct Navigator {
     last_replan: f64,
     replans: usize,
     retries: usize,
+    back_ups: usize,
+    /// The machine's recent front-axle poses (the back-up's way).
+    track: Track,
+    /// Backing up: replan when the back-up pose is reached.
+    backing_up: bool,
     pending_no_route: bool,
     aborted: Option<AbortReason>,
     last_plan: Option<PlanReport>,
@@ -551,6 +573,9 @@ impl Navigator {
             last_replan: 0.0,
             replans: 0,
             retries: 0,
+            back_ups: 0,
+            track: Track::default(),
+            backing_up: false,
             pending_no_route: false,
             aborted: None,
             last_plan: None,
@@ -614,6 +639,17 @@ impl Navigator {
             self.last_progress = now;
             self.last_replan = now;
         }
+        self.track.record(x);
+        if self.backing_up && self.route_index == 0 {
+            let b = self.route[0];
+            if (x[ix::X] - b.x).hypot(x[ix::Y] - b.y) < BACK_UP_ARRIVAL {
+                // Backed up: the ladder's next step is the replan from here.
+                self.backing_up = false;
+                self.last_replan = now;
+                self.plan(x, true);
+                self.pending_no_route = false;
+            }
+        }
         self.advance(x, now);
         let target = self.route[self.route_index];
         self.checker.update(x, &target, now);
@@ -644,6 +680,18 @@ impl Navigator {
             // machine out): its own window, bounded by `max_retries`.
             self.last_progress = now;
             self.retry(x, &goal);
+        } else if stalled
+            && !self.world.is_empty()
+            && self.replans >= 1
+            && !self.backing_up
+            && self.back_ups < self.settings.max_back_ups
+            && self.back_up(x)
+        {
+            // The replan did not help: back up along the track (a manoeuvre
+            // that leads away first: its own window), then replan there.
+            self.back_ups += 1;
+            self.last_replan = now;
+            self.last_progress = now;
         } else if stalled && !self.world.is_empty() && self.replans < self.settings.max_replans {
             self.replans += 1;
             self.last_replan = now;
@@ -702,6 +750,8 @@ impl Navigator {
         self.clocks_pending = false;
         self.replans = 0;
         self.retries = 0;
+        self.back_ups = 0;
+        self.backing_up = false;
         self.pending_no_route = false;
         self.aborted = None;
     }
@@ -722,7 +772,7 @@ impl Navigator {
                 s.subgoal_radius,
             );
         }
-        while self.route_index + 1 < self.route.len() {
+        while self.route_index + 1 < self.route.len() && !self.backing_up {
             let t = &self.route[self.route_index];
             let near = (x[ix::X] - t.x).hypot(x[ix::Y] - t.y) < s.subgoal_radius;
             let behind = following
@@ -766,6 +816,7 @@ impl Navigator {
     /// Decides direct or not (unless `force`), plans, writes the route.
     fn plan(&mut self, start: &State, force: bool) {
         let t0 = Instant::now();
+        self.backing_up = false;
         let Some(goal) = self.goal else {
             return;
         };
@@ -877,6 +928,7 @@ impl Navigator {
     /// the abort window decides.
     fn retry(&mut self, x: &State, goal: &Goal) {
         let t0 = Instant::now();
+        self.backing_up = false;
         let d = self.settings.approach_distance;
         let (sin, cos) = goal.theta.sin_cos();
         let approach = [-1.0, 1.0]
@@ -908,6 +960,37 @@ impl Navigator {
         self.plans += 1;
     }
 
+    /// The ladder's back-up: route [the pose `back_up_distance` back along
+    /// the track, goal], if the track reaches that far with the pose clear.
+    fn back_up(&mut self, x: &State) -> bool {
+        let t0 = Instant::now();
+        let d = self.settings.back_up_distance;
+        let Some(p) = self.track.back(d).filter(|_| d > 0.0) else {
+            return false;
+        };
+        if !self.world.pose_free(p.x, p.y, p.theta, p.beta)
+            || (p.x - x[ix::X]).hypot(p.y - x[ix::Y]) < BACK_UP_ARRIVAL
+        {
+            return false;
+        }
+        let goal = self.route[self.route.len() - 1];
+        self.path.clear();
+        self.route.clear();
+        self.route_path_index.clear();
+        self.route.push(Goal::new(p.x, p.y, p.theta));
+        self.route.push(goal);
+        self.route_index = 0;
+        self.backing_up = true;
+        self.last_plan = Some(PlanReport {
+            outcome: PlanOutcome::BackUp,
+            duration: t0.elapsed(),
+            search: SearchStats::default(),
+            replan: true,
+        });
+        self.plans += 1;
+        true
+    }
+
     /// "Is anything in the way?", by measurement: the actor rolled out from
     /// the start (what the MPC's warm start does) keeps the margin all the way,
     /// or, without networks, a straight corridor of both axle points does.
@@ -932,6 +1015,76 @@ impl Navigator {
             }
             None => straight_corridor_free(&self.world, start, goal, s.sample_spacing),
         }
+    }
+}
+
+/// Within this distance of the back-up pose the machine has backed up [m].
+const BACK_UP_ARRIVAL: f64 = 0.5;
+
+/// The machine's recent front-axle poses, one every [`Track::SPACING`] of
+/// travel, newest last; a fixed ring (no allocation) of [`Track::CAPACITY`].
+#[derive(Debug, Clone, Copy)]
+struct Track {
+    poses: [PathPose; Track::CAPACITY],
+    /// Index of the newest pose.
+    head: usize,
+    len: usize,
+}
+
+impl Default for Track {
+    fn default() -> Self {
+        let origin = PathPose {
+            x: 0.0,
+            y: 0.0,
+            theta: 0.0,
+            beta: 0.0,
+            direction: 0,
+        };
+        Self {
+            poses: [origin; Track::CAPACITY],
+            head: 0,
+            len: 0,
+        }
+    }
+}
+
+impl Track {
+    const CAPACITY: usize = 64;
+    const SPACING: f64 = 0.2;
+
+    /// Keeps `x` if it is `SPACING` from the newest pose (or the first).
+    fn record(&mut self, x: &State) {
+        if self.len > 0 {
+            let last = &self.poses[self.head];
+            if (x[ix::X] - last.x).hypot(x[ix::Y] - last.y) < Self::SPACING {
+                return;
+            }
+        }
+        self.head = (self.head + 1) % Self::CAPACITY;
+        self.len = (self.len + 1).min(Self::CAPACITY);
+        self.poses[self.head] = PathPose {
+            x: x[ix::X],
+            y: x[ix::Y],
+            theta: x[ix::THETA],
+            beta: x[ix::BETA],
+            direction: 0,
+        };
+    }
+
+    /// The first pose at least `distance` of travel back from the newest.
+    fn back(&self, distance: f64) -> Option<PathPose> {
+        let mut travelled = 0.0;
+        let mut k = self.head;
+        for _ in 1..self.len {
+            let prev = (k + Self::CAPACITY - 1) % Self::CAPACITY;
+            let (a, b) = (&self.poses[k], &self.poses[prev]);
+            travelled += (a.x - b.x).hypot(a.y - b.y);
+            k = prev;
+            if travelled >= distance {
+                return Some(self.poses[k]);
+            }
+        }
+        None
     }
 }
 

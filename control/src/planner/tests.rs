@@ -493,6 +493,102 @@ fn a_stall_replans_from_the_current_state_then_aborts() {
 }
 
 #[test]
+fn a_second_stall_backs_up_along_the_track_then_replans_from_there() {
+    let settings = NavigatorSettings {
+        back_up_distance: 2.5,
+        ..NavigatorSettings::default()
+    };
+    let mut nav = Navigator::new(params(), settings, None).unwrap();
+    let s = nav.settings().clone();
+    let goal = Goal::new(8.0, 0.0, 0.0);
+    let start = at_rest(-3.0, -1.0, 0.0);
+    nav.set_goal(&start, goal, &wall()).unwrap();
+    // Drive 5 m straight along y = -1 (the track), 0.25 m per tick, then stand.
+    let mut t = 0.0;
+    for k in 0..=20 {
+        let x = State::new(-3.0 + 0.25 * k as f64, -1.0, 0.0, 0.0, 1.0, 0.0);
+        assert!(matches!(nav.update(&x, t), NavStep::Drive { .. }));
+        t += 0.2;
+    }
+    let stuck = at_rest(2.0, -1.0, 0.0);
+    let mut outcomes = Vec::new();
+    let mut back_up_target = None;
+    while t < 30.0 && back_up_target.is_none() {
+        let step = nav.update(&stuck, t);
+        if let Some(r) = nav.last_plan().filter(|r| r.replan) {
+            if outcomes.last() != Some(&(r.outcome, nav.plans())) {
+                outcomes.push((r.outcome, nav.plans()));
+            }
+            if r.outcome == PlanOutcome::BackUp {
+                let NavStep::Drive {
+                    target,
+                    final_target,
+                } = step
+                else {
+                    panic!("{step:?}")
+                };
+                assert!(!final_target);
+                back_up_target = Some(target);
+            }
+        }
+        t += 0.2;
+    }
+    // First a replan, then (the next stall) the back-up.
+    let kinds: Vec<PlanOutcome> = outcomes.iter().map(|o| o.0).collect();
+    assert_eq!(kinds, vec![PlanOutcome::Route, PlanOutcome::BackUp]);
+    // The pose back_up_distance behind along the track, with the track's heading.
+    let b = back_up_target.unwrap();
+    // (the first track pose at least that far: within one tick's travel of it)
+    let behind = 2.0 - b.x;
+    assert!(
+        behind >= s.back_up_distance && behind < s.back_up_distance + 0.25 + 1e-9,
+        "{b:?}"
+    );
+    assert!((b.y + 1.0).abs() < 1e-9 && b.theta == 0.0, "{b:?}");
+    assert_eq!(nav.route(), &[b, goal]);
+    // The back-up opens its own abort window: standing there longer than the
+    // replan delay but less than the timeout does not abort.
+    let plans = nav.plans();
+    let moved = State::new(b.x + 0.3, b.y, 0.0, 0.0, -0.5, 0.0);
+    assert!(matches!(nav.update(&moved, t + 0.2), NavStep::Drive { .. }));
+    // Within the arrival distance: a replan from there.
+    assert_eq!(nav.plans(), plans + 1);
+    let r = nav.last_plan().unwrap();
+    assert!(r.replan && r.outcome == PlanOutcome::Route, "{r:?}");
+    let p0 = nav.path()[0];
+    assert_eq!((p0.x, p0.y), (moved[ix::X], moved[ix::Y]));
+    // No second back-up for this goal (max_back_ups 1).
+    let mut later = Vec::new();
+    for k in 0..100 {
+        if let NavStep::Abort(_) = nav.update(&moved, t + 0.4 + 0.2 * k as f64) {
+            break;
+        }
+        later.extend(nav.last_plan().map(|r| r.outcome));
+    }
+    assert!(!later.contains(&PlanOutcome::BackUp));
+}
+
+#[test]
+fn no_back_up_without_a_track() {
+    // Stuck where it started: nothing driven to back up along, so the ladder
+    // goes on with replans (a_stall_replans_from_the_current_state_then_aborts).
+    let settings = NavigatorSettings {
+        back_up_distance: 2.5,
+        ..NavigatorSettings::default()
+    };
+    let mut nav = Navigator::new(params(), settings, None).unwrap();
+    let stuck = at_rest(2.0, -1.0, 0.5);
+    nav.set_goal(&stuck, Goal::new(8.0, 0.0, 0.0), &wall())
+        .unwrap();
+    for k in 0..100 {
+        if let NavStep::Abort(_) = nav.update(&stuck, 0.2 * k as f64) {
+            break;
+        }
+        assert_ne!(nav.last_plan().unwrap().outcome, PlanOutcome::BackUp);
+    }
+}
+
+#[test]
 fn the_waypoint_graph_needs_the_networks_and_its_cost_scale_is_fitted() {
     let s = NavigatorSettings {
         planner: PlannerKind::WaypointGraph,
