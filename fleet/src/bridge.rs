@@ -6,8 +6,10 @@
 //!   loop and sends the requests the vehicle asks for. No telemetry for
 //!   `daemon_timeout` means the daemon is gone: the thread reports it, drops its ports and
 //!   opens them again until a daemon serves the prefix.
-//! * The async loop polls the MQTT event loop (which reconnects by itself), the daemon
-//!   thread's messages, the state timer and the shutdown signal.
+//! * The async loop polls the MQTT event loop (which reconnects by itself, tried again
+//!   every 0.5 s while the broker is away), the daemon thread's messages, the state timer
+//!   and the shutdown signal. The order goes on without the broker: only the MQTT side
+//!   waits.
 
 use std::future::Future;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -178,6 +180,9 @@ pub async fn run(options: Options, shutdown: impl Future<Output = ()>) -> anyhow
     let mut last_error_log: Option<Instant> = None;
     let mut last_tick = 0u64;
     let visualization_interval = 0.2;
+    // While the broker is away: when to try again. The event loop is not polled meanwhile,
+    // and everything else (telemetry, goals, the order) goes on.
+    let mut reconnect_at: Option<tokio::time::Instant> = None;
 
     tokio::pin!(shutdown);
     loop {
@@ -185,7 +190,9 @@ pub async fn run(options: Options, shutdown: impl Future<Output = ()>) -> anyhow
         let mut publish_visualization = false;
         tokio::select! {
             _ = &mut shutdown => break,
-            ev = eventloop.poll() => match ev {
+            _ = tokio::time::sleep_until(reconnect_at.unwrap_or_else(tokio::time::Instant::now)),
+                if reconnect_at.is_some() => reconnect_at = None,
+            ev = eventloop.poll(), if reconnect_at.is_none() => match ev {
                 Ok(Event::Incoming(Packet::ConnAck(_))) => {
                     tracing::info!(broker = %format!("{}:{}", options.host, options.port), "connected to the broker");
                     connected = true;
@@ -217,7 +224,9 @@ pub async fn run(options: Options, shutdown: impl Future<Output = ()>) -> anyhow
                     connected = false;
                     // The will goes with the next CONNECT: give it a fresh header.
                     eventloop.mqtt_options.set_last_will(will(&mut ids));
-                    tokio::time::sleep(Duration::from_millis(500)).await;
+                    // Not a sleep here: the daemon's telemetry must go on being handled (a
+                    // pass-through node, an outcome) while the broker is away.
+                    reconnect_at = Some(tokio::time::Instant::now() + Duration::from_millis(500));
                 }
             },
             msg = daemon_rx.recv() => {

@@ -275,10 +275,15 @@ impl Proc {
         let out = std::fs::File::create(&log).unwrap();
         let child = Command::new(bin)
             .args(args)
+            // wlnavd finds its default weights (critic-weights/avant635/) relative to the
+            // working directory, as on the machine; cargo runs the tests in fleet/.
+            .current_dir(repo_root())
             .stdin(Stdio::null())
             .stdout(out.try_clone().unwrap())
             .stderr(out)
             .env("NO_COLOR", "1")
+            // The tests read the logs (wlnavd's goals with their obstacle counts).
+            .env("RUST_LOG", "info")
             .spawn()
             .unwrap_or_else(|e| panic!("start {}: {e}", bin.display()));
         Self {
@@ -457,6 +462,9 @@ pub struct Received {
     pub serial: String,
     pub topic: String,
     pub retained: bool,
+    /// The QoS it arrived with: the smaller of the publisher's and the subscription's
+    /// (this master subscribes with QoS 1, so a message published with QoS 0 arrives with 0).
+    pub qos: u8,
     pub json: Value,
     pub at: Instant,
 }
@@ -531,6 +539,7 @@ impl Master {
                             serial,
                             topic,
                             retained: p.retain,
+                            qos: p.qos as u8,
                             json,
                             at: Instant::now(),
                         });
@@ -683,6 +692,23 @@ impl Master {
             );
             std::thread::sleep(Duration::from_millis(20));
         }
+    }
+
+    /// Asserts the QoS every message of `serial` so far arrived with: the specification's
+    /// (`connection` 1, `state`, `visualization`, `factsheet` 0); returns how many.
+    pub fn check_qos(&self, serial: &str) -> usize {
+        let received = self.received.lock().unwrap();
+        let mut n = 0;
+        for r in received.iter().filter(|r| r.serial == serial) {
+            let want = if r.topic == "connection" { 1 } else { 0 };
+            assert_eq!(
+                r.qos, want,
+                "{} {} arrived with QoS {}",
+                r.serial, r.topic, r.qos
+            );
+            n += 1;
+        }
+        n
     }
 
     /// Asserts every message so far matched its schema, and returns how many there were.
