@@ -217,6 +217,14 @@ pub async fn run(options: Options, shutdown: impl Future<Output = ()>) -> anyhow
                 }
                 Ok(_) => {}
                 Err(e) => {
+                    // A message beyond MAX_PACKET: refused before it is read, which drops
+                    // the connection; the vehicle reports it in the state.
+                    if let rumqttc::ConnectionError::MqttState(rumqttc::StateError::Deserialization(
+                        rumqttc::mqttbytes::Error::PayloadSizeLimitExceeded(len),
+                    )) = &e
+                    {
+                        effects = vehicle.on_oversized_message(*len, MAX_PACKET, start.elapsed());
+                    }
                     if connected || last_error_log.is_none_or(|t| t.elapsed() > Duration::from_secs(30)) {
                         tracing::warn!("broker {}:{}: {e}; reconnecting", options.host, options.port);
                         last_error_log = Some(Instant::now());

@@ -329,6 +329,24 @@ impl Vehicle {
         effects
     }
 
+    /// The broker delivered a message beyond the MQTT packet limit (`limit` bytes; the
+    /// bridge's is [`crate::bridge::MAX_PACKET`]): the MQTT client refused it and dropped the
+    /// connection without reading it, so neither its topic nor its content is known. A
+    /// `validationError` in the state says so once the bridge is connected again.
+    pub fn on_oversized_message(&mut self, len: usize, limit: usize, now: Duration) -> Vec<Effect> {
+        self.now = now;
+        self.keep_error(vda::Error::new(
+            "validationError",
+            ErrorLevel::Warning,
+            format!(
+                "a message of {len} bytes exceeds the MQTT packet limit of {limit} bytes: \
+                 refused unread (the connection to the broker was dropped and made anew)"
+            ),
+            &[("messageLength", &len.to_string())],
+        ));
+        vec![Effect::PublishState]
+    }
+
     fn set_action_status(&mut self, id: &str, status: ActionStatus, result: Option<String>) {
         if let Some(s) = self.actions.iter_mut().find(|s| s.action_id == id) {
             s.action_status = status;

@@ -286,6 +286,22 @@ fn bad_orders_and_actions_are_errors_in_state_and_never_reach_the_daemon() {
         });
         assert_eq!(s["orderId"], "probe", "{what}");
     }
+    // Beyond the MQTT packet limit (16 MiB): refused unread, which drops the connection
+    // (the broker publishes the will); the bridge connects again (ONLINE) and says so.
+    let t = Instant::now();
+    let huge = {
+        let mut v = good.clone().into_bytes();
+        v.extend(std::iter::repeat_n(b' ', 17 << 20));
+        v
+    };
+    let s = new_error(&master, "validationError", "MQTT packet limit", || {
+        master.publish("L1", "order", huge)
+    });
+    assert_eq!(s["orderId"], "probe");
+    master.wait_msg("L1", "connection", t, LONG, |r| {
+        r.json["connectionState"] == "ONLINE"
+    });
+    assert!(bridge.is_running());
     // sequenceIds out of order.
     new_error(&master, "validationError", "out of order", || {
         master.order("L1", "h5", 0, 1, &[("A", 0.0, 0.0, 0.0, true)]);
