@@ -611,32 +611,43 @@ fn a_daemon_restart_is_an_error_then_recovers() {
             w[1] - w[0]
         );
     }
+    // The daemon stops while the machine drives an order: an error, the order kept; the
+    // restarted daemon (its simulated machine starts at the origin again) gets the goal
+    // again and the order ends at B.
     let t0 = Instant::now();
+    master.order(
+        "L1",
+        "across",
+        0,
+        0,
+        &[("A", 0.0, 0.0, 0.0, true), ("B", 6.0, 0.0, 0.0, true)],
+    );
+    master.wait_state("L1", t0, LONG, "driving", |s| {
+        s["orderId"] == "across" && s["driving"] == true
+    });
+    let t1 = Instant::now();
     assert!(
         daemon.terminate(Duration::from_secs(10)),
         "wlnavd exit:\n{}",
         daemon.log_tail(20)
     );
-    let s = master.wait_state("L1", t0, LONG, "daemon error", |s| {
+    let s = master.wait_state("L1", t1, LONG, "daemon error", |s| {
         has_error(s, "daemonUnavailableError", "")
     });
     assert_eq!(s["operatingMode"], "SERVICE");
-    let t1 = Instant::now();
+    assert_eq!(s["errors"].as_array().unwrap().len(), 1, "{s:#}");
+    assert_eq!(s["errors"][0]["errorLevel"], "FATAL");
+    assert_eq!((s["lastNodeId"].as_str(), node_count(&s)), (Some("A"), 1));
+    let t2 = Instant::now();
     let _daemon = start_daemon(&prefix);
-    master.wait_state("L1", t1, LONG, "recovered", |s| {
+    master.wait_state("L1", t2, LONG, "recovered", |s| {
         s["operatingMode"] == "AUTOMATIC" && errors(s).is_empty()
     });
-    let t2 = Instant::now();
-    master.order(
-        "L1",
-        "after",
-        0,
-        0,
-        &[("A", 0.0, 0.0, 0.0, true), ("B", 2.0, 0.0, 0.0, true)],
-    );
-    master.wait_state("L1", t2, LONG, "B reached", |s| {
+    let s = master.wait_state("L1", t2, LONG, "B reached", |s| {
         s["lastNodeId"] == "B" && node_count(s) == 0
     });
+    assert_eq!(s["orderId"], "across");
+    assert!(errors(&s).is_empty(), "{s:#}");
     master.check_valid();
 }
 
