@@ -7,7 +7,7 @@ mod common;
 use control::model::{Goal, MachineParams, State};
 use control::mpc::MpcSettings;
 use control::obstacle::Obstacle;
-use control::planner::{NavStep, Navigator, NavigatorSettings, PlanOutcome, PlannerKind};
+use control::planner::{NavStep, Navigator, NavigatorSettings, PlanOutcome, PlannerKind, Tracking};
 use control::weights;
 use control::{Actor, Critic};
 
@@ -77,4 +77,41 @@ fn set_goal_and_update_do_not_allocate() {
             );
         }
     }
+    // The carrot and the stall ladder's back-up with its keep-out replan
+    // (both off by default): drive along a track, stand, back up, replan.
+    let settings = NavigatorSettings {
+        tracking: Tracking::Carrot,
+        back_up_distance: 2.5,
+        ..NavigatorSettings::default()
+    };
+    let mut nav = Navigator::new(MachineParams::default(), settings, Some(trained())).unwrap();
+    let before = common::allocations();
+    nav.set_goal(&State::new(-3.0, -1.0, 0.0, 0.0, 0.0, 0.0), goal, &wall)
+        .unwrap();
+    let mut t = 0.0;
+    for k in 0..=20 {
+        let x = State::new(-3.0 + 0.25 * k as f64, -1.0, 0.0, 0.0, 1.0, 0.0);
+        nav.update(&x, t);
+        t += 0.2;
+    }
+    let (mut stuck, mut backed_up) = (State::new(2.0, -1.0, 0.0, 0.0, 0.0, 0.0), false);
+    while t < 40.0 {
+        if let NavStep::Abort(_) = nav.update(&stuck, t) {
+            break;
+        }
+        if !backed_up && nav.last_plan().map(|r| r.outcome) == Some(PlanOutcome::BackUp) {
+            backed_up = true;
+            // Arrive at the back-up pose: the keep-out replan.
+            stuck = State::new(nav.route()[0].x, nav.route()[0].y, 0.0, 0.0, 0.0, 0.0);
+        }
+        t += 0.2;
+    }
+    let after = common::allocations();
+    assert!(backed_up, "no back-up happened");
+    assert_eq!(
+        after - before,
+        0,
+        "{} allocations (carrot, back-up)",
+        after - before
+    );
 }

@@ -40,7 +40,7 @@ use crate::critic::{Critic, CriticWorkspace};
 use crate::model::{
     goal_distance, ix, wrap_angle, Goal, MachineParams, State, REACH_SPEED, SUCCESS_TOLERANCE,
 };
-use crate::obstacle::{BadObstacle, Obstacle};
+use crate::obstacle::{footprint_clearance, BadObstacle, Obstacle};
 use crate::progress::{ProgressChecker, ProgressSettings};
 
 use rollout::{roll_out, Arrival};
@@ -122,10 +122,10 @@ pub struct NavigatorSettings {
     /// The stall ladder's second step (issue 27): after a replan that did not
     /// help (the next stall), back up this far along the machine's own recent
     /// track — a way it has just driven, so known to be passable — then
-    /// replan from there [m]. 0 turns the step off. Default 0: measured at
-    /// 2.5 (about a body length) on obstacles200 it gained one goal and lost
-    /// two (`docs/global-layer.md`); the ladder's next step (a replan with
-    /// the stall pose made costly) is not built yet.
+    /// replan from there, keeping out of the stall point [m]. 0 turns the
+    /// step off. Default 0: measured at 2.5 (about a body length) on
+    /// obstacles200 it gained one goal and lost two or three
+    /// (`docs/global-layer.md`, "Following the route").
     pub back_up_distance: f64,
     /// Back-ups per goal. Default 1.
     pub max_back_ups: usize,
@@ -504,6 +504,9 @@ pub struct Navigator {
     track: Track,
     /// Backing up: replan when the back-up pose is reached.
     backing_up: bool,
+    /// Where the front axle stood at the stall that started the back-up: the
+    /// replan after it keeps out of there.
+    stall_point: Option<[f64; 2]>,
     pending_no_route: bool,
     aborted: Option<AbortReason>,
     last_plan: Option<PlanReport>,
@@ -576,6 +579,7 @@ impl Navigator {
             back_ups: 0,
             track: Track::default(),
             backing_up: false,
+            stall_point: None,
             pending_no_route: false,
             aborted: None,
             last_plan: None,
@@ -643,10 +647,20 @@ impl Navigator {
         if self.backing_up && self.route_index == 0 {
             let b = self.route[0];
             if (x[ix::X] - b.x).hypot(x[ix::Y] - b.y) < BACK_UP_ARRIVAL {
-                // Backed up: the ladder's next step is the replan from here.
+                // Backed up: the ladder's next step is the replan from here,
+                // keeping out of the stall point (so it cannot hand back the
+                // route that stalled).
                 self.backing_up = false;
                 self.last_replan = now;
+                let keep_out = self
+                    .stall_point
+                    .take()
+                    .map(|p| Obstacle::new(p[0], p[1], KEEP_OUT_RADIUS));
+                let kept_out = keep_out.is_some_and(|o| self.keep_out(x, o));
                 self.plan(x, true);
+                if kept_out {
+                    self.world.pop_keep_out();
+                }
                 self.pending_no_route = false;
             }
         }
@@ -752,6 +766,7 @@ impl Navigator {
         self.retries = 0;
         self.back_ups = 0;
         self.backing_up = false;
+        self.stall_point = None;
         self.pending_no_route = false;
         self.aborted = None;
     }
@@ -981,6 +996,7 @@ impl Navigator {
         self.route.push(goal);
         self.route_index = 0;
         self.backing_up = true;
+        self.stall_point = Some([x[ix::X], x[ix::Y]]);
         self.last_plan = Some(PlanReport {
             outcome: PlanOutcome::BackUp,
             duration: t0.elapsed(),
@@ -989,6 +1005,19 @@ impl Navigator {
         });
         self.plans += 1;
         true
+    }
+
+    /// Adds the keep-out circle `o` to the planning world unless the machine
+    /// or the goal is within it (then the replan cannot keep out).
+    fn keep_out(&mut self, x: &State, o: Obstacle) -> bool {
+        let Some(goal) = self.goal else {
+            return false;
+        };
+        let goal_pose = State::new(goal.x, goal.y, goal.theta, 0.0, 0.0, 0.0);
+        let clear = |s: &State| {
+            footprint_clearance(&self.params, s, &[o]) >= self.settings.clearance_margin
+        };
+        clear(x) && clear(&goal_pose) && self.world.push_keep_out(o)
     }
 
     /// "Is anything in the way?", by measurement: the actor rolled out from
@@ -1020,6 +1049,10 @@ impl Navigator {
 
 /// Within this distance of the back-up pose the machine has backed up [m].
 const BACK_UP_ARRIVAL: f64 = 0.5;
+
+/// Radius of the keep-out circle at the stall point for the replan after a
+/// back-up [m] (both axle points keep it plus the route's margin).
+const KEEP_OUT_RADIUS: f64 = 0.5;
 
 /// The machine's recent front-axle poses, one every [`Track::SPACING`] of
 /// travel, newest last; a fixed ring (no allocation) of [`Track::CAPACITY`].

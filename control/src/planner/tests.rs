@@ -557,6 +557,15 @@ fn a_second_stall_backs_up_along_the_track_then_replans_from_there() {
     assert!(r.replan && r.outcome == PlanOutcome::Route, "{r:?}");
     let p0 = nav.path()[0];
     assert_eq!((p0.x, p0.y), (moved[ix::X], moved[ix::Y]));
+    // That replan kept out of the stall point (both axle points of every
+    // pose), and the keep-out circle was only for it.
+    let keep_out = [Obstacle::new(stuck[ix::X], stuck[ix::Y], 0.5)];
+    for q in nav.path() {
+        let pose = State::new(q.x, q.y, q.theta, q.beta, 0.0, 0.0);
+        let c = footprint_clearance(&params(), &pose, &keep_out);
+        assert!(c >= s.clearance_margin - 1e-9, "{q:?} {c}");
+    }
+    assert_eq!(nav.world.obstacles(), &wall()[..]);
     // No second back-up for this goal (max_back_ups 1).
     let mut later = Vec::new();
     for k in 0..100 {
