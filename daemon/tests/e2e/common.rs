@@ -30,6 +30,17 @@ pub fn time_scale() -> f64 {
     timing_scale::daemon_time_scale(TIME_SCALE)
 }
 
+/// `[mpc] time_budget` for a `wlnavd` started as a process (a `--config` file, or a section
+/// appended to one): the default solver budget, also the start-up self-test's, times
+/// `WLNAV_TIMING_SCALE`, as [`sim_config`] does in process. Under qemu the unscaled 0.1 s
+/// failed the self-test (the daemon exited 1) on a loaded machine.
+pub fn budget_toml() -> String {
+    format!(
+        "\n[mpc]\ntime_budget = {:?}\n",
+        timing_scale::secs(Config::default().mpc.time_budget)
+    )
+}
+
 /// A service prefix no other test (or process) uses.
 pub fn unique_prefix(name: &str) -> String {
     static N: AtomicU32 = AtomicU32::new(0);
@@ -365,10 +376,14 @@ pub enum Sample {
     Skip,
 }
 
-/// An external localization on its own thread: every 20 ms (real) it asks `f` what to
-/// publish, given the simulated machine's log (true pose, daemon time) and the current
-/// `CLOCK_MONOTONIC` time, and publishes it on the daemon's pose service through shared
-/// memory.
+/// An external localization on its own thread: every 20 ms (real, times
+/// `WLNAV_TIMING_SCALE`: the same period in daemon time as natively, as the daemon's clock
+/// is slowed by the factor) it asks `f` what to publish, given the simulated machine's log
+/// (true pose, daemon time) and the current `CLOCK_MONOTONIC` time, and publishes it on the
+/// daemon's pose service through shared memory. (Unscaled under qemu, 5x the samples per
+/// daemon second: enough for the pose gate to re-anchor on a source jumping every 0.5 s
+/// within one tick, and `pose_jumping_10_m_every_half_second_stops_the_machine` stopped
+/// 2.6 s after the last good pose instead of within 1.2 s.)
 pub struct Localization {
     stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
     thread: Option<std::thread::JoinHandle<()>>,
@@ -384,13 +399,14 @@ impl Localization {
         let config = IpcConfig::new(prefix.to_owned());
         let client = Client::new(&config).expect("localization client");
         let s = stop.clone();
+        let period = timing_scale::real(Duration::from_millis(20));
         let thread = std::thread::spawn(move || {
             while !s.load(Ordering::Relaxed) {
                 let log = sim.snapshot();
                 if let Sample::Publish(p) = f(&log, shm_ipc::monotonic_now_ns()) {
                     client.publish_pose(&p).expect("publish pose");
                 }
-                std::thread::sleep(Duration::from_millis(20));
+                std::thread::sleep(period);
             }
         });
         Self {

@@ -8,7 +8,9 @@ use std::time::{Duration, Instant};
 use shm_ipc::{Client, IpcConfig, Mode, Pose2};
 use wlnavd::can::{CandumpReader, DriveMode, VelocityCommandFrame, VELOCITY_COMMAND_ID};
 
-use crate::common::{assert_systemd_verifies, unique_prefix};
+use crate::common::{
+    assert_systemd_verifies, budget_toml, time_scale, timing_scale, unique_prefix,
+};
 
 const BIN: &str = env!("CARGO_BIN_EXE_wlnavd");
 
@@ -37,17 +39,14 @@ fn wait_exit(child: &mut Child, timeout: Duration) -> std::process::ExitStatus {
 fn sigterm_stops_the_machine_and_the_stop_is_the_last_frame() {
     let dir = tempfile::tempdir().unwrap();
     let log = dir.path().join("can.log");
+    let config = dir.path().join("wlnavd.toml");
+    std::fs::write(&config, budget_toml()).unwrap();
     let prefix = unique_prefix("sigterm");
     let mut child = Command::new(BIN)
-        .args([
-            "--sim",
-            "--cost",
-            "quadratic",
-            "--time-scale",
-            "4",
-            "--log",
-            "terminal",
-        ])
+        .args(["--sim", "--cost", "quadratic", "--log", "terminal"])
+        .args(["--time-scale", &time_scale().to_string()])
+        .arg("--config")
+        .arg(&config)
         .args(["--prefix", &prefix])
         .arg("--can-log")
         .arg(&log)
@@ -57,7 +56,7 @@ fn sigterm_stops_the_machine_and_the_stop_is_the_last_frame() {
         .unwrap();
     let client = Client::connect(&IpcConfig::new(prefix), Duration::from_secs(30)).unwrap();
     let telemetry = client.subscribe_telemetry().unwrap();
-    let deadline = Instant::now() + Duration::from_secs(30);
+    let deadline = Instant::now() + timing_scale::real(Duration::from_secs(30));
     loop {
         assert!(Instant::now() < deadline, "goal never accepted");
         if let Ok(r) = client.set_goal(Pose2::new(10.0, 0.0, 0.0), &[], Duration::from_secs(1)) {
@@ -67,7 +66,7 @@ fn sigterm_stops_the_machine_and_the_stop_is_the_last_frame() {
         }
         std::thread::sleep(Duration::from_millis(50));
     }
-    let deadline = Instant::now() + Duration::from_secs(30);
+    let deadline = Instant::now() + timing_scale::real(Duration::from_secs(30));
     'driving: loop {
         assert!(Instant::now() < deadline, "never drove");
         while let Some(t) = telemetry.try_recv().unwrap() {
@@ -311,8 +310,13 @@ fn a_config_file_without_weights_finds_the_default_weights() {
 #[test]
 fn a_flood_of_bad_goals_is_logged_at_a_limited_rate() {
     let prefix = unique_prefix("reject-log");
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("wlnavd.toml");
+    std::fs::write(&config, budget_toml()).unwrap();
     let mut child = Command::new(BIN)
         .args(["--sim", "--cost", "quadratic", "--log", "terminal"])
+        .arg("--config")
+        .arg(&config)
         .args(["--prefix", &prefix])
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
@@ -323,7 +327,9 @@ fn a_flood_of_bad_goals_is_logged_at_a_limited_rate() {
     let mut rejected = 0;
     for i in 0..N {
         let bad = Pose2::new(f64::NAN, i as f64, 0.0);
-        let r = client.set_goal(bad, &[], Duration::from_secs(2)).unwrap();
+        let r = client
+            .set_goal(bad, &[], timing_scale::real(Duration::from_secs(2)))
+            .unwrap();
         rejected += usize::from(!r.is_accepted());
     }
     assert_eq!(rejected, N);

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use crate::common::{assert_systemd_verifies, unique_prefix};
+use crate::common::{assert_systemd_verifies, budget_toml, timing_scale, unique_prefix};
 
 const BIN: &str = env!("CARGO_BIN_EXE_wlnavd");
 
@@ -33,13 +33,15 @@ fn refused_real_time_scheduling_is_a_warning_and_the_daemon_ticks() {
     std::fs::write(
         &config,
         format!(
-            "[loop.realtime]\nenabled = true\npriority = 40\nlock_memory = true\ncpu = {cpu}\n"
+            "[loop.realtime]\nenabled = true\npriority = 40\nlock_memory = true\ncpu = {cpu}\n{}",
+            budget_toml()
         ),
     )
     .unwrap();
     let prefix = unique_prefix("rt-refused");
     let mut cmd = Command::new(BIN);
-    cmd.args(["--sim", "--cost", "quadratic", "--time-scale", "5"])
+    let time_scale = timing_scale::daemon_time_scale(5.0).to_string();
+    cmd.args(["--sim", "--cost", "quadratic", "--time-scale", &time_scale])
         .args([
             "--max-ticks",
             "25",
@@ -94,7 +96,7 @@ fn refused_real_time_scheduling_is_a_warning_and_the_daemon_ticks() {
     };
     let started = Instant::now();
     let out = child.wait_with_output().unwrap();
-    assert!(started.elapsed() < Duration::from_secs(60));
+    assert!(started.elapsed() < timing_scale::real(Duration::from_secs(60)));
     let stdout = String::from_utf8_lossy(&out.stdout);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(
