@@ -99,15 +99,19 @@ grep -q '^enabled' $binfmt/qemu-aarch64 || fail "binfmt_misc: qemu-aarch64 is re
 # and are built, not run, here.
 mkdir -p "$CARGO_TARGET_DIR"
 suites=(control shm-ipc daemon e2e)
-"$CARGO" test --locked --target $TARGET --profile cross --no-run \
+# The build's CPU time too (its cost on free cores: (user + sys) / cores), and cargo's
+# timings report (cargo-timings/ in the target directory: which units took how long).
+TIMEFORMAT='%R s wall, %U s user + %S s sys of CPU'
+{ time "$CARGO" test --locked --target $TARGET --profile cross --no-run --timings \
   -p control -p shm-ipc -p daemon -p e2e -p wlnav-cli -p wlnav-examples -p wlnav-fleet \
-  --message-format=json-render-diagnostics >"$CARGO_TARGET_DIR/cross-build.json" 2>"$CARGO_TARGET_DIR/cross-build.log" ||
+  --message-format=json-render-diagnostics >"$CARGO_TARGET_DIR/cross-build.json" 2>"$CARGO_TARGET_DIR/cross-build.log"; } \
+  2>"$CARGO_TARGET_DIR/cross-build.time" ||
   fail "cargo test --no-run --profile cross --target $TARGET:\n$(tail -n 30 "$CARGO_TARGET_DIR/cross-build.log")"
 bin=$CARGO_TARGET_DIR/$TARGET/cross
 for b in wlnavd wlnav wlnav-fleet goal-client pose-publisher; do
   file -L "$bin/$b" | grep -q 'ARM aarch64' || fail "$bin/$b is not an arm64 executable"
 done
-step "built the test executables and binaries for $TARGET: $bin/{wlnavd,wlnav,wlnav-fleet,goal-client,pose-publisher} are arm64"
+step "built the test executables and binaries for $TARGET ($(tail -n 1 "$CARGO_TARGET_DIR/cross-build.time")): $bin/{wlnavd,wlnav,wlnav-fleet,goal-client,pose-publisher} are arm64"
 
 # 4. The test suites under qemu-aarch64: each test executable of the build above, run in its
 # package's directory (as cargo test does). Timing limits are multiplied by
