@@ -1,9 +1,10 @@
 //! `wlnav demo`: the whole system in one command. Starts `wlnavd --sim` (the built-in
 //! simulated machine, no configuration) under a private prefix, waits until it is ready,
-//! drives the short loading cycle in [`LOADING_CYCLE`] through the real shared-memory path
-//! (goal requests, telemetry), prints progress and each leg's convergence time, writes an
-//! SVG of the driven path with the planned horizons, and stops the daemon with SIGTERM.
-//! Exit code 0 only if every leg was reached.
+//! drives the short loading cycle in [`LOADING_CYCLE`] and a leg around a pile through the
+//! real shared-memory path (goal requests with obstacles, telemetry), prints progress and
+//! each leg's convergence time, writes an SVG of the obstacles, the global route, the driven
+//! path and the planned horizons, and stops the daemon with SIGTERM. Exit code 0 only if
+//! every leg was reached.
 
 use std::ffi::OsString;
 use std::path::PathBuf;
@@ -17,7 +18,7 @@ use clap::Args;
 use shm_ipc::Client;
 use shm_ipc::ClientError;
 use shm_ipc::IpcConfig;
-use shm_ipc::{GoalReply, Pose2};
+use shm_ipc::{GoalReply, Obstacle, Pose2};
 
 use super::commands::{
     describe_reply, emit, follow, outcome_line, FollowEnd, FollowOptions, ProgressPrinter,
@@ -35,24 +36,58 @@ pub struct Leg {
     pub name: &'static str,
     /// Goal of the front axle.
     pub goal: Pose2,
+    /// Obstacles sent with the goal (radii inflated by the machine's half-width, as on the
+    /// wire).
+    pub obstacles: &'static [Obstacle],
 }
+
+/// A pile across the way out of the dump point: three circles of 0.8 m, 4 m ahead along the
+/// dump heading (−60°), 1 m apart across it; the global layer routes around them.
+const PILE: [Obstacle; 3] = [
+    Obstacle {
+        x: 5.134,
+        y: -6.794,
+        r: 0.8,
+    },
+    Obstacle {
+        x: 6.000,
+        y: -6.294,
+        r: 0.8,
+    },
+    Obstacle {
+        x: 6.866,
+        y: -5.794,
+        r: 0.8,
+    },
+];
 
 /// A short V-pattern loading cycle from the origin (heading 0): forward into the pile face
 /// 5 m ahead, back out to the apex of the V while turning the nose 60° to the right, then
-/// forward 5 m along the new heading to the dump point (truck). Each leg is 4–5 m, inside
-/// the goal distances the critic was trained on (2.5–10 m).
-pub const LOADING_CYCLE: [Leg; 3] = [
+/// forward 5 m along the new heading to the dump point (truck); then on to the next face,
+/// 8 m on, behind a pile (the work-site capability: the global layer's route around it).
+/// Each leg is 4–8 m, inside the goal distances the critic was trained on (2.5–10 m). The
+/// pile leg was checked in the simulator first (`wlnav-sim eval`, same start, ideal
+/// plant: reached in 11.4 s around the pile's upper end, clearance ≥ 0.21 m).
+pub const LOADING_CYCLE: [Leg; 4] = [
     Leg {
         name: "drive to the pile face",
         goal: Pose2::new(5.0, 0.0, 0.0),
+        obstacles: &[],
     },
     Leg {
         name: "back out while turning",
         goal: Pose2::new(1.5, 1.5, -std::f64::consts::FRAC_PI_3),
+        obstacles: &[],
     },
     Leg {
         name: "drive to the dump point",
         goal: Pose2::new(4.0, -2.83, -std::f64::consts::FRAC_PI_3),
+        obstacles: &[],
+    },
+    Leg {
+        name: "around a pile to a face",
+        goal: Pose2::new(8.0, -9.758, -std::f64::consts::FRAC_PI_3),
+        obstacles: &PILE,
     },
 ];
 
@@ -109,12 +144,13 @@ pub struct LegResult {
     pub trace: LegTrace,
 }
 
-fn send_goal(client: &Client, goal: Pose2) -> Result<(u64, GoalReply), ClientError> {
+fn send_goal(client: &Client, leg: &Leg) -> Result<(u64, GoalReply), ClientError> {
     // The daemon may answer "no server" for a moment after its first telemetry: retry.
     let mut tries = 0;
     loop {
         let id = client.next_request_id();
-        let req = shm_ipc::GoalRequest::set_goal(id, goal, &[]).expect("no obstacles");
+        let req = shm_ipc::GoalRequest::set_goal(id, leg.goal, leg.obstacles)
+            .expect("a leg's obstacles fit the wire's limit");
         match client.request(&req, Duration::from_secs(2)) {
             Err(ClientError::NoDaemon { .. }) if tries < 20 => {
                 tries += 1;
@@ -247,6 +283,7 @@ pub fn run(cli: &Cli, a: &DemoArgs) -> anyhow::Result<u8> {
         let mut trace = LegTrace {
             name: leg.name.to_owned(),
             goal: g,
+            obstacles: leg.obstacles.iter().map(|o| (o.x, o.y, o.r)).collect(),
             ..LegTrace::default()
         };
         if i > 0 && !results.last().is_some_and(|r| r.status.is_succeeded()) {
@@ -256,7 +293,7 @@ pub fn run(cli: &Cli, a: &DemoArgs) -> anyhow::Result<u8> {
                 emit(&format!("  the daemon did not recover: {e:#}"));
             }
         }
-        let (id, reply) = match send_goal(&client, g) {
+        let (id, reply) = match send_goal(&client, leg) {
             Ok(r) => r,
             Err(e) => {
                 emit(&format!("{head}: request failed: {e}"));
@@ -287,6 +324,16 @@ pub fn run(cli: &Cli, a: &DemoArgs) -> anyhow::Result<u8> {
                     return;
                 }
                 trace.path.push((t.state.x_f, t.state.y_f));
+                if trace.route.is_empty() && t.route().len() > 1 {
+                    trace.route = t.route().iter().map(|p| (p.x, p.y)).collect();
+                    let via: String = t.route()[..t.route().len() - 1]
+                        .iter()
+                        .map(|p| format!(" ({:.2}, {:.2})", p.x, p.y))
+                        .collect();
+                    emit(&format!(
+                        "  route    around the obstacles via{via}, then the goal"
+                    ));
+                }
                 let second = tr.seconds_since_start(t.tick).unwrap_or(0.0).floor() as u64;
                 if drawn_second != Some(second) && !tr.status().is_final() {
                     drawn_second = Some(second);
@@ -382,7 +429,7 @@ pub fn run(cli: &Cli, a: &DemoArgs) -> anyhow::Result<u8> {
     ) {
         Ok(()) => {
             emit(&format!(
-                "  picture  {} (driven path, planned horizons every 1 s)",
+                "  picture  {} (driven path, planned horizons every 1 s, obstacles, route)",
                 a.out.display()
             ));
         }

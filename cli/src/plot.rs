@@ -31,6 +31,22 @@ pub struct LegTrace {
     pub horizons: Vec<Vec<(f64, f64)>>,
     /// Whether the daemon reported the goal reached.
     pub reached: bool,
+    /// The leg's obstacles (x, y, inflated radius) [m].
+    pub obstacles: Vec<(f64, f64, f64)>,
+    /// The global layer's first route for the leg (subgoals, then the goal) [m]; empty
+    /// when the way was direct.
+    pub route: Vec<(f64, f64)>,
+}
+
+/// A circle of radius `r` about (`x`, `y`) as a polygon in data coordinates (plotters'
+/// `Circle` has its radius in pixels).
+fn circle_points(x: f64, y: f64, r: f64) -> Vec<(f64, f64)> {
+    (0..=48)
+        .map(|k| {
+            let a = std::f64::consts::TAU * k as f64 / 48.0;
+            (x + r * a.cos(), y + r * a.sin())
+        })
+        .collect()
 }
 
 /// Axis ranges with equal metres per pixel on both axes, and the picture size.
@@ -71,14 +87,18 @@ fn layout(points: &[(f64, f64)]) -> ((f64, f64), (f64, f64), (u32, u32)) {
     ((x0, x1), (y0, y1), (width as u32, height as u32))
 }
 
-/// Writes the picture: each leg's driven path (thick), its planned horizons (thin, faint),
-/// its goal (dot and a heading tick 0.5 m long) and the start pose.
+/// Writes the picture: each leg's obstacles (grey discs) and planned route (dashed, through
+/// its subgoals), driven path (thick), planned horizons (thin, faint), goal (dot and a
+/// heading tick 0.5 m long), and the start pose.
 pub fn write_svg(path: &Path, title: &str, start: Pose2, legs: &[LegTrace]) -> anyhow::Result<()> {
     let mut all: Vec<(f64, f64)> = vec![(start.x, start.y)];
     for leg in legs {
         all.extend(&leg.path);
         all.extend(leg.horizons.iter().flatten());
         all.push((leg.goal.x, leg.goal.y));
+        for &(x, y, r) in &leg.obstacles {
+            all.extend([(x - r, y - r), (x + r, y + r)]);
+        }
     }
     let ((x0, x1), (y0, y1), size) = layout(&all);
     let err = |e: DrawingAreaErrorKind<_>| anyhow!("cannot draw {}: {e}", path.display());
@@ -102,6 +122,31 @@ pub fn write_svg(path: &Path, title: &str, start: Pose2, legs: &[LegTrace]) -> a
 
     for (i, leg) in legs.iter().enumerate() {
         let color = LEG_COLORS[i % LEG_COLORS.len()];
+        for &(x, y, r) in &leg.obstacles {
+            chart
+                .draw_series([Polygon::new(
+                    circle_points(x, y, r),
+                    RGBColor(150, 150, 150).mix(0.6).filled(),
+                )])
+                .map_err(err)?;
+        }
+        if !leg.route.is_empty() {
+            chart
+                .draw_series(DashedLineSeries::new(
+                    leg.route.iter().copied(),
+                    6,
+                    4,
+                    color.mix(0.8).stroke_width(2),
+                ))
+                .map_err(err)?;
+            chart
+                .draw_series(
+                    leg.route
+                        .iter()
+                        .map(|&p| Cross::new(p, 4, color.stroke_width(2))),
+                )
+                .map_err(err)?;
+        }
         for h in &leg.horizons {
             chart
                 .draw_series(LineSeries::new(
@@ -161,7 +206,9 @@ pub fn write_svg(path: &Path, title: &str, start: Pose2, legs: &[LegTrace]) -> a
             BLACK.filled(),
         )])
         .map_err(err)?
-        .label("start (black); short ticks: goal headings; faint lines: planned horizons")
+        .label(
+            "start (black); ticks: goal headings; faint: planned horizons; dashed: route; grey: obstacles",
+        )
         .legend(|(x, y)| Rectangle::new([(x + 6, y - 4), (x + 14, y + 4)], BLACK.filled()));
     chart
         .configure_series_labels()

@@ -198,11 +198,13 @@ fn demo_drives_the_loading_cycle_and_stops_the_daemon() {
         picture.contains("<svg") && picture.contains("<polyline"),
         "not a plot"
     );
+    // The pile leg's three circles.
+    assert!(picture.matches("<polygon").count() >= 3, "no obstacles drawn");
     assert!(std::fs::metadata(&rec).expect("recording").len() > 1000);
     // 0 = every leg reached, 3 = a leg not reached (reported honestly); never a crash.
     assert!(matches!(o.status.code(), Some(0) | Some(3)), "{out}");
     if o.status.code() == Some(0) {
-        assert!(out.contains("3/3 legs reached"), "{out}");
+        assert!(out.contains("4/4 legs reached"), "{out}");
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
