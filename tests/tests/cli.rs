@@ -199,7 +199,10 @@ fn demo_drives_the_loading_cycle_and_stops_the_daemon() {
         "not a plot"
     );
     // The pile leg's three circles.
-    assert!(picture.matches("<polygon").count() >= 3, "no obstacles drawn");
+    assert!(
+        picture.matches("<polygon").count() >= 3,
+        "no obstacles drawn"
+    );
     assert!(std::fs::metadata(&rec).expect("recording").len() > 1000);
     // 0 = every leg reached, 3 = a leg not reached (reported honestly); never a crash.
     assert!(matches!(o.status.code(), Some(0) | Some(3)), "{out}");
