@@ -497,9 +497,20 @@ fn main() -> Result<()> {
                 );
                 ev.summaries = eval::summarize_runs(&cfg.methods, &ev.runs, &rows);
             }
+            let navigation = cfg.navigator.as_ref().map_or(String::new(), |n| {
+                let mut text = format!(" ({}", n.tracking.name());
+                if n.tracking == Tracking::Carrot {
+                    text += &format!(" {} m", n.carrot_distance);
+                }
+                if n.back_up_distance > 0.0 {
+                    text += &format!(", back-up {} m", n.back_up_distance);
+                }
+                text + ")"
+            });
             let header = format!(
-                "# eval: {}\n\nmethods {methods}, planner {planner}, N = {}, Hessian {:?}, obstacles {:?} with margin {} m, SQP iterations {} × step {}, gain estimation {}, delay estimation {}, delay {delay} s, lag {lag} s, plant perturbation: {}, tolerance {}, networks: {}, machine (MPC, plant and min-time bound): {}\n",
+                "# eval: {}\n\nmethods {methods}, planner {planner}{navigation}, time budget {} s, N = {}, Hessian {:?}, obstacles {:?} with margin {} m, SQP iterations {} × step {}, gain estimation {}, delay estimation {}, delay {delay} s, lag {lag} s, plant perturbation: {}, tolerance {}, networks: {}, machine (MPC, plant and min-time bound): {}\n",
                 scenarios.display(),
+                cfg.mpc.time_budget,
                 cfg.mpc.horizon,
                 cfg.mpc.hessian,
                 cfg.mpc.obstacle_constraint,

@@ -8,7 +8,8 @@
 //! a subgoal is just a [`Goal`]; the MPC needs no change.
 //!
 //! Pieces: [`World`] (the circles, both axle points, a margin), the actor
-//! [`rollout`] ("is anything in the way?", goal shots, edge checks), two
+//! [`rollout`] ("is anything in the way?", goal shots, edge checks), the
+//! [`carrot`] (an alternative to subgoals, measured and off), two
 //! planners behind [`PlannerKind`] — [`HybridAStar`] over (x, y, θ) with the
 //! model's [`primitives`], and [`WaypointGraph`] (a critic-cost graph over
 //! waypoints around the circles, after Eysenbach et al., "Search on the
@@ -988,7 +989,9 @@ impl Navigator {
         {
             return false;
         }
-        let goal = self.route[self.route.len() - 1];
+        let Some(goal) = self.goal else {
+            return false;
+        };
         self.path.clear();
         self.route.clear();
         self.route_path_index.clear();
