@@ -59,13 +59,13 @@ fi
 
 # The Jetson's build (issue 28): arm64 binaries, the control, shm-ipc, daemon and e2e
 # tests under qemu, the examples against an arm64 daemon, the arm64 package. Opt-in
-# (WLNAV_CROSS_CHECK=1): it does not fit CI's budget (the test command ~35 min, at most
-# 45 with it). Measured 2026-12-03 (README, "The Jetson"): the arm64 build from scratch
-# alone is 2956 s user + 59 s sys of CPU (47 min wall beside other builds; >= 25 min on two
-# free cores), the control suite under qemu about 2.5 min, the daemon and e2e suites longer
-# (their daemons run 5x slower under WLNAV_TIMING_SCALE=5). Any failure in it is fatal.
+# (WLNAV_CROSS_CHECK=1): it does not fit CI's budget (at most 45 min; the test command
+# takes 27-35 min without it). Measured 2026-12-03 (README, "The Jetson"): the arm64 build
+# from scratch is 1723 s user + 50 s sys of CPU (>= 14.8 min on two free cores), its tests
+# under qemu about 12 min, the examples and the package 40 s: about 27 min where about 18
+# are left. Any failure in it is fatal.
 if [ $# -eq 0 ] && [ "${WLNAV_CROSS_CHECK:-0}" = 1 ]; then
   bash scripts/cross-check.sh
 else
-  echo "test.sh: cross check not run (opt-in: WLNAV_CROSS_CHECK=1 and no arguments run it, about 35 min more)"
+  echo "test.sh: cross check not run (opt-in: WLNAV_CROSS_CHECK=1 and no arguments run it, about 27 min more on two free cores)"
 fi
