@@ -2,6 +2,11 @@
 //! solution is the discrete-time LQR solution of the same finite-horizon
 //! problem, computed here independently by the backward Riccati recursion.
 
+/// The solver's wall-clock budget is a timing limit: times `WLNAV_TIMING_SCALE` (the shared
+/// helper; emulation: scripts/cross-check.sh).
+#[path = "../../tests/timing_scale.rs"]
+mod timing_scale;
+
 use control::model::{Control, ControlJacobian, Goal, MachineParams, State, StateJacobian};
 use control::mpc::{ClarabelBackend, LinearDynamics, Mpc, MpcSettings, QuadraticCost, StepStatus};
 use nalgebra::{SMatrix, SVector};
@@ -79,6 +84,7 @@ fn check(horizon: usize, seed: u64) {
         levenberg_marquardt: 0.0,
         delay: 0.0,
         qp_tolerance: 1e-11,
+        time_budget: timing_scale::secs(MpcSettings::default().time_budget),
         ..MpcSettings::default()
     };
     let params = wide_params();
