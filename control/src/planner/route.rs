@@ -10,6 +10,7 @@
 
 use crate::model::Goal;
 
+use super::carrot::is_cusp;
 use super::PathPose;
 
 /// Writes the subgoals of `path` (start first) followed by `goal` into
@@ -50,8 +51,7 @@ pub fn subgoals_from_path(
         let (a, b) = (&path[i - 1], &path[i]);
         since += (b.x - a.x).hypot(b.y - a.y);
         let last = i + 1 == path.len();
-        let cusp = !last && path[i + 1].direction != b.direction;
-        if since >= spacing || cusp || last {
+        if since >= spacing || is_cusp(path, i) || last {
             push(route, i);
             since = 0.0;
         }
