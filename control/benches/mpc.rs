@@ -70,21 +70,15 @@ struct Loop {
 
 impl Loop {
     fn new(horizon: usize, hessian: HessianMode, circles: usize) -> Self {
-        Self::with(
-            MpcSettings {
-                horizon,
-                hessian,
-                ..MpcSettings::default()
-            },
-            &CIRCLES[..circles],
-        )
-    }
-
-    fn with(settings: MpcSettings, obstacles: &'static [Obstacle]) -> Self {
-        let p = MachineParams::default();
+        let settings = MpcSettings {
+            horizon,
+            hessian,
+            ..MpcSettings::default()
+        };
         let (critic, actor) = networks();
-        let mpc = Mpc::new(p, critic, Some(actor), settings).expect("valid settings");
-        Self::around(mpc, obstacles)
+        let mpc = Mpc::new(MachineParams::default(), critic, Some(actor), settings)
+            .expect("valid settings");
+        Self::around(mpc, &CIRCLES[..circles])
     }
 
     fn around(mpc: Mpc<Critic>, obstacles: &'static [Obstacle]) -> Self {

@@ -492,13 +492,18 @@ fn a_stall_replans_from_the_current_state_then_aborts() {
     assert!(nav.plans() as usize <= 1 + s.max_replans);
 }
 
-#[test]
-fn a_second_stall_backs_up_along_the_track_then_replans_from_there() {
+/// Hybrid A* without networks, the stall ladder's back-up on (off by default).
+fn backing_up_navigator() -> Navigator {
     let settings = NavigatorSettings {
         back_up_distance: 2.5,
         ..NavigatorSettings::default()
     };
-    let mut nav = Navigator::new(params(), settings, None).unwrap();
+    Navigator::new(params(), settings, None).unwrap()
+}
+
+#[test]
+fn a_second_stall_backs_up_along_the_track_then_replans_from_there() {
+    let mut nav = backing_up_navigator();
     let s = nav.settings().clone();
     let goal = Goal::new(8.0, 0.0, 0.0);
     let start = at_rest(-3.0, -1.0, 0.0);
@@ -581,11 +586,7 @@ fn a_second_stall_backs_up_along_the_track_then_replans_from_there() {
 fn no_back_up_without_a_track() {
     // Stuck where it started: nothing driven to back up along, so the ladder
     // goes on with replans (a_stall_replans_from_the_current_state_then_aborts).
-    let settings = NavigatorSettings {
-        back_up_distance: 2.5,
-        ..NavigatorSettings::default()
-    };
-    let mut nav = Navigator::new(params(), settings, None).unwrap();
+    let mut nav = backing_up_navigator();
     let stuck = at_rest(2.0, -1.0, 0.5);
     nav.set_goal(&stuck, Goal::new(8.0, 0.0, 0.0), &wall())
         .unwrap();
