@@ -138,6 +138,8 @@ pub type ControllerFactory =
 pub struct MpcController<C: StageCost> {
     mpc: Mpc<C>,
     navigator: Option<Navigator>,
+    /// The navigator's cost-to-go version the MPC has (issue 27).
+    cost_to_go_version: Option<u64>,
 }
 
 impl<C: StageCost> MpcController<C> {
@@ -146,15 +148,18 @@ impl<C: StageCost> MpcController<C> {
         Self {
             mpc,
             navigator: None,
+            cost_to_go_version: None,
         }
     }
 
     /// Wraps a built MPC under a navigator (allocated here, once: set_goal and
     /// step allocate nothing).
-    pub fn with_navigator(mpc: Mpc<C>, navigator: Navigator) -> Self {
+    pub fn with_navigator(mut mpc: Mpc<C>, navigator: Navigator) -> Self {
+        mpc.reserve_cost_to_go(navigator.settings().grid_cells());
         Self {
             mpc,
             navigator: Some(navigator),
+            cost_to_go_version: None,
         }
     }
 }
@@ -199,6 +204,11 @@ impl<C: StageCost> Controller for MpcController<C> {
                 } => {
                     if self.mpc.goal() != Some(target) {
                         self.mpc.retarget(target).map_err(err)?;
+                    }
+                    // The MPC's copy of the cost-to-go field, as `wlnav-sim eval`.
+                    if self.cost_to_go_version != Some(nav.cost_to_go_version()) {
+                        self.cost_to_go_version = Some(nav.cost_to_go_version());
+                        self.mpc.set_cost_to_go(nav.cost_to_go());
                     }
                     subgoal = (!final_target).then_some(target);
                 }

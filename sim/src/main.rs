@@ -254,6 +254,18 @@ enum Command {
         /// instead of point subgoals (issue 27).
         #[arg(long, value_name = "M")]
         carrot_distance: Option<f64>,
+        /// Navigator: drive to the goal with a cost-to-go field around the
+        /// circles added to the MPC's cost, weighted G × the critic's cost of
+        /// a metre, instead of point subgoals (issue 27, design (b)).
+        #[arg(long, value_name = "G", conflicts_with = "carrot_distance")]
+        field_gain: Option<f64>,
+        /// Navigator: with --field-gain, keep the point subgoals and add the
+        /// field of the current subgoal.
+        #[arg(long, requires = "field_gain")]
+        field_on_subgoals: bool,
+        /// Navigator: with --field-gain, the clearance of the field's way [m].
+        #[arg(long, value_name = "M", requires = "field_gain")]
+        field_margin: Option<f64>,
         /// Navigator: clearance margin of the planned route [m].
         #[arg(long)]
         route_margin: Option<f64>,
@@ -401,6 +413,9 @@ fn main() -> Result<()> {
             subgoal_radius,
             subgoal_spacing,
             carrot_distance,
+            field_gain,
+            field_on_subgoals,
+            field_margin,
             route_margin,
             replan_after,
             heuristic_weight,
@@ -454,12 +469,15 @@ fn main() -> Result<()> {
                     },
                     subgoal_radius: subgoal_radius.unwrap_or(nd.subgoal_radius),
                     subgoal_spacing: subgoal_spacing.unwrap_or(nd.subgoal_spacing),
-                    tracking: if carrot_distance.is_some() {
-                        Tracking::Carrot
-                    } else {
-                        nd.tracking
+                    tracking: match (carrot_distance, field_gain) {
+                        (Some(_), _) => Tracking::Carrot,
+                        (None, Some(_)) if field_on_subgoals => Tracking::SubgoalsInField,
+                        (None, Some(_)) => Tracking::Field,
+                        (None, None) => nd.tracking,
                     },
                     carrot_distance: carrot_distance.unwrap_or(nd.carrot_distance),
+                    field_gain: field_gain.unwrap_or(nd.field_gain),
+                    field_margin: field_margin.unwrap_or(nd.field_margin),
                     clearance_margin: route_margin.unwrap_or(nd.clearance_margin),
                     replan_after: replan_after.unwrap_or(nd.replan_after),
                     heuristic_weight: heuristic_weight.unwrap_or(nd.heuristic_weight),
@@ -499,8 +517,12 @@ fn main() -> Result<()> {
             }
             let navigation = cfg.navigator.as_ref().map_or(String::new(), |n| {
                 let mut text = format!(" ({}", n.tracking.name());
-                if n.tracking == Tracking::Carrot {
-                    text += &format!(" {} m", n.carrot_distance);
+                match n.tracking {
+                    Tracking::Carrot => text += &format!(" {} m", n.carrot_distance),
+                    Tracking::Field | Tracking::SubgoalsInField => {
+                        text += &format!(" x{}, margin {} m", n.field_gain, n.field_margin);
+                    }
+                    Tracking::Subgoals => {}
                 }
                 if n.back_up_distance > 0.0 {
                     text += &format!(", back-up {} m", n.back_up_distance);

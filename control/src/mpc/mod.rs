@@ -35,6 +35,7 @@
 
 pub mod constraints;
 pub mod cost;
+pub mod cost_to_go;
 pub mod dynamics;
 pub mod layout;
 pub mod qp;
@@ -44,6 +45,7 @@ mod sqp;
 
 pub use constraints::Obstacle;
 pub use cost::{QuadraticCost, StageCost};
+pub use cost_to_go::CostToGo;
 pub use dynamics::{Dynamics, LinearDynamics, Rk4Model};
 pub use layout::QpLayout;
 pub use qp::{ClarabelBackend, QpBackend, QpData, QpOutcome, QpStatus};
@@ -77,6 +79,9 @@ pub struct Mpc<C: StageCost, D: Dynamics = Rk4Model, B: QpBackend = ClarabelBack
     /// `settings.delay_estimation`.
     delay_estimate: DelayEstimator,
     goal: Option<Goal>,
+    /// Added to the cost of every stage and the terminal cost: the way to the
+    /// goal around the circles ([`CostToGo`]; empty = the critic alone).
+    cost_to_go: CostToGo,
     obstacles: [Obstacle; MAX_OBSTACLES],
     n_obstacles: usize,
     /// The plan, which is also the next linearisation point once shifted.
@@ -202,6 +207,7 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
             gain: GainEstimator::new(params, settings.delay, settings.dt),
             delay_estimate,
             goal: None,
+            cost_to_go: CostToGo::default(),
             obstacles: [Obstacle::default(); MAX_OBSTACLES],
             n_obstacles: 0,
             xs: vec![State::zeros(); n + 1],
@@ -266,6 +272,7 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
     /// goal while driving, or a start after a stop ramp).
     pub fn clear_goal(&mut self) {
         self.goal = None;
+        self.cost_to_go.clear();
         self.n_obstacles = 0;
         self.has_plan = false;
         self.set_obstacle_weight(self.settings.obstacle_slack_weight);
@@ -356,6 +363,27 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
         self.has_plan = keep;
         self.set_obstacle_weight(weight);
         Ok(())
+    }
+
+    /// Sets the cost-to-go field added to the cost from the next tick on
+    /// (`None` removes it). Allocates only when the field is larger than any
+    /// before: reserve with [`Self::reserve_cost_to_go`] at start-up.
+    pub fn set_cost_to_go(&mut self, field: Option<&CostToGo>) {
+        match field {
+            Some(f) => self.cost_to_go.copy_from(f),
+            None => self.cost_to_go.clear(),
+        }
+    }
+
+    /// Room for a cost-to-go field of `n × n` cells, so setting one in a tick
+    /// does not allocate.
+    pub fn reserve_cost_to_go(&mut self, n: usize) {
+        self.cost_to_go = CostToGo::with_cells(n);
+    }
+
+    /// The cost-to-go field in use.
+    pub fn cost_to_go(&self) -> &CostToGo {
+        &self.cost_to_go
     }
 
     /// The obstacle rows' L1 weight in force (DESIGN §14).

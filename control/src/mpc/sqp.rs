@@ -11,6 +11,7 @@ use crate::obstacle::{footprint_clearance, PENETRATION_TOLERANCE};
 
 use super::constraints::{fill_bounds, fill_obstacles};
 use super::cost::{stage_block, terminal_block, StageCost};
+use super::cost_to_go::CostToGo;
 use super::dynamics::Dynamics;
 use super::layout::{QpLayout, AXLE_POINTS, NU, NX, NZ};
 use super::qp::{QpBackend, QpStatus};
@@ -37,6 +38,15 @@ pub const MAX_OBSTACLE_WEIGHT: f64 = 1e6;
 
 fn derivatives_finite(value: f64, grad: &[f64], hess: &[f64]) -> bool {
     value.is_finite() && grad.iter().chain(hess).all(|v| v.is_finite())
+}
+
+/// Adds the cost-to-go field's w·φ at the front axle (x, y) and its gradient
+/// to a cost's value and gradient (its Hessian is zero: [`CostToGo`]).
+fn add_cost_to_go(field: &CostToGo, x: &State, value: &mut f64, grad: &mut [f64]) {
+    let (v, g) = field.eval(x[ix::X], x[ix::Y]);
+    *value += v;
+    grad[ix::X] += g[0];
+    grad[ix::Y] += g[1];
 }
 
 fn finite(x: &State) -> bool {
@@ -293,6 +303,7 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
             if !derivatives_finite(der.value, &der.grad, der.hess.as_flattened()) {
                 return false;
             }
+            add_cost_to_go(&self.cost_to_go, &self.xs[k], &mut der.value, &mut der.grad);
             cost += s.dt * der.value;
             stage_block(
                 &der,
@@ -324,6 +335,12 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
         if !derivatives_finite(term.value, &term.grad, term.hess.as_flattened()) {
             return false;
         }
+        add_cost_to_go(
+            &self.cost_to_go,
+            &self.xs[s.horizon],
+            &mut term.value,
+            &mut term.grad,
+        );
         cost += term.value;
         terminal_block(
             &term,

@@ -39,11 +39,14 @@ pub use world::World;
 use crate::actor::{Actor, ActorWorkspace};
 use crate::critic::{Critic, CriticWorkspace};
 use crate::model::{
-    goal_distance, ix, wrap_angle, Goal, MachineParams, State, REACH_SPEED, SUCCESS_TOLERANCE,
+    goal_distance, ix, wrap_angle, Control, Goal, MachineParams, State, REACH_SPEED,
+    SUCCESS_TOLERANCE,
 };
+use crate::mpc::CostToGo;
 use crate::obstacle::{footprint_clearance, BadObstacle, Obstacle};
 use crate::progress::{ProgressChecker, ProgressSettings};
 
+use grid::{GridFrame, ObstacleHeuristic};
 use rollout::{roll_out, Arrival};
 
 /// Which planner finds the route when the way is blocked.
@@ -74,6 +77,15 @@ pub enum Tracking {
     /// onto it, moved every tick ([`carrot`]); the subgoals remain the
     /// progress markers of the stall logic.
     Carrot,
+    /// The goal itself, with a cost-to-go field added to the MPC's cost: the
+    /// excess of the distance around the circles over the open distance,
+    /// priced at the critic's cost of a metre ([`CostToGo`]; issue 27's design
+    /// (b)). The planned path's subgoals remain the progress markers, passed
+    /// by projection as with the carrot.
+    Field,
+    /// Point subgoals as `Subgoals`, with the cost-to-go field of the current
+    /// subgoal added to the MPC's cost.
+    SubgoalsInField,
 }
 
 impl Tracking {
@@ -81,6 +93,8 @@ impl Tracking {
         match self {
             Tracking::Subgoals => "subgoals",
             Tracking::Carrot => "carrot",
+            Tracking::Field => "field",
+            Tracking::SubgoalsInField => "subgoals in a field",
         }
     }
 }
@@ -95,6 +109,16 @@ pub struct NavigatorSettings {
     /// [m] (`Tracking::Carrot`). Default 3: beyond what the 2 s horizon covers
     /// at v_max, so the critic does not brake for it.
     pub carrot_distance: f64,
+    /// `Tracking::Field`: the field's weight as a multiple of the critic's
+    /// cost of a metre (calibrated at construction). Default 1: the critic
+    /// plus the field then prices the way around as the critic prices the
+    /// open way.
+    pub field_gain: f64,
+    /// Field tracking: the clearance the field's way keeps from every
+    /// circle [m] (the front axle's; at least the route's margin). A wider
+    /// way leaves the machine room to turn: the field knows no heading.
+    /// Default 0.15 (the route's).
+    pub field_margin: f64,
     /// A subgoal is passed (the next one becomes the target) when the front
     /// axle is within this distance of it [m]. Default 1.0: before the MPC
     /// slows down for it.
@@ -201,6 +225,8 @@ impl Default for NavigatorSettings {
             planner: PlannerKind::HybridAStar,
             tracking: Tracking::Subgoals,
             carrot_distance: 3.0,
+            field_gain: 1.0,
+            field_margin: 0.15,
             subgoal_radius: 1.0,
             subgoal_spacing: 2.5,
             progress: ProgressSettings::default(),
@@ -253,6 +279,8 @@ impl NavigatorSettings {
         let positive = [
             ("subgoal_radius", self.subgoal_radius),
             ("carrot_distance", self.carrot_distance),
+            ("field_gain", self.field_gain),
+            ("field_margin", self.field_margin),
             ("subgoal_spacing", self.subgoal_spacing),
             ("progress.timeout", self.progress.timeout),
             ("replan_after", self.replan_after),
@@ -474,6 +502,33 @@ enum Planner {
 /// published critic: about 0.22, `docs/global-layer.md`).
 const FALLBACK_SECONDS_PER_COST: f64 = 0.22;
 
+/// The critic's cost of a metre when there is no critic or its fit fails
+/// (measured on the published critic: 3.0).
+const FALLBACK_COST_PER_METRE: f64 = 3.0;
+
+/// The critic's cost of a metre of way to the goal: its mean slope in the
+/// goal distance between 3 and 10 m (the range it was trained on), over goals
+/// on every side of the machine at rest and every relative heading. The
+/// critic is close to proportional to the time to go (`docs/global-layer.md`),
+/// so this is its price of a metre at cruising speed.
+pub fn critic_cost_per_metre(critic: &Critic, ws: &mut CriticWorkspace) -> Option<f64> {
+    let (near, far) = (3.0, 10.0);
+    let (mut sum, mut count) = (0.0, 0.0);
+    for bearing in [0.0f64, 45.0, 90.0, 135.0, 180.0, 225.0, 270.0, 315.0] {
+        for heading in [0.0f64, 90.0, 180.0, 270.0] {
+            let (b, h) = (bearing.to_radians(), heading.to_radians());
+            let mut value = |d: f64| {
+                let g = Goal::new(d * b.cos(), d * b.sin(), h);
+                critic.value(ws, &State::zeros(), &Control::zeros(), &g)
+            };
+            sum += (value(far) - value(near)) / (far - near);
+            count += 1.0;
+        }
+    }
+    let slope = sum / count;
+    (slope.is_finite() && slope > 0.0).then_some(slope)
+}
+
 /// The global layer: built once, then `set_goal` per goal and `update` per tick.
 pub struct Navigator {
     params: MachineParams,
@@ -512,6 +567,15 @@ pub struct Navigator {
     aborted: Option<AbortReason>,
     last_plan: Option<PlanReport>,
     plans: u64,
+    /// `Tracking::Field`: the distance from the goal, and the field written
+    /// from it at each plan (empty when the way is direct).
+    field_distance: ObstacleHeuristic,
+    field: CostToGo,
+    /// The target and plan count the field was computed for.
+    field_for: Option<(Goal, u64)>,
+    field_version: u64,
+    /// The field's weight: `field_gain` × the critic's cost of a metre.
+    field_weight: f64,
 }
 
 impl Navigator {
@@ -559,8 +623,18 @@ impl Navigator {
                 ))
             }
         };
+        let cost_per_metre = networks
+            .as_mut()
+            .and_then(|n| critic_cost_per_metre(&n.critic, &mut n.critic_ws))
+            .unwrap_or(FALLBACK_COST_PER_METRE);
+        let cells = settings.grid_cells();
         Ok(Self {
             params,
+            field_distance: ObstacleHeuristic::new(cells),
+            field: CostToGo::with_cells(cells),
+            field_for: None,
+            field_version: 0,
+            field_weight: settings.field_gain * cost_per_metre,
             world: World::new(params, settings.max_obstacles, settings.clearance_margin),
             networks,
             planner,
@@ -716,6 +790,7 @@ impl Navigator {
             self.advance(x, now);
         }
         let (target, final_target) = self.drive_target(x);
+        self.refresh_field(x, &target);
         NavStep::Drive {
             target,
             final_target,
@@ -770,6 +845,9 @@ impl Navigator {
         self.stall_point = None;
         self.pending_no_route = false;
         self.aborted = None;
+        self.field.clear();
+        self.field_for = None;
+        self.field_version += 1;
     }
 
     /// Passes every subgoal within `subgoal_radius` (never the goal); with a
@@ -777,7 +855,8 @@ impl Navigator {
     /// carrot may cut a corner at more than the radius from its subgoal).
     fn advance(&mut self, x: &State, now: f64) {
         let s = &self.settings;
-        let following = s.tracking == Tracking::Carrot && !self.path.is_empty();
+        let following =
+            matches!(s.tracking, Tracking::Carrot | Tracking::Field) && !self.path.is_empty();
         if following {
             self.path_index = carrot::project(
                 &self.path,
@@ -810,6 +889,10 @@ impl Navigator {
     fn drive_target(&mut self, x: &State) -> (Goal, bool) {
         let last = self.route.len() - 1;
         let s = &self.settings;
+        if s.tracking == Tracking::Field && !self.path.is_empty() {
+            // The field knows the way: the MPC drives to the goal itself.
+            return (self.route[last], true);
+        }
         if s.tracking == Tracking::Carrot && !self.path.is_empty() && self.route_index < last {
             let world = &self.world;
             let k = carrot::carrot(
@@ -919,6 +1002,51 @@ impl Navigator {
         report.duration = t0.elapsed();
         self.last_plan = Some(report);
         self.plans += 1;
+    }
+
+    /// The cost-to-go field of the drive target (with a field tracking and a
+    /// planned route), over the planning world (its margin and any keep-out
+    /// circle): computed again when the target or the route changes. No field
+    /// for a direct way, a back-up or a retry (the critic alone, as in open
+    /// ground).
+    fn refresh_field(&mut self, x: &State, target: &Goal) {
+        let s = &self.settings;
+        let wanted = matches!(s.tracking, Tracking::Field | Tracking::SubgoalsInField)
+            && !self.path.is_empty();
+        if !wanted {
+            if !self.field.is_empty() {
+                self.field.clear();
+                self.field_version += 1;
+            }
+            self.field_for = None;
+            return;
+        }
+        if self.field_for == Some((*target, self.plans)) {
+            return;
+        }
+        self.field_for = Some((*target, self.plans));
+        self.field_version += 1;
+        // A grid of the search's size, centred between machine and target.
+        let centre = [0.5 * (x[ix::X] + target.x), 0.5 * (x[ix::Y] + target.y)];
+        let frame = GridFrame::centred(centre, s.grid_resolution, s.grid_cells());
+        let margin = self.world.margin();
+        self.world.set_margin(s.field_margin.max(margin));
+        self.field_distance
+            .compute(frame, &self.world, [target.x, target.y]);
+        self.world.set_margin(margin);
+        self.field_distance
+            .write_excess(self.field_weight, &mut self.field);
+    }
+
+    /// The cost-to-go field the MPC adds to its cost now (`None`: the critic
+    /// alone). It changes only when [`Self::cost_to_go_version`] does.
+    pub fn cost_to_go(&self) -> Option<&CostToGo> {
+        (!self.field.is_empty()).then_some(&self.field)
+    }
+
+    /// Counts the changes of [`Self::cost_to_go`].
+    pub fn cost_to_go_version(&self) -> u64 {
+        self.field_version
     }
 
     /// At rest within `approach_distance` of the goal: stopped short of it,
