@@ -259,10 +259,6 @@ enum Command {
         /// a metre, instead of point subgoals (issue 27, design (b)).
         #[arg(long, value_name = "G", conflicts_with = "carrot_distance")]
         field_gain: Option<f64>,
-        /// Navigator: with --field-gain, keep the point subgoals and add the
-        /// field of the current subgoal.
-        #[arg(long, requires = "field_gain")]
-        field_on_subgoals: bool,
         /// Navigator: with --field-gain, the clearance of the field's way [m].
         #[arg(long, value_name = "M", requires = "field_gain")]
         field_margin: Option<f64>,
@@ -414,7 +410,6 @@ fn main() -> Result<()> {
             subgoal_spacing,
             carrot_distance,
             field_gain,
-            field_on_subgoals,
             field_margin,
             route_margin,
             replan_after,
@@ -471,7 +466,6 @@ fn main() -> Result<()> {
                     subgoal_spacing: subgoal_spacing.unwrap_or(nd.subgoal_spacing),
                     tracking: match (carrot_distance, field_gain) {
                         (Some(_), _) => Tracking::Carrot,
-                        (None, Some(_)) if field_on_subgoals => Tracking::SubgoalsInField,
                         (None, Some(_)) => Tracking::Field,
                         (None, None) => nd.tracking,
                     },
@@ -519,7 +513,7 @@ fn main() -> Result<()> {
                 let mut text = format!(" ({}", n.tracking.name());
                 match n.tracking {
                     Tracking::Carrot => text += &format!(" {} m", n.carrot_distance),
-                    Tracking::Field | Tracking::SubgoalsInField => {
+                    Tracking::Field => {
                         text += &format!(" x{}, margin {} m", n.field_gain, n.field_margin);
                     }
                     Tracking::Subgoals => {}

@@ -79,13 +79,11 @@ pub enum Tracking {
     Carrot,
     /// The goal itself, with a cost-to-go field added to the MPC's cost: the
     /// excess of the distance around the circles over the open distance,
-    /// priced at the critic's cost of a metre ([`CostToGo`]; issue 27's design
-    /// (b)). The planned path's subgoals remain the progress markers, passed
-    /// by projection as with the carrot.
+    /// priced at `field_gain` × the critic's cost of a metre ([`CostToGo`];
+    /// issue 27's design (b)). The planned path's subgoals remain the
+    /// progress markers, passed by projection as with the carrot; after the
+    /// first stall the subgoals are the targets (the field knows no heading).
     Field,
-    /// Point subgoals as `Subgoals`, with the cost-to-go field of the current
-    /// subgoal added to the MPC's cost.
-    SubgoalsInField,
 }
 
 impl Tracking {
@@ -94,7 +92,6 @@ impl Tracking {
             Tracking::Subgoals => "subgoals",
             Tracking::Carrot => "carrot",
             Tracking::Field => "field",
-            Tracking::SubgoalsInField => "subgoals in a field",
         }
     }
 }
@@ -574,6 +571,8 @@ pub struct Navigator {
     /// The target and plan count the field was computed for.
     field_for: Option<(Goal, u64)>,
     field_version: u64,
+    /// `Tracking::Field` stalled once on this goal: subgoals from then on.
+    field_stalled: bool,
     /// The field's weight: `field_gain` × the critic's cost of a metre.
     field_weight: f64,
 }
@@ -634,6 +633,7 @@ impl Navigator {
             field: CostToGo::with_cells(cells),
             field_for: None,
             field_version: 0,
+            field_stalled: false,
             field_weight: settings.field_gain * cost_per_metre,
             world: World::new(params, settings.max_obstacles, settings.clearance_margin),
             networks,
@@ -784,6 +784,10 @@ impl Navigator {
         } else if stalled && !self.world.is_empty() && self.replans < self.settings.max_replans {
             self.replans += 1;
             self.last_replan = now;
+            // The field knows no heading: a machine it stalled (pressed
+            // against a circle, or without room to turn) goes on by the
+            // route's subgoals, which do.
+            self.field_stalled = self.settings.tracking == Tracking::Field;
             self.plan(x, true);
             // A failed replan keeps the route it had: the abort window decides.
             self.pending_no_route = false;
@@ -848,6 +852,7 @@ impl Navigator {
         self.field.clear();
         self.field_for = None;
         self.field_version += 1;
+        self.field_stalled = false;
     }
 
     /// Passes every subgoal within `subgoal_radius` (never the goal); with a
@@ -889,7 +894,7 @@ impl Navigator {
     fn drive_target(&mut self, x: &State) -> (Goal, bool) {
         let last = self.route.len() - 1;
         let s = &self.settings;
-        if s.tracking == Tracking::Field && !self.path.is_empty() {
+        if self.driving_to_goal_in_field() {
             // The field knows the way: the MPC drives to the goal itself.
             return (self.route[last], true);
         }
@@ -1011,8 +1016,7 @@ impl Navigator {
     /// ground).
     fn refresh_field(&mut self, x: &State, target: &Goal) {
         let s = &self.settings;
-        let wanted = matches!(s.tracking, Tracking::Field | Tracking::SubgoalsInField)
-            && !self.path.is_empty();
+        let wanted = self.driving_to_goal_in_field();
         if !wanted {
             if !self.field.is_empty() {
                 self.field.clear();
@@ -1036,6 +1040,12 @@ impl Navigator {
         self.world.set_margin(margin);
         self.field_distance
             .write_excess(self.field_weight, &mut self.field);
+    }
+
+    /// `Tracking::Field` on a planned route that has not stalled: the MPC
+    /// drives to the goal, the field shows the way.
+    fn driving_to_goal_in_field(&self) -> bool {
+        self.settings.tracking == Tracking::Field && !self.path.is_empty() && !self.field_stalled
     }
 
     /// The cost-to-go field the MPC adds to its cost now (`None`: the critic

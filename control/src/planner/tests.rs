@@ -492,6 +492,73 @@ fn a_stall_replans_from_the_current_state_then_aborts() {
     assert!(nav.plans() as usize <= 1 + s.max_replans);
 }
 
+#[test]
+fn the_field_drives_to_the_goal_around_the_wall_and_gives_way_to_subgoals_after_a_stall() {
+    let settings = NavigatorSettings {
+        tracking: Tracking::Field,
+        ..NavigatorSettings::default()
+    };
+    let replan_after = settings.replan_after;
+    let mut nav = Navigator::new(params(), settings, None).unwrap();
+    let goal = Goal::new(8.0, 0.0, 0.0);
+    nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &wall())
+        .unwrap();
+    assert!(nav.route().len() > 1, "a route around the wall");
+    let stuck = at_rest(2.0, -0.3, 0.0);
+    assert_eq!(nav.update(&stuck, 0.0), drive(goal, true));
+    let field = nav.cost_to_go().expect("a field on a route");
+    // The field's weight: the fallback cost of a metre (no critic) × gain 1.
+    // In front of the wall the excess is positive and falls towards the
+    // nearer end (−y); beyond the wall it is zero.
+    let (v, g) = field.eval(2.0, -0.3);
+    assert!(v > 1.0 && g[1] > 0.0, "{v} {g:?}");
+    assert_eq!(field.eval(6.0, 0.0).0, 0.0);
+    let version = nav.cost_to_go_version();
+    // Stalled there: the replan hands the MPC the route's subgoals and no field.
+    let mut t = 0.0;
+    while t < replan_after + 0.5 {
+        t += 0.2;
+        let step = nav.update(&stuck, t);
+        if nav.plans() == 2 {
+            let NavStep::Drive { target, .. } = step else {
+                panic!("{step:?}");
+            };
+            assert_ne!(target, goal);
+            assert!(nav.cost_to_go().is_none());
+            assert!(nav.cost_to_go_version() > version);
+            return;
+        }
+    }
+    panic!("no replan by {t} s");
+}
+
+#[test]
+fn the_critics_cost_of_a_metre_is_its_slope_in_the_goal_distance() {
+    let (_, critic) = trained();
+    let mut ws = CriticWorkspace::new(&critic);
+    let per_metre = critic_cost_per_metre(&critic, &mut ws).unwrap();
+    // Measured on the published critic: 3.0 (FALLBACK_COST_PER_METRE), and
+    // about the time to go at cruising speed / 0.22 s per unit (waypoint graph).
+    assert!(
+        (per_metre - FALLBACK_COST_PER_METRE).abs() < 0.5,
+        "{per_metre}"
+    );
+    // Independently: the slope straight ahead, 4 to 9 m, is of the same size.
+    let mut value = |d: f64| {
+        critic.value(
+            &mut ws,
+            &State::zeros(),
+            &Control::zeros(),
+            &Goal::new(d, 0.0, 0.0),
+        )
+    };
+    let ahead = (value(9.0) - value(4.0)) / 5.0;
+    assert!(
+        ahead > 0.5 * per_metre && ahead < 2.0 * per_metre,
+        "{ahead} vs {per_metre}"
+    );
+}
+
 /// Hybrid A* without networks, the stall ladder's back-up on (off by default).
 fn backing_up_navigator() -> Navigator {
     let settings = NavigatorSettings {
