@@ -18,8 +18,13 @@
 //! published after it. `reject_run` consecutive rejects are a pose fault
 //! ([`PoseGate::faulted`] → controlled stop). The fault clears only when the source has
 //! been consistent again: `reject_run` successive samples, each plausible relative to the
-//! one before and inside the region, received while faulted; the newest of them becomes
-//! the reference (a relocalised machine recovers; a jumping or absurd source never does).
+//! one before and inside the region, received while faulted and spanning at least the pose
+//! timeout; the newest of them becomes the reference (a relocalised machine recovers; a
+//! jumping or absurd source never does). The span matters for a fast source: at 50 Hz
+//! `reject_run` samples take 0.1 s, so a source jumping every 0.5 s would re-anchor within
+//! one 5 Hz tick each time and the loop might never see the fault; with the span a fault
+//! lasts at least the timeout (longer than a tick), and a source that jumps more often
+//! than that never recovers.
 
 use shm_ipc::Pose2;
 
@@ -163,8 +168,9 @@ pub struct PoseGate {
     run: u32,
     /// All rejects since start.
     rejected_total: u64,
-    /// While faulted: the newest sane sample and how many consistent ones led to it.
-    chain: Option<(Pose2, f64, u32)>,
+    /// While faulted: the newest sane sample, how many consistent ones led to it, and
+    /// the time of the first of them.
+    chain: Option<(Pose2, f64, u32, f64)>,
 }
 
 /// Heading difference wrapped to (−π, π].
@@ -264,13 +270,17 @@ impl PoseGate {
             return PoseVerdict::Accepted;
         };
         if self.faulted() {
-            // Re-anchoring: count successive samples consistent with each other.
-            let len = match self.chain {
-                Some((p, tp, n)) if t > tp && self.implausible((p, tp), pose, t).is_none() => n + 1,
-                _ => 1,
+            // Re-anchoring: count successive samples consistent with each other, and
+            // how long they have been (module docs: at least the pose timeout).
+            let (len, since) = match self.chain {
+                Some((p, tp, n, t0)) if t > tp && self.implausible((p, tp), pose, t).is_none() => {
+                    (n + 1, t0)
+                }
+                _ => (1, t),
             };
-            self.chain = Some((pose, t, len));
-            if len >= self.cfg.reject_run.max(1) {
+            self.chain = Some((pose, t, len, since));
+            // 1 µs: sample times summed in floating point.
+            if len >= self.cfg.reject_run.max(1) && t - since >= self.cfg.timeout - 1e-6 {
                 return PoseVerdict::Accepted;
             }
         }
@@ -435,7 +445,7 @@ mod tests {
         drive(&mut g, 1.0);
         // The localization now reports the machine 5 m to the side, consistently.
         let mut verdicts = Vec::new();
-        for k in 0..8 {
+        for k in 0..20 {
             let t = 1.05 + 0.05 * k as f64;
             verdicts.push(g.offer(p(1.0, 5.0, 0.0), true, t, t));
         }
@@ -443,8 +453,9 @@ mod tests {
             .iter()
             .position(|v| *v == PoseVerdict::Accepted)
             .expect("re-anchored");
-        // Three rejects make the fault, three consistent samples while faulted re-anchor.
-        assert_eq!(accepted, 5, "{verdicts:?}");
+        // Three rejects make the fault (k = 2); consistent samples while faulted from k = 3
+        // on re-anchor once there are three spanning the 0.5 s timeout (k = 13).
+        assert_eq!(accepted, 13, "{verdicts:?}");
         assert!(!g.faulted());
         assert_eq!(g.last().map(|l| l.0.y), Some(5.0));
         // A source jumping 10 m each sample never re-anchors.
@@ -456,6 +467,31 @@ mod tests {
             assert!(matches!(v, PoseVerdict::Rejected(_)), "{k}: {v:?}");
         }
         assert!(g.faulted());
+    }
+
+    #[test]
+    fn a_fast_source_jumping_to_another_place_every_half_second_never_re_anchors() {
+        // 50 Hz, alternating every 0.5 s between the machine's place and 3 m beside it.
+        // Each half-second beside is self-consistent, but never for the 0.5 s timeout,
+        // so the gate never takes the other place (before the span it did after six
+        // samples, 0.12 s, and the pose teleported every half second), and the fault
+        // holds at every 5 Hz tick of those halves once it has begun.
+        let mut g = PoseGate::new(cfg());
+        drive(&mut g, 1.0);
+        let mut faulted_ticks = 0;
+        for k in 1..=200 {
+            let t = 1.0 + 0.02 * k as f64;
+            let beside = ((t - 1.0 + 1e-9) / 0.5).floor() as i64 % 2 == 0;
+            let v = g.offer(p(1.0, if beside { 3.0 } else { 0.0 }, 0.0), true, t, t);
+            assert_eq!(v == PoseVerdict::Accepted, !beside, "t = {t}: {v:?}");
+            let half = (t - 1.0) % 0.5;
+            if beside && k % 10 == 0 && half > 0.1 {
+                assert!(g.faulted(), "t = {t}: no fault");
+                faulted_ticks += 1;
+            }
+        }
+        assert!(faulted_ticks >= 8, "{faulted_ticks}");
+        assert!(g.last().is_some_and(|l| l.0.y == 0.0));
     }
 
     #[test]

@@ -381,9 +381,10 @@ pub enum Sample {
 /// is slowed by the factor) it asks `f` what to publish, given the simulated machine's log
 /// (true pose, daemon time) and the current `CLOCK_MONOTONIC` time, and publishes it on the
 /// daemon's pose service through shared memory. (Unscaled under qemu, 5x the samples per
-/// daemon second: enough for the pose gate to re-anchor on a source jumping every 0.5 s
-/// within one tick, and `pose_jumping_10_m_every_half_second_stops_the_machine` stopped
-/// 2.6 s after the last good pose instead of within 1.2 s.)
+/// daemon second: enough for the pose gate of that time to re-anchor on a source jumping
+/// every 0.5 s within one tick, and `pose_jumping_10_m_every_half_second_stops_the_machine`
+/// stopped 2.6 s after the last good pose instead of within 1.2 s. Since then recovery
+/// needs consistent samples spanning the pose timeout, whatever the rate: pose_gate.rs.)
 pub struct Localization {
     stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
     thread: Option<std::thread::JoinHandle<()>>,
