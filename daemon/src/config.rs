@@ -280,7 +280,7 @@ pub struct LoopConfig {
     /// Poses must lie inside `ipc.workspace` grown by this margin [m]. Default 10.
     pub pose_workspace_margin: f64,
     /// Consecutive rejected pose samples that make a pose fault → controlled stop; as many
-    /// consistent samples clear it. Default 5.
+    /// consistent samples, spanning at least `pose_timeout`, clear it. Default 5.
     pub pose_reject_stop: u32,
     /// `[loop.realtime]`: SCHED_FIFO, mlockall and CPU pinning for the tick thread
     /// (off by default; refusals are logged, never fatal). See [`crate::realtime`].
