@@ -15,15 +15,10 @@
 // validationError in state), so this master renames the key on the wire: the library's
 // known bug, worked around on the master's side.
 
-import fs from "node:fs";
-import path from "node:path";
 import lib from "vda-5050-lib";
-import Ajv2020Module from "ajv/dist/2020.js";
-import addFormatsModule from "ajv-formats";
+import { compileSchemas } from "./schemas.mjs";
 
 const { MasterController, Topic } = lib;
-const Ajv2020 = Ajv2020Module.default ?? Ajv2020Module;
-const addFormats = addFormatsModule.default ?? addFormatsModule;
 
 function arg(name) {
   const i = process.argv.indexOf(`--${name}`);
@@ -37,14 +32,7 @@ const serials = arg("serials").split(",");
 const schemaDir = arg("schemas");
 
 // ---- schemas --------------------------------------------------------------------------
-const ajv = new Ajv2020({ strict: false, allErrors: true });
-addFormats(ajv);
-const validators = {};
-for (const topic of ["state", "visualization", "connection", "factsheet", "order", "instantActions"]) {
-  const schema = JSON.parse(fs.readFileSync(path.join(schemaDir, `${topic}.schema`), "utf8"));
-  delete schema.$id;
-  validators[topic] = ajv.compile(schema);
-}
+const { ajv, validators } = compileSchemas(schemaDir);
 const counts = {};
 const invalid = [];
 function check(topic, msg, serial) {

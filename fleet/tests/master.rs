@@ -14,31 +14,6 @@ use std::time::{Duration, Instant};
 
 use common::*;
 
-/// `npm ci` in `dir` unless its node_modules holds exactly the committed lock file's
-/// packages: `npm ci` copies package-lock.json to node_modules/.wlnav-lock (as
-/// scripts/test.sh does), and a different or missing copy means missing or stale.
-fn npm_ci(dir: &std::path::Path) {
-    let lock =
-        std::fs::read(dir.join("package-lock.json")).expect("fleet/master/package-lock.json");
-    let stamp = dir.join("node_modules/.wlnav-lock");
-    if std::fs::read(&stamp).is_ok_and(|s| s == lock) {
-        return;
-    }
-    eprintln!("fleet master: npm ci in {}", dir.display());
-    let status = Command::new("npm")
-        .args(["ci", "--no-audit", "--no-fund", "--loglevel=error"])
-        .current_dir(dir)
-        .status()
-        .unwrap_or_else(|e| {
-            panic!(
-                "npm: {e}: Node.js and npm are needed for the VDA 5050 master test \
-                 (apt-get install nodejs npm; scripts/test.sh installs them)"
-            )
-        });
-    assert!(status.success(), "npm ci failed in {}", dir.display());
-    std::fs::write(&stamp, lock).unwrap();
-}
-
 #[test]
 fn vda_5050_lib_master_drives_two_machines() {
     let _g = serial();

@@ -4,8 +4,8 @@
 
 #![allow(dead_code)]
 
-use std::collections::HashMap;
 use std::ffi::OsString;
+use std::io::{BufRead, BufReader, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::sync::{Arc, Mutex, OnceLock};
@@ -31,42 +31,101 @@ pub fn serial() -> std::sync::MutexGuard<'static, ()> {
 // Schemas
 // ------------------------------------------------------------------------------------
 
-/// The official schemas by topic name.
-pub fn validators() -> &'static HashMap<&'static str, jsonschema::Validator> {
-    static V: OnceLock<HashMap<&'static str, jsonschema::Validator>> = OnceLock::new();
-    V.get_or_init(|| {
-        let mut map = HashMap::new();
-        for topic in [
-            "connection",
-            "factsheet",
-            "instantActions",
-            "order",
-            "state",
-            "visualization",
-        ] {
-            let path = repo_root().join(format!("fleet/schemas/{topic}.schema"));
-            let text = std::fs::read_to_string(&path).unwrap();
-            let schema: Value =
-                serde_json::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-            let v = jsonschema::options()
-                .should_validate_formats(true)
-                .build(&schema)
-                .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-            map.insert(topic, v);
-        }
-        map
+/// The topics with an official schema (fleet/schemas/).
+pub const SCHEMA_TOPICS: [&str; 6] = [
+    "connection",
+    "factsheet",
+    "instantActions",
+    "order",
+    "state",
+    "visualization",
+];
+
+/// `npm ci` in `dir` unless its node_modules holds exactly the committed lock file's
+/// packages: `npm ci` copies package-lock.json to node_modules/.wlnav-lock (as
+/// scripts/test.sh does), and a different or missing copy means missing or stale.
+pub fn npm_ci(dir: &Path) {
+    static DONE: Mutex<bool> = Mutex::new(false);
+    let mut done = DONE.lock().unwrap_or_else(|p| p.into_inner());
+    if *done {
+        return;
+    }
+    let lock =
+        std::fs::read(dir.join("package-lock.json")).expect("fleet/master/package-lock.json");
+    let stamp = dir.join("node_modules/.wlnav-lock");
+    if !std::fs::read(&stamp).is_ok_and(|s| s == lock) {
+        eprintln!("fleet tests: npm ci in {}", dir.display());
+        let status = Command::new("npm")
+            .args(["ci", "--no-audit", "--no-fund", "--loglevel=error"])
+            .current_dir(dir)
+            .status()
+            .unwrap_or_else(|e| {
+                panic!(
+                    "npm: {e}: Node.js and npm are needed for the fleet tests' schema check \
+                     and the VDA 5050 master (apt-get install nodejs npm; scripts/test.sh \
+                     installs them)"
+                )
+            });
+        assert!(status.success(), "npm ci failed in {}", dir.display());
+        std::fs::write(&stamp, lock).unwrap();
+    }
+    *done = true;
+}
+
+/// The official schemas (fleet/schemas/, draft 2020-12) checked by Ajv with its formats,
+/// the validator the VDA 5050 master test uses too: fleet/master/validate.mjs, one Node.js
+/// process per test binary, a JSON line per message each way.
+struct SchemaCheck {
+    stdin: std::process::ChildStdin,
+    stdout: BufReader<std::process::ChildStdout>,
+    _child: Child,
+}
+
+fn schema_check() -> &'static Mutex<SchemaCheck> {
+    static CHECK: OnceLock<Mutex<SchemaCheck>> = OnceLock::new();
+    CHECK.get_or_init(|| {
+        let master = repo_root().join("fleet/master");
+        npm_ci(&master);
+        let mut child = Command::new("node")
+            .arg(master.join("validate.mjs"))
+            .arg(repo_root().join("fleet/schemas"))
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .spawn()
+            .unwrap_or_else(|e| panic!("node: {e}: Node.js is needed for the schema check"));
+        let stdin = child.stdin.take().unwrap();
+        let stdout = BufReader::new(child.stdout.take().unwrap());
+        Mutex::new(SchemaCheck {
+            stdin,
+            stdout,
+            _child: child,
+        })
     })
+}
+
+/// What the schema of `topic` finds wrong with `msg` (empty: valid).
+pub fn schema_errors(topic: &str, msg: &Value) -> Vec<String> {
+    let mut check = schema_check().lock().unwrap_or_else(|p| p.into_inner());
+    let request = json!({ "topic": topic, "msg": msg }).to_string();
+    writeln!(check.stdin, "{request}").expect("schema check (node validate.mjs) gone");
+    check.stdin.flush().unwrap();
+    let mut line = String::new();
+    check.stdout.read_line(&mut line).unwrap();
+    assert!(
+        !line.is_empty(),
+        "schema check (node validate.mjs) exited; its error is above"
+    );
+    serde_json::from_str(&line).unwrap_or_else(|e| panic!("schema check answered {line:?}: {e}"))
+}
+
+/// Whether `msg` validates against the schema of `topic`.
+pub fn is_valid(topic: &str, msg: &Value) -> bool {
+    schema_errors(topic, msg).is_empty()
 }
 
 /// Panics unless `msg` validates against the schema of `topic`.
 pub fn assert_valid(topic: &str, msg: &Value) {
-    let v = validators()
-        .get(topic)
-        .unwrap_or_else(|| panic!("no schema for {topic}"));
-    let errors: Vec<String> = v
-        .iter_errors(msg)
-        .map(|e| format!("{} at {}", e, e.instance_path()))
-        .collect();
+    let errors = schema_errors(topic, msg);
     assert!(
         errors.is_empty(),
         "{topic} message fails its schema: {errors:?}\n{msg:#}"
@@ -523,12 +582,8 @@ impl Master {
                                 continue;
                             }
                         };
-                        let v = validators().get(topic.as_str());
-                        if let Some(v) = v {
-                            let errs: Vec<String> = v
-                                .iter_errors(&json)
-                                .map(|e| format!("{e} at {}", e.instance_path()))
-                                .collect();
+                        if SCHEMA_TOPICS.contains(&topic.as_str()) {
+                            let errs = schema_errors(&topic, &json);
                             if !errs.is_empty() {
                                 inv.lock()
                                     .unwrap()
