@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# Cross check for the Jetson AGX Orin (issue 28), run by scripts/test.sh after the package
-# check: builds the deployable crates and the test suites for aarch64-unknown-linux-gnu
+# Cross check for the Jetson AGX Orin (issue 28), run by scripts/test.sh (its tests after
+# the package check): builds the deployable crates and the test suites for aarch64-unknown-linux-gnu
 # with Debian's own Rust (no rustup target), runs the control, shm-ipc, daemon and
 # end-to-end tests under qemu-aarch64-static, runs the programs of examples/ against an
 # arm64 `wlnavd --sim`, builds the arm64 Debian package and checks it against the amd64
@@ -12,14 +12,27 @@
 # README "The Jetson"): no test is skipped because of emulation.
 #
 # Everything arm64 is built once, in the profile `cross` (Cargo.toml: optimised, debug
-# assertions on, no debug info), test executables and binaries in one cargo invocation;
-# the test executables then run directly under qemu. The package is checked, not shipped
+# assertions on, no debug info), test executables and binaries with one feature set (step
+# 3); the test executables then run directly under qemu. The package is checked, not shipped
 # (README, "The Jetson"). The build goes to target/cross (Debian's rustc 1.96 is not the
 # workspace's toolchain, so nothing would be shared with target/, and builds of both never
 # wait for each other's lock; WLNAV_CROSS_TARGET_DIR moves it). Needs root (apt-get,
 # binfmt_misc). WLNAV_SKIP_CROSS_CHECK=1 skips it. Each step prints its time in seconds.
+#
+# Phases: `cross-check.sh` runs all three; scripts/test.sh runs them apart, so that the
+# arm64 build uses what the native tests leave of the two cores:
+#   setup  installs the packages (apt; before anything else touches the package database)
+#   build  builds everything arm64 (no root, no apt: may run in the background)
+#   run    registers binfmt, runs the suites under qemu, the examples and the package check
 set -euo pipefail
 cd "$(dirname "$0")/.."
+phases=${1:-all}
+case $phases in
+  setup | build | run) ;;
+  all) phases="setup build run" ;;
+  *) echo "usage: $0 [setup|build|run|all]" >&2; exit 2 ;;
+esac
+has_phase() { [[ " $phases " == *" $1 "* ]]; }
 
 TARGET=aarch64-unknown-linux-gnu
 CROSS_TIMING_SCALE=${WLNAV_CROSS_TIMING_SCALE:-5}
@@ -42,23 +55,27 @@ if [ "${WLNAV_SKIP_CROSS_CHECK:-0}" = 1 ]; then
   echo "cross-check: skipped (WLNAV_SKIP_CROSS_CHECK=1)"
   exit 0
 fi
-[ "$(id -u)" -eq 0 ] || fail "needs root (apt-get, binfmt_misc); run as root or set WLNAV_SKIP_CROSS_CHECK=1"
+if has_phase setup || has_phase run; then
+  [ "$(id -u)" -eq 0 ] || fail "needs root (apt-get, binfmt_misc); run as root or set WLNAV_SKIP_CROSS_CHECK=1"
+fi
 
 # 1. Debian's cross toolchain: rustc-web (1.96, bookworm-security) puts rustc and cargo in
 # /usr/bin with the arm64 standard library; the linker and C runtime of the cross gcc;
 # the arm64 C library the binaries load under qemu.
-pkgs=(rustc-web cargo-web libstd-rust-web-dev:arm64 gcc-aarch64-linux-gnu
-  libc6-dev-arm64-cross libc6:arm64 qemu-user-static binutils-aarch64-linux-gnu)
-dpkg --print-foreign-architectures | grep -qx arm64 || { dpkg --add-architecture arm64; need_update=1; }
-missing=()
-for p in "${pkgs[@]}"; do
-  dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p")
-done
-if [ ${#missing[@]} -gt 0 ] || [ "${need_update:-0}" = 1 ]; then
-  echo "cross-check: installing ${missing[*]}"
-  export DEBIAN_FRONTEND=noninteractive
-  apt-get update -qq
-  apt-get install -y -qq --no-install-recommends "${pkgs[@]}" >/dev/null
+if has_phase setup; then
+  pkgs=(rustc-web cargo-web libstd-rust-web-dev:arm64 gcc-aarch64-linux-gnu
+    libc6-dev-arm64-cross libc6:arm64 qemu-user-static binutils-aarch64-linux-gnu)
+  dpkg --print-foreign-architectures | grep -qx arm64 || { dpkg --add-architecture arm64; need_update=1; }
+  missing=()
+  for p in "${pkgs[@]}"; do
+    dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p")
+  done
+  if [ ${#missing[@]} -gt 0 ] || [ "${need_update:-0}" = 1 ]; then
+    echo "cross-check: installing ${missing[*]}"
+    export DEBIAN_FRONTEND=noninteractive
+    apt-get update -qq
+    apt-get install -y -qq --no-install-recommends "${pkgs[@]}" >/dev/null
+  fi
 fi
 CARGO=/usr/bin/cargo
 RUSTC=/usr/bin/rustc
@@ -67,9 +84,12 @@ export CARGO_TARGET_AARCH64_UNKNOWN_LINUX_GNU_LINKER=aarch64-linux-gnu-gcc
 # Test executables run under qemu; never with -L /usr/aarch64-linux-gnu (two C libraries
 # mixed: every thread spawn hangs). The arm64 loader and libc come from libc6:arm64.
 export CARGO_TARGET_AARCH64_UNKNOWN_LINUX_GNU_RUNNER=qemu-aarch64-static
-"$RUSTC" --print target-cpus --target $TARGET | grep -qw cortex-a78ae ||
-  fail "$("$RUSTC" -V) does not know target-cpu=cortex-a78ae (.cargo/config.toml)"
-step "toolchain: $("$RUSTC" -V), target-cpu cortex-a78ae known"
+if has_phase setup; then
+  "$RUSTC" --print target-cpus --target $TARGET | grep -qw cortex-a78ae ||
+    fail "$("$RUSTC" -V) does not know target-cpu=cortex-a78ae (.cargo/config.toml)"
+  step "toolchain: $("$RUSTC" -V), target-cpu cortex-a78ae known"
+fi
+bin=$CARGO_TARGET_DIR/$TARGET/cross
 
 # 2. The tests start wlnavd and wlnav as child processes (arm64 executables started by an
 # arm64 test under qemu): the kernel must hand them to qemu, i.e. binfmt_misc has
@@ -77,41 +97,65 @@ step "toolchain: $("$RUSTC" -V), target-cpu cortex-a78ae known"
 # F: the interpreter is opened now, so it works in any mount namespace). Containers
 # without systemd-binfmt get it registered here.
 binfmt=/proc/sys/fs/binfmt_misc
-if [ ! -e $binfmt/register ]; then
-  mount -t binfmt_misc binfmt_misc $binfmt 2>/dev/null ||
-    fail "binfmt_misc is not mounted at $binfmt and cannot be mounted (the tests start arm64 child processes; they need qemu-aarch64 registered)"
+if has_phase run; then
+  if [ ! -e $binfmt/register ]; then
+    mount -t binfmt_misc binfmt_misc $binfmt 2>/dev/null ||
+      fail "binfmt_misc is not mounted at $binfmt and cannot be mounted (the tests start arm64 child processes; they need qemu-aarch64 registered)"
+  fi
+  if [ ! -e $binfmt/qemu-aarch64 ]; then
+    cat /usr/lib/binfmt.d/qemu-aarch64.conf > $binfmt/register ||
+      fail "cannot register qemu-aarch64 with binfmt_misc"
+  fi
+  grep -q '^enabled' $binfmt/qemu-aarch64 || fail "binfmt_misc: qemu-aarch64 is registered but disabled"
 fi
-if [ ! -e $binfmt/qemu-aarch64 ]; then
-  cat /usr/lib/binfmt.d/qemu-aarch64.conf > $binfmt/register ||
-    fail "cannot register qemu-aarch64 with binfmt_misc"
-fi
-grep -q '^enabled' $binfmt/qemu-aarch64 || fail "binfmt_misc: qemu-aarch64 is registered but disabled"
 
 # 3. Build, once, in one profile (`cross`: optimised, debug assertions on, no debug info;
-# Cargo.toml): the test executables of the four suites run below and the binaries they and
-# the examples start (wlnavd, wlnav, goal-client, pose-publisher). One `cargo test
-# --no-run` over one package selection, so every dependency is compiled once with one
-# feature set; the executables are taken from its JSON messages and run directly under
-# qemu below (a `cargo test -p X` per suite, or a separate `cargo build` of one binary,
-# resolves features differently and rebuilds most dependencies: measured, a separate
-# `cargo build -p wlnav-fleet` started over from proc-macro2 and syn). wlnav-fleet is in
-# the selection for its binary (the package carries it); its tests need mosquitto and node
-# and are built, not run, here.
-mkdir -p "$CARGO_TARGET_DIR"
+# Cargo.toml): the test executables of the four suites run below and the binaries they,
+# the examples and the package need (wlnavd, wlnav, wlnav-fleet, goal-client,
+# pose-publisher), nothing else. Every cargo invocation here selects the same packages,
+# with test targets among what it builds, so cargo resolves one feature set and compiles
+# every dependency once (a `cargo test -p X` per suite, or a `cargo build` of a binary
+# alone, resolves other features and rebuilt most dependencies: measured). The first, a
+# `cargo test --no-run`, builds the libraries' and binaries' unit tests and the
+# integration tests of the four suites (their names from `cargo metadata`; not
+# wlnav-fleet's, which need mosquitto and node and run natively; not the examples'); its
+# JSON messages name the executables run under qemu below. The second, a `cargo build
+# --bins` with one of those tests, adds the binaries of wlnav-cli, wlnav-examples and
+# wlnav-fleet, whose packages have no integration test in that selection.
 suites=(control shm-ipc daemon e2e)
-# The build's CPU time too (its cost on free cores: (user + sys) / cores), and cargo's
-# timings report (cargo-timings/ in the target directory: which units took how long).
-TIMEFORMAT='%R s wall, %U s user + %S s sys of CPU'
-{ time "$CARGO" test --locked --target $TARGET --profile cross --no-run --timings \
-  -p control -p shm-ipc -p daemon -p e2e -p wlnav-cli -p wlnav-examples -p wlnav-fleet \
-  --message-format=json-render-diagnostics >"$CARGO_TARGET_DIR/cross-build.json" 2>"$CARGO_TARGET_DIR/cross-build.log"; } \
-  2>"$CARGO_TARGET_DIR/cross-build.time" ||
-  fail "cargo test --no-run --profile cross --target $TARGET:\n$(tail -n 30 "$CARGO_TARGET_DIR/cross-build.log")"
-bin=$CARGO_TARGET_DIR/$TARGET/cross
-for b in wlnavd wlnav wlnav-fleet goal-client pose-publisher; do
-  file -L "$bin/$b" | grep -q 'ARM aarch64' || fail "$bin/$b is not an arm64 executable"
-done
-step "built the test executables and binaries for $TARGET ($(tail -n 1 "$CARGO_TARGET_DIR/cross-build.time")): $bin/{wlnavd,wlnav,wlnav-fleet,goal-client,pose-publisher} are arm64"
+if has_phase build; then
+  mkdir -p "$CARGO_TARGET_DIR"
+  rm -f "$CARGO_TARGET_DIR/cross-build.ok"
+  packages=(-p control -p shm-ipc -p daemon -p e2e -p wlnav-cli -p wlnav-examples -p wlnav-fleet)
+  tests=()
+  for t in $("$CARGO" metadata --locked --no-deps --format-version 1 | jq -r --arg s "${suites[*]}" '
+    .packages[] | select(.name as $n | $s | split(" ") | index($n))
+    | .targets[] | select(.kind == ["test"]) | .name'); do
+    tests+=(--test "$t")
+  done
+  [ ${#tests[@]} -ge 8 ] || fail "cargo metadata names no integration tests of ${suites[*]}"
+  # The build's CPU time too (its cost on free cores: (user + sys) / cores), and cargo's
+  # timings report (cargo-timings/ in the target directory: which units took how long).
+  TIMEFORMAT='%R s wall, %U s user + %S s sys of CPU'
+  { time {
+    "$CARGO" test --locked --target $TARGET --profile cross --no-run --timings "${packages[@]}" \
+      --lib --bins "${tests[@]}" \
+      --message-format=json-render-diagnostics >"$CARGO_TARGET_DIR/cross-build.json" &&
+      "$CARGO" build --locked --target $TARGET --profile cross "${packages[@]}" --bins "${tests[@]:0:2}"
+  } 2>"$CARGO_TARGET_DIR/cross-build.log"; } 2>"$CARGO_TARGET_DIR/cross-build.time" ||
+    fail "cargo test --no-run / cargo build --profile cross --target $TARGET:\n$(tail -n 30 "$CARGO_TARGET_DIR/cross-build.log")"
+  for b in wlnavd wlnav wlnav-fleet goal-client pose-publisher; do
+    file -L "$bin/$b" | grep -q 'ARM aarch64' || fail "$bin/$b is not an arm64 executable"
+  done
+  touch "$CARGO_TARGET_DIR/cross-build.ok"
+  step "built the test executables and binaries for $TARGET ($(tail -n 1 "$CARGO_TARGET_DIR/cross-build.time")): $bin/{wlnavd,wlnav,wlnav-fleet,goal-client,pose-publisher} are arm64"
+fi
+if ! has_phase run; then
+  echo "cross-check: ${phases// /, }: OK in $(($(date +%s) - started)) s"
+  exit 0
+fi
+[ -f "$CARGO_TARGET_DIR/cross-build.ok" ] ||
+  fail "no finished arm64 build in $CARGO_TARGET_DIR (run: bash scripts/cross-check.sh build)"
 
 # 4. The test suites under qemu-aarch64: each test executable of the build above, run in its
 # package's directory (as cargo test does). Timing limits are multiplied by
@@ -127,29 +171,71 @@ jq -r '
   "$CARGO_TARGET_DIR/cross-build.json" | sort -u >"$CARGO_TARGET_DIR/cross-tests.txt"
 [ "$(wc -l <"$CARGO_TARGET_DIR/cross-tests.txt")" -ge 4 ] ||
   fail "found no test executables of ${suites[*]} in $CARGO_TARGET_DIR/cross-build.json"
-total_tests=0
-while read -r dir name exe; do
-  log=$CARGO_TARGET_DIR/cross-test-$(basename "$dir")-${name//[:\/]/-}.log
-  t0=$(date +%s)
+# One at a time by default. WLNAV_CROSS_JOBS=2 runs two side by side, the longest first
+# (several executables leave a core idle: one long test, or daemons waiting for their
+# tick), but measured beside other builds (load 7-8) that cost the daemon's e2e suite 6
+# of 37 tests on solve time (median 144 ms against about 67 ms alone) and overruns: the
+# factor leaves room for emulation, not for a second suite. Those named in
+# WLNAV_CROSS_ALONE (default: daemon's soak, whose resident-memory check under qemu-user
+# counts the emulator and grew on a loaded machine) run afterwards, alone.
+jobs=${WLNAV_CROSS_JOBS:-1}
+alone=" ${WLNAV_CROSS_ALONE-daemon:test:soak} "
+# package directory, target name, executable -> its log; "status wall user sys" in $log.status
+run_suite() {
+  local dir=$1 name=$2 exe=$3 cwd=$1 status=0 t0
+  local log=$CARGO_TARGET_DIR/cross-test-$(basename "$dir")-${name//[:\/]/-}.log
   # The end-to-end suite's wlnavd finds the default weights (critic-weights/avant635)
   # through its working directory: the arm64 binaries are not under target/<profile>/,
   # from where it would find the repository. Every other suite runs in its package's
   # directory, as cargo test does.
-  cwd=$dir
-  [ "$(basename "$dir")" = tests ] && cwd=$PWD
+  if [ "$(basename "$dir")" = tests ]; then cwd=$PWD; fi
+  t0=$(date +%s)
   # Directly (binfmt_misc hands it to qemu-aarch64-static, as it does the wlnavd and wlnav
   # the tests start); stdin closed; the harness's own parallelism (one thread per core).
-  if ! (cd "$cwd" && "$exe" </dev/null) >"$log" 2>&1; then
+  # Its CPU time (user, sys; with the processes it started) beside its wall time.
+  TIMEFORMAT='%U %S'
+  { time { (cd "$cwd" && "$exe" </dev/null) >"$log" 2>&1; }; } 2>"$log.cpu" || status=$?
+  echo "$status $(($(date +%s) - t0)) $(tail -n 1 "$log.cpu")" >"$log.status"
+}
+export -f run_suite
+export CARGO_TARGET_DIR
+# Longest first (measured under qemu: daemon_ipc, soak, daemon's e2e, mpc_alloc, cli).
+order() {
+  local first=" tests:test:daemon_ipc daemon:test:e2e control:test:mpc_alloc tests:test:cli tests:test:inputs tests:test:stop_squat "
+  while read -r dir name exe; do
+    key="$(basename "$dir"):$name"
+    if [[ $alone == *" $key "* ]]; then continue; fi
+    if [[ $first == *" $key "* ]]; then echo "0 $dir $name $exe"; else echo "1 $dir $name $exe"; fi
+  done <"$CARGO_TARGET_DIR/cross-tests.txt" | sort -s -k1,1n | cut -d' ' -f2-
+}
+rm -f "$CARGO_TARGET_DIR"/cross-test-*.status
+order | xargs -P "$jobs" -L 1 bash -c 'run_suite "$@"' _
+while read -r dir name exe; do
+  if [[ $alone == *" $(basename "$dir"):$name "* ]]; then run_suite "$dir" "$name" "$exe"; fi
+done <"$CARGO_TARGET_DIR/cross-tests.txt"
+total_tests=0
+failed=()
+cpu_total=0
+while read -r dir name exe; do
+  log=$CARGO_TARGET_DIR/cross-test-$(basename "$dir")-${name//[:\/]/-}.log
+  [ -f "$log.status" ] || { failed+=("$(basename "$dir") $name (did not run)"); continue; }
+  read -r status wall user sys <"$log.status"
+  cpu_total=$(awk -v t="$cpu_total" -v u="$user" -v s="$sys" 'BEGIN { print t + u + s }')
+  if [ "$status" != 0 ]; then
+    echo "cross-check:   $(basename "$dir") $name FAILED (exit $status, $wall s; log: $log):" >&2
     grep -E '^test .*FAILED|^failures:|panicked|^test result' "$log" >&2 || tail -n 40 "$log" >&2
-    fail "$(basename "$dir") $name under qemu-aarch64 (WLNAV_TIMING_SCALE=$WLNAV_TIMING_SCALE; log: $log)"
+    failed+=("$(basename "$dir") $name")
+    continue
   fi
   result=$(grep -E '^test result' "$log" | tail -n 1)
   n=$(echo "$result" | sed -E 's/.* ([0-9]+) passed.*/\1/')
   total_tests=$((total_tests + n))
-  echo "cross-check:   $(basename "$dir") $name: $result ($(($(date +%s) - t0)) s)"
+  echo "cross-check:   $(basename "$dir") $name: $result ($wall s wall, $user s user + $sys s sys of CPU)"
 done <"$CARGO_TARGET_DIR/cross-tests.txt"
+[ ${#failed[@]} -eq 0 ] ||
+  fail "under qemu-aarch64 (WLNAV_TIMING_SCALE=$WLNAV_TIMING_SCALE): ${failed[*]}"
 unset WLNAV_E2E_BIN_DIR
-step "$total_tests tests of ${suites[*]} pass under qemu-aarch64 (WLNAV_TIMING_SCALE=$WLNAV_TIMING_SCALE)"
+step "$total_tests tests of ${suites[*]} pass under qemu-aarch64 (WLNAV_TIMING_SCALE=$WLNAV_TIMING_SCALE; $jobs at a time; $cpu_total s of CPU)"
 
 # 5. The examples (the Rust ones arm64 too; the Python one native, over the same shared
 # memory) against an arm64 wlnavd --sim.
