@@ -90,5 +90,5 @@ if [ $cross = 1 ]; then
   cat target/cross-check-build.log
   bash scripts/cross-check.sh run
 else
-  echo "test.sh: cross check not run (opt-in: WLNAV_CROSS_CHECK=1 and no arguments run it; about 16 min more on two free cores)"
+  echo "test.sh: cross check not run (opt-in: WLNAV_CROSS_CHECK=1 and no arguments run it; README, \"The Jetson\": measured whole from scratch, 46 min)"
 fi
