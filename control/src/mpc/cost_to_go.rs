@@ -98,17 +98,17 @@ impl CostToGo {
         if self.n == 0 || !(x.is_finite() && y.is_finite()) {
             return (0.0, [0.0; 2]);
         }
+        if self.n == 1 {
+            return (self.values[0], [0.0; 2]);
+        }
         let last = (self.n - 1) as f64;
         let u = (x - self.origin[0]) / self.resolution;
         let v = (y - self.origin[1]) / self.resolution;
         // Outside the centres' square the edge continues: clamp, and the
         // clamped coordinate has no gradient.
         let (uc, vc) = (u.clamp(0.0, last), v.clamp(0.0, last));
-        let i = (uc.floor() as usize).min(self.n.saturating_sub(2));
-        let j = (vc.floor() as usize).min(self.n.saturating_sub(2));
-        if self.n == 1 {
-            return (self.values[0], [0.0; 2]);
-        }
+        let i = (uc.floor() as usize).min(self.n - 2);
+        let j = (vc.floor() as usize).min(self.n - 2);
         let (s, t) = (uc - i as f64, vc - j as f64);
         let at = |a: usize, b: usize| self.values[b * self.n + a];
         let (f00, f10, f01, f11) = (at(i, j), at(i + 1, j), at(i, j + 1), at(i + 1, j + 1));

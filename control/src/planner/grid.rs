@@ -150,17 +150,11 @@ impl ObstacleHeuristic {
             if dist > self.dist[k] {
                 continue;
             }
-            let (i, j) = ((k % n) as isize, (k / n) as isize);
-            for (di, dj) in NEIGHBOURS {
-                let (a, b) = (i + di, j + dj);
-                if a < 0 || b < 0 || a >= n as isize || b >= n as isize {
-                    continue;
-                }
-                let m = b as usize * n + a as usize;
+            for (m, diagonal) in neighbours(n, k) {
                 if self.dist[m] < 0.0 {
                     continue;
                 }
-                let step = if di != 0 && dj != 0 { diag } else { res };
+                let step = if diagonal { diag } else { res };
                 let nd = dist + step;
                 if nd < self.dist[m] && self.heap.len() < self.heap.capacity() {
                     self.dist[m] = nd;
@@ -229,14 +223,9 @@ impl ObstacleHeuristic {
                 if !self.excess[k].is_nan() {
                     continue;
                 }
-                let (i, j) = ((k % n) as isize, (k / n) as isize);
                 let mut best = f32::NAN;
-                for (di, dj) in NEIGHBOURS {
-                    let (a, b) = (i + di, j + dj);
-                    if a < 0 || b < 0 || a >= n as isize || b >= n as isize {
-                        continue;
-                    }
-                    let e = self.excess[b as usize * n + a as usize];
+                for (m, _) in neighbours(n, k) {
+                    let e = self.excess[m];
                     if !e.is_nan() && !(e <= best) {
                         best = e;
                     }
@@ -258,6 +247,18 @@ impl ObstacleHeuristic {
     }
 }
 
+/// The cells next to cell `k` of an `n × n` grid (row-major), and whether each
+/// is a diagonal neighbour.
+fn neighbours(n: usize, k: usize) -> impl Iterator<Item = (usize, bool)> {
+    let (i, j) = ((k % n) as isize, (k / n) as isize);
+    let n = n as isize;
+    NEIGHBOURS.into_iter().filter_map(move |(di, dj)| {
+        let (a, b) = (i + di, j + dj);
+        ((0..n).contains(&a) && (0..n).contains(&b))
+            .then_some(((b * n + a) as usize, di != 0 && dj != 0))
+    })
+}
+
 const NEIGHBOURS: [(isize, isize); 8] = [
     (1, 0),
     (-1, 0),
@@ -275,15 +276,20 @@ mod tests {
     use crate::model::MachineParams;
     use crate::obstacle::Obstacle;
 
-    #[test]
-    fn distance_goes_around_a_wall_and_is_infinite_inside_a_ring() {
+    /// A wall x = 0, |y| ≤ 3.2 of circles overlapping by 0.4 m, no margin.
+    fn wall_world() -> World {
         let mut world = World::new(MachineParams::default(), 32, 0.0);
-        // A wall x = 0, |y| ≤ 3.2 of circles overlapping by 0.4 m, between
-        // (−2, 0) and the goal (2, 0).
         let wall: Vec<Obstacle> = (-4..=4)
             .map(|k| Obstacle::new(0.0, 0.8 * k as f64, 0.6))
             .collect();
         world.set(&wall).unwrap();
+        world
+    }
+
+    #[test]
+    fn distance_goes_around_a_wall_and_is_infinite_inside_a_ring() {
+        // The wall between (−2, 0) and the goal (2, 0).
+        let mut world = wall_world();
         let frame = GridFrame::centred([0.0, 0.0], 0.2, 100);
         let mut h = ObstacleHeuristic::new(100);
         h.compute(frame, &world, [2.0, 0.0]);
@@ -307,11 +313,7 @@ mod tests {
 
     #[test]
     fn the_excess_is_zero_in_the_open_and_the_detour_behind_a_wall() {
-        let mut world = World::new(MachineParams::default(), 32, 0.0);
-        let wall: Vec<Obstacle> = (-4..=4)
-            .map(|k| Obstacle::new(0.0, 0.8 * k as f64, 0.6))
-            .collect();
-        world.set(&wall).unwrap();
+        let world = wall_world();
         // Cell centres on y = 0 and at the goal: the field is symmetric.
         let frame = GridFrame::centred([0.1, 0.1], 0.2, 100);
         let mut h = ObstacleHeuristic::new(100);
@@ -323,8 +325,7 @@ mod tests {
         for (x, y) in [(2.0, 0.0), (3.5, 2.0), (1.0, -3.0), (6.0, 6.0)] {
             assert_eq!(field.eval(x, y).0, 0.0, "({x}, {y})");
         }
-        // Behind the wall: 2 × (the way around its end − the straight way),
-        // within the grid's octile error of the way around.
+        // Behind the wall: 2 × (the way around its end − the straight way).
         let around = 2.0f64.hypot(3.8) + 2.0f64.hypot(3.8);
         // The straight way is along the grid (exact); the way around is not:
         // 8-neighbour steps make it up to 8.2 % longer (octile metric), and

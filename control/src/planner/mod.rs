@@ -565,11 +565,11 @@ pub struct Navigator {
     last_plan: Option<PlanReport>,
     plans: u64,
     /// `Tracking::Field`: the distance from the goal, and the field written
-    /// from it at each plan (empty when the way is direct).
+    /// from it once per plan (empty when none applies).
     field_distance: ObstacleHeuristic,
     field: CostToGo,
-    /// The target and plan count the field was computed for.
-    field_for: Option<(Goal, u64)>,
+    /// The plan count the field was computed at.
+    field_plan: Option<u64>,
     field_version: u64,
     /// `Tracking::Field` stalled once on this goal: subgoals from then on.
     field_stalled: bool,
@@ -631,7 +631,7 @@ impl Navigator {
             params,
             field_distance: ObstacleHeuristic::new(cells),
             field: CostToGo::with_cells(cells),
-            field_for: None,
+            field_plan: None,
             field_version: 0,
             field_stalled: false,
             field_weight: settings.field_gain * cost_per_metre,
@@ -794,7 +794,7 @@ impl Navigator {
             self.advance(x, now);
         }
         let (target, final_target) = self.drive_target(x);
-        self.refresh_field(x, &target);
+        self.refresh_field(x);
         NavStep::Drive {
             target,
             final_target,
@@ -850,7 +850,7 @@ impl Navigator {
         self.pending_no_route = false;
         self.aborted = None;
         self.field.clear();
-        self.field_for = None;
+        self.field_plan = None;
         self.field_version += 1;
         self.field_stalled = false;
     }
@@ -1009,34 +1009,33 @@ impl Navigator {
         self.plans += 1;
     }
 
-    /// The cost-to-go field of the drive target (with a field tracking and a
-    /// planned route), over the planning world (its margin and any keep-out
-    /// circle): computed again when the target or the route changes. No field
-    /// for a direct way, a back-up or a retry (the critic alone, as in open
-    /// ground).
-    fn refresh_field(&mut self, x: &State, target: &Goal) {
-        let s = &self.settings;
-        let wanted = self.driving_to_goal_in_field();
-        if !wanted {
+    /// The goal's cost-to-go field while [`Self::driving_to_goal_in_field`],
+    /// over the planning world (its margin and any keep-out circle): computed
+    /// once per plan. No field for a direct way, a back-up, a retry or after
+    /// the hand-over to subgoals (the critic alone, as in open ground).
+    fn refresh_field(&mut self, x: &State) {
+        let goal = self.goal.filter(|_| self.driving_to_goal_in_field());
+        let Some(goal) = goal else {
             if !self.field.is_empty() {
                 self.field.clear();
                 self.field_version += 1;
             }
-            self.field_for = None;
+            self.field_plan = None;
+            return;
+        };
+        if self.field_plan == Some(self.plans) {
             return;
         }
-        if self.field_for == Some((*target, self.plans)) {
-            return;
-        }
-        self.field_for = Some((*target, self.plans));
+        self.field_plan = Some(self.plans);
         self.field_version += 1;
-        // A grid of the search's size, centred between machine and target.
-        let centre = [0.5 * (x[ix::X] + target.x), 0.5 * (x[ix::Y] + target.y)];
+        let s = &self.settings;
+        // A grid of the search's size, centred between machine and goal.
+        let centre = [0.5 * (x[ix::X] + goal.x), 0.5 * (x[ix::Y] + goal.y)];
         let frame = GridFrame::centred(centre, s.grid_resolution, s.grid_cells());
         let margin = self.world.margin();
         self.world.set_margin(s.field_margin.max(margin));
         self.field_distance
-            .compute(frame, &self.world, [target.x, target.y]);
+            .compute(frame, &self.world, [goal.x, goal.y]);
         self.world.set_margin(margin);
         self.field_distance
             .write_excess(self.field_weight, &mut self.field);
