@@ -1,10 +1,18 @@
-//! The cost-to-go field (issue 27) enters the MPC's QP as Δt·∇(w·φ) on the
-//! front-axle position of every stage and ∇(w·φ) at the terminal stage,
-//! checked against the field's own gradient; and it steers: a field rising in
-//! +y bends the plan towards −y.
+//! The navigator's cost terms in the MPC (issue 27).
+//!
+//! The cost-to-go field enters the QP as Δt·∇(w·φ) on the front-axle
+//! position of every stage and ∇(w·φ) at the terminal stage, checked against
+//! the field's own gradient; and it steers: a field rising in +y bends the
+//! plan towards −y.
+//!
+//! The path cost (design (a)) replaces the stage and terminal costs while it
+//! is set: the QP's gradient on every stage is Δt × the path term's (the
+//! terminal's 1 ×), independently of the cost it replaces (a quadratic cost
+//! pulling elsewhere); and it steers: the plan follows the path's bend
+//! instead of heading for the goal.
 
-use control::model::{Goal, MachineParams, State};
-use control::mpc::{CostToGo, Mpc, MpcSettings, QuadraticCost};
+use control::model::{Control, Goal, MachineParams, State};
+use control::mpc::{CostToGo, Mpc, MpcSettings, PathCost, PathWeights, QuadraticCost};
 
 fn mpc() -> Mpc<QuadraticCost> {
     let cost = QuadraticCost::diagonal([1.0, 1.0, 0.5, 0.1, 0.1, 0.1], [0.1, 0.1]);
@@ -78,4 +86,70 @@ fn the_field_gradient_enters_every_stage_and_the_terminal_cost() {
     with.step(&x0, 0.2).unwrap();
     again.step(&x0, 0.2).unwrap();
     assert_eq!(with.qp_data().q, again.qp_data().q);
+}
+
+/// An arc of radius 5 m from the origin, heading 0, turning left (+y); the
+/// goal of `mpc()` is straight ahead.
+fn bending_path() -> PathCost {
+    let mut p = PathCost::new();
+    let poses = (0..=20).map(|k| {
+        let a = 0.06 * k as f64;
+        [5.0 * a.sin(), 5.0 * (1.0 - a.cos()), a]
+    });
+    let weights = PathWeights {
+        per_metre: 3.0,
+        lateral: 12.0,
+        heading: 9.0,
+        control: 0.3,
+    };
+    p.set(poses, weights, &MachineParams::default(), false);
+    p
+}
+
+#[test]
+fn the_path_term_is_the_cost_of_every_stage_and_the_terminal() {
+    let x0 = State::new(0.0, 0.0, 0.0, 0.0, 0.0, 0.5);
+    let path = bending_path();
+    let mut m = mpc();
+    m.set_path_cost(Some(&path));
+    assert_eq!(m.path_cost(), &path);
+    m.step(&x0, 0.0).unwrap();
+    let (layout, dt, n) = (m.layout(), m.settings().dt, m.settings().horizon);
+    let q = &m.qp_data().q;
+    // The first QP is built at the hold roll-out from x0 (no actor): stage k
+    // at x0 moved k·Δt·v along x with zero controls.
+    let mut hint = 0;
+    for k in 0..=n {
+        let x = State::new(0.5 * dt * k as f64, 0.0, 0.0, 0.0, 0.0, 0.5);
+        let term = path.eval(&x, &Control::zeros(), hint);
+        hint = term.segment;
+        let scale = if k < n { dt } else { 1.0 };
+        for c in 0..3 {
+            let d = q[layout.x(k) + c];
+            assert!(
+                (d - scale * term.grad_pose[c]).abs() < 1e-9,
+                "stage {k} component {c}: {d} vs {}",
+                scale * term.grad_pose[c]
+            );
+        }
+        for c in 3..6 {
+            assert_eq!(q[layout.x(k) + c], 0.0, "stage {k} component {c}");
+        }
+    }
+    // It steers: after a few ticks the plan bends to +y with the path (the
+    // quadratic cost alone keeps it on y = 0, towards the goal).
+    let mut plain = mpc();
+    let (mut x, mut x_plain) = (x0, x0);
+    for t in 0..10 {
+        m.step(&x, 0.2 * t as f64).unwrap();
+        plain.step(&x_plain, 0.2 * t as f64).unwrap();
+        x = m.solution().states[1];
+        x_plain = plain.solution().states[1];
+    }
+    let y_end = |m: &Mpc<QuadraticCost>| m.solution().states[n][1];
+    assert!(y_end(&m) > 0.3, "{}", y_end(&m));
+    assert!(y_end(&plain).abs() < 0.05, "{}", y_end(&plain));
+    // Removed, the cost is the critic's again.
+    m.set_path_cost(None);
+    assert!(m.path_cost().is_empty());
 }

@@ -114,26 +114,49 @@ fn set_goal_and_update_do_not_allocate() {
         "{} allocations (carrot, back-up)",
         after - before
     );
-    // The cost-to-go field (issue 27): computed inside `update`.
-    let settings = NavigatorSettings {
-        tracking: Tracking::Field,
-        ..NavigatorSettings::default()
+    // The cost-to-go field and the path cost (issue 27): computed inside
+    // `update` (the path cost with the goal shot driven again), and copied
+    // into an MPC as wlnav-sim and wlnavd do.
+    let (critic, actor) = {
+        let (a, c) = trained();
+        (c, a)
     };
-    let mut nav = Navigator::new(MachineParams::default(), settings, Some(trained())).unwrap();
-    let before = common::allocations();
-    nav.set_goal(&start, goal, &wall).unwrap();
-    let (mut fields, mut versions, mut seen) = (0, 0, None);
-    for k in 0..80 {
-        // Around the wall's lower end, then on to the goal.
-        let x = State::new(0.1 * k as f64, -0.05 * k as f64, 0.0, 0.0, 0.0, 0.5);
-        nav.update(&x, k as f64 * 0.2);
-        fields += usize::from(nav.cost_to_go().is_some());
-        if seen != Some(nav.cost_to_go_version()) {
-            seen = Some(nav.cost_to_go_version());
-            versions += 1;
+    let mut mpc = control::mpc::Mpc::new(
+        MachineParams::default(),
+        critic,
+        Some(actor),
+        MpcSettings::default(),
+    )
+    .unwrap();
+    mpc.reserve_cost_to_go(NavigatorSettings::default().grid_cells());
+    for tracking in [Tracking::Field, Tracking::Path] {
+        let settings = NavigatorSettings {
+            tracking,
+            ..NavigatorSettings::default()
+        };
+        let mut nav = Navigator::new(MachineParams::default(), settings, Some(trained())).unwrap();
+        let before = common::allocations();
+        nav.set_goal(&start, goal, &wall).unwrap();
+        let (mut costs, mut versions, mut seen) = (0, 0, None);
+        for k in 0..80 {
+            // Around the wall's lower end, then on to the goal.
+            let x = State::new(0.1 * k as f64, -0.05 * k as f64, 0.0, 0.0, 0.0, 0.5);
+            nav.update(&x, k as f64 * 0.2);
+            costs += usize::from(nav.cost_to_go().is_some() || nav.path_cost().is_some());
+            let version = seen;
+            nav.sync_costs(&mut mpc, &mut seen);
+            versions += usize::from(seen != version);
         }
+        let after = common::allocations();
+        assert!(
+            costs > 0 && versions >= 2,
+            "{tracking:?}: {costs} {versions}"
+        );
+        assert_eq!(
+            after - before,
+            0,
+            "{} allocations ({tracking:?})",
+            after - before
+        );
     }
-    let after = common::allocations();
-    assert!(fields > 0 && versions >= 2, "{fields} {versions}");
-    assert_eq!(after - before, 0, "{} allocations (field)", after - before);
 }

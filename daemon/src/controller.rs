@@ -138,8 +138,8 @@ pub type ControllerFactory =
 pub struct MpcController<C: StageCost> {
     mpc: Mpc<C>,
     navigator: Option<Navigator>,
-    /// The navigator's cost-to-go version the MPC has (issue 27).
-    cost_to_go_version: Option<u64>,
+    /// The navigator's cost terms' version the MPC has (issue 27).
+    costs_seen: Option<u64>,
 }
 
 impl<C: StageCost> MpcController<C> {
@@ -148,7 +148,7 @@ impl<C: StageCost> MpcController<C> {
         Self {
             mpc,
             navigator: None,
-            cost_to_go_version: None,
+            costs_seen: None,
         }
     }
 
@@ -159,7 +159,7 @@ impl<C: StageCost> MpcController<C> {
         Self {
             mpc,
             navigator: Some(navigator),
-            cost_to_go_version: None,
+            costs_seen: None,
         }
     }
 }
@@ -205,11 +205,8 @@ impl<C: StageCost> Controller for MpcController<C> {
                     if self.mpc.goal() != Some(target) {
                         self.mpc.retarget(target).map_err(err)?;
                     }
-                    // The MPC's copy of the cost-to-go field, as `wlnav-sim eval`.
-                    if self.cost_to_go_version != Some(nav.cost_to_go_version()) {
-                        self.cost_to_go_version = Some(nav.cost_to_go_version());
-                        self.mpc.set_cost_to_go(nav.cost_to_go());
-                    }
+                    // The MPC's copies of the field and the path, as `wlnav-sim eval`.
+                    nav.sync_costs(&mut self.mpc, &mut self.costs_seen);
                     subgoal = (!final_target).then_some(target);
                 }
                 NavStep::Abort(reason) => return Ok(Step::Abort(reason)),

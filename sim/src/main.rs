@@ -262,6 +262,24 @@ enum Command {
         /// Navigator: with --field-gain, the clearance of the field's way [m].
         #[arg(long, value_name = "M", requires = "field_gain")]
         field_margin: Option<f64>,
+        /// Navigator: follow the planned path with progress along it as the
+        /// MPC's cost, the critic within --path-handover of a cusp or the
+        /// goal, instead of point subgoals (issue 27, design (a)).
+        #[arg(long, conflicts_with_all = ["carrot_distance", "field_gain"])]
+        path_following: bool,
+        /// Navigator: with --path-following, where the critic takes over [m of
+        /// arc before the cusp or the path's end].
+        #[arg(long, value_name = "M", requires = "path_following")]
+        path_handover: Option<f64>,
+        /// Navigator: with --path-following, the prices of the squared lateral
+        /// error, the heading error and the squared controls, each × the
+        /// critic's cost of a metre.
+        #[arg(long, value_name = "W", requires = "path_following")]
+        path_lateral: Option<f64>,
+        #[arg(long, value_name = "W", requires = "path_following")]
+        path_heading: Option<f64>,
+        #[arg(long, value_name = "W", requires = "path_following")]
+        path_control: Option<f64>,
         /// Navigator: clearance margin of the planned route [m].
         #[arg(long)]
         route_margin: Option<f64>,
@@ -411,6 +429,11 @@ fn main() -> Result<()> {
             carrot_distance,
             field_gain,
             field_margin,
+            path_following,
+            path_handover,
+            path_lateral,
+            path_heading,
+            path_control,
             route_margin,
             replan_after,
             heuristic_weight,
@@ -464,11 +487,16 @@ fn main() -> Result<()> {
                     },
                     subgoal_radius: subgoal_radius.unwrap_or(nd.subgoal_radius),
                     subgoal_spacing: subgoal_spacing.unwrap_or(nd.subgoal_spacing),
-                    tracking: match (carrot_distance, field_gain) {
-                        (Some(_), _) => Tracking::Carrot,
-                        (None, Some(_)) => Tracking::Field,
-                        (None, None) => nd.tracking,
+                    tracking: match (carrot_distance, field_gain, path_following) {
+                        (Some(_), _, _) => Tracking::Carrot,
+                        (None, Some(_), _) => Tracking::Field,
+                        (None, None, true) => Tracking::Path,
+                        (None, None, false) => nd.tracking,
                     },
+                    path_handover: path_handover.unwrap_or(nd.path_handover),
+                    path_lateral: path_lateral.unwrap_or(nd.path_lateral),
+                    path_heading: path_heading.unwrap_or(nd.path_heading),
+                    path_control: path_control.unwrap_or(nd.path_control),
                     carrot_distance: carrot_distance.unwrap_or(nd.carrot_distance),
                     field_gain: field_gain.unwrap_or(nd.field_gain),
                     field_margin: field_margin.unwrap_or(nd.field_margin),
@@ -515,6 +543,12 @@ fn main() -> Result<()> {
                     Tracking::Carrot => text += &format!(" {} m", n.carrot_distance),
                     Tracking::Field => {
                         text += &format!(" x{}, margin {} m", n.field_gain, n.field_margin);
+                    }
+                    Tracking::Path => {
+                        text += &format!(
+                            " handover {} m, lateral x{}, heading x{}, control x{}",
+                            n.path_handover, n.path_lateral, n.path_heading, n.path_control
+                        );
                     }
                     Tracking::Subgoals => {}
                 }

@@ -420,7 +420,7 @@ pub fn run_mpc(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run> 
     };
     let mut navigation = nav.as_ref().map(|_| Navigation::default());
     let mut plans_seen = 0;
-    let mut field_version = None;
+    let mut costs_seen = None;
     let mut plant = scenario_plant(cfg, sc)?;
     let steps = (cfg.duration / settings.dt).round() as usize;
     let mut states = Vec::with_capacity(steps + 1);
@@ -456,10 +456,7 @@ pub fn run_mpc(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run> 
                 let step = nav.update(&x, now);
                 rec.update_ms.push(t0.elapsed().as_secs_f64() * 1e3);
                 rec.record_plan(nav, &mut plans_seen, now);
-                if field_version != Some(nav.cost_to_go_version()) {
-                    field_version = Some(nav.cost_to_go_version());
-                    mpc.set_cost_to_go(nav.cost_to_go());
-                }
+                nav.sync_costs(&mut mpc, &mut costs_seen);
                 match step {
                     // The first target starts from an actor roll-out; later
                     // ones (subgoal switches, replans) keep the plan.

@@ -38,6 +38,7 @@ pub mod cost;
 pub mod cost_to_go;
 pub mod dynamics;
 pub mod layout;
+pub mod path_cost;
 pub mod qp;
 pub mod settings;
 pub mod solution;
@@ -48,6 +49,7 @@ pub use cost::{QuadraticCost, StageCost};
 pub use cost_to_go::CostToGo;
 pub use dynamics::{Dynamics, LinearDynamics, Rk4Model};
 pub use layout::QpLayout;
+pub use path_cost::{PathCost, PathWeights};
 pub use qp::{ClarabelBackend, QpBackend, QpData, QpOutcome, QpStatus};
 pub use settings::{MpcError, MpcSettings, ObstacleConstraint, MAX_OBSTACLES};
 pub use solution::{FallbackReason, Solution, StepStatus};
@@ -82,6 +84,11 @@ pub struct Mpc<C: StageCost, D: Dynamics = Rk4Model, B: QpBackend = ClarabelBack
     /// Added to the cost of every stage and the terminal cost: the way to the
     /// goal around the circles ([`CostToGo`]; empty = the critic alone).
     cost_to_go: CostToGo,
+    /// While set, the cost of every stage and the terminal cost instead of
+    /// the critic: progress along the navigator's path ([`PathCost`]).
+    path_cost: PathCost,
+    /// The path segment the last tick's x̂ was projected onto.
+    path_hint: usize,
     obstacles: [Obstacle; MAX_OBSTACLES],
     n_obstacles: usize,
     /// The plan, which is also the next linearisation point once shifted.
@@ -208,6 +215,8 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
             delay_estimate,
             goal: None,
             cost_to_go: CostToGo::default(),
+            path_cost: PathCost::new(),
+            path_hint: 0,
             obstacles: [Obstacle::default(); MAX_OBSTACLES],
             n_obstacles: 0,
             xs: vec![State::zeros(); n + 1],
@@ -273,6 +282,7 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
     pub fn clear_goal(&mut self) {
         self.goal = None;
         self.cost_to_go.clear();
+        self.path_cost.clear();
         self.n_obstacles = 0;
         self.has_plan = false;
         self.set_obstacle_weight(self.settings.obstacle_slack_weight);
@@ -384,6 +394,21 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
     /// The cost-to-go field in use.
     pub fn cost_to_go(&self) -> &CostToGo {
         &self.cost_to_go
+    }
+
+    /// Sets the path whose progress is the cost from the next tick on, in
+    /// place of the critic (`None`: the critic again). Allocation-free.
+    pub fn set_path_cost(&mut self, path: Option<&PathCost>) {
+        match path {
+            Some(p) => self.path_cost.copy_from(p),
+            None => self.path_cost.clear(),
+        }
+        self.path_hint = 0;
+    }
+
+    /// The path cost in use (empty: the critic).
+    pub fn path_cost(&self) -> &PathCost {
+        &self.path_cost
     }
 
     /// The obstacle rows' L1 weight in force (DESIGN §14).

@@ -14,6 +14,7 @@ use super::cost::{stage_block, terminal_block, StageCost};
 use super::cost_to_go::CostToGo;
 use super::dynamics::Dynamics;
 use super::layout::{QpLayout, AXLE_POINTS, NU, NX, NZ};
+use super::path_cost::PathTerm;
 use super::qp::{QpBackend, QpStatus};
 use super::settings::{MpcError, MpcSettings};
 use super::solution::{FallbackReason, StepStatus};
@@ -47,6 +48,26 @@ fn add_cost_to_go(field: &CostToGo, x: &State, value: &mut f64, grad: &mut [f64]
     *value += v;
     grad[ix::X] += g[0];
     grad[ix::Y] += g[1];
+}
+
+/// A path term as the derivatives of a stage cost over z = (x, u).
+fn path_derivatives(term: &PathTerm, out: &mut Derivatives) {
+    out.value = term.value;
+    out.grad = [0.0; NZ];
+    out.hess = [[0.0; NZ]; NZ];
+    for (k, c) in [ix::X, ix::Y, ix::THETA].into_iter().enumerate() {
+        out.grad[c] = term.grad_pose[k];
+    }
+    for i in 0..2 {
+        for j in 0..2 {
+            out.hess[i][j] = term.hess_position[i][j];
+        }
+    }
+    out.hess[ix::THETA][ix::THETA] = term.hess_heading;
+    for c in 0..NU {
+        out.grad[NX + c] = term.grad_control[c];
+        out.hess[NX + c][NX + c] = term.hess_control[c];
+    }
 }
 
 fn finite(x: &State) -> bool {
@@ -290,15 +311,28 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
         // Cost blocks (paper eq. 19–21).
         let mut der = Derivatives::default();
         let (mut h, mut g) = ([[0.0; NZ]; NZ], [0.0; NZ]);
+        // With a path, its progress is the cost (projected stage by stage
+        // from x̂'s segment onwards), else the critic.
+        let path = !self.path_cost.is_empty();
+        let mut hint = self.path_hint;
         for k in 0..s.horizon {
-            self.cost.stage(
-                &mut self.cost_ws,
-                &self.xs[k],
-                &self.us[k],
-                goal,
-                s.hessian,
-                &mut der,
-            );
+            if path {
+                let term = self.path_cost.eval(&self.xs[k], &self.us[k], hint);
+                hint = term.segment;
+                if k == 0 {
+                    self.path_hint = hint;
+                }
+                path_derivatives(&term, &mut der);
+            } else {
+                self.cost.stage(
+                    &mut self.cost_ws,
+                    &self.xs[k],
+                    &self.us[k],
+                    goal,
+                    s.hessian,
+                    &mut der,
+                );
+            }
             // Checked before the projection, which could hide a NaN.
             if !derivatives_finite(der.value, &der.grad, der.hess.as_flattened()) {
                 return false;
@@ -325,13 +359,22 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
         }
         let mut term = TerminalDerivatives::default();
         let (mut ht, mut gt) = ([[0.0; NX]; NX], [0.0; NX]);
-        self.cost.terminal(
-            &mut self.cost_ws,
-            &self.xs[s.horizon],
-            goal,
-            s.hessian,
-            &mut term,
-        );
+        if path {
+            let mut full = Derivatives::default();
+            let t = self
+                .path_cost
+                .eval(&self.xs[s.horizon], &Control::zeros(), hint);
+            path_derivatives(&t, &mut full);
+            term = TerminalDerivatives::state_block(&full);
+        } else {
+            self.cost.terminal(
+                &mut self.cost_ws,
+                &self.xs[s.horizon],
+                goal,
+                s.hessian,
+                &mut term,
+            );
+        }
         if !derivatives_finite(term.value, &term.grad, term.hess.as_flattened()) {
             return false;
         }

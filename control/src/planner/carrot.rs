@@ -16,6 +16,31 @@ pub fn is_cusp(path: &[PathPose], i: usize) -> bool {
     i + 1 < path.len() && i > 0 && (path[i].direction as i32) * (path[i + 1].direction as i32) < 0
 }
 
+/// The last pose of the direction of travel `i` is on: the next cusp at or
+/// after `i`, or the path's last pose.
+pub fn direction_end(path: &[PathPose], i: usize) -> usize {
+    let last = path.len().saturating_sub(1);
+    (i.min(last)..last)
+        .find(|&k| is_cusp(path, k))
+        .unwrap_or(last)
+}
+
+/// The first pose of the direction of travel `i` is on: the cusp before `i`
+/// (where the machine starts again the other way), or 0.
+pub fn direction_start(path: &[PathPose], i: usize) -> usize {
+    (1..i.min(path.len()))
+        .rev()
+        .find(|&k| is_cusp(path, k))
+        .unwrap_or(0)
+}
+
+/// Arc length from pose `from` to pose `to` (0 unless `from < to`).
+pub fn arc_between(path: &[PathPose], from: usize, to: usize) -> f64 {
+    (from..to.min(path.len().saturating_sub(1)))
+        .map(|i| step(path, i))
+        .sum()
+}
+
 fn step(path: &[PathPose], i: usize) -> f64 {
     (path[i + 1].x - path[i].x).hypot(path[i + 1].y - path[i].y)
 }
@@ -116,6 +141,29 @@ mod tests {
         let cusps: Vec<usize> = (0..path.len()).filter(|&i| is_cusp(&path, i)).collect();
         // Not the start (direction 0 → forward), not the end: the pose at x = 6.
         assert_eq!(cusps, vec![12]);
+    }
+
+    #[test]
+    fn a_direction_runs_from_cusp_to_cusp_and_its_arc_is_summed() {
+        let path = with_cusp();
+        // Forward: poses 0..=12; reversing: from the cusp (12) to the end (18).
+        for i in 0..=12 {
+            assert_eq!(
+                (direction_start(&path, i), direction_end(&path, i)),
+                (0, 12)
+            );
+        }
+        for i in 13..path.len() {
+            assert_eq!(
+                (direction_start(&path, i), direction_end(&path, i)),
+                (12, 18)
+            );
+        }
+        assert_eq!(arc_between(&path, 2, 12), 5.0);
+        assert_eq!(arc_between(&path, 12, 18), 3.0);
+        assert_eq!(arc_between(&path, 12, 2), 0.0);
+        assert_eq!(arc_between(&path, 16, 99), 1.0);
+        assert_eq!(direction_end(&[], 0), 0);
     }
 
     #[test]

@@ -67,7 +67,7 @@ const NO_PARENT: u32 = u32::MAX;
 
 /// Steps of a goal shot over `dist`: the distance at a cautious pace plus the
 /// final approach.
-fn shot_steps(dist: f64, dt: f64) -> usize {
+pub(super) fn shot_steps(dist: f64, dt: f64) -> usize {
     ((2.0 * dist + 8.0) / dt).ceil() as usize
 }
 

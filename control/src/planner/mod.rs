@@ -42,7 +42,7 @@ use crate::model::{
     goal_distance, ix, wrap_angle, Control, Goal, MachineParams, State, REACH_SPEED,
     SUCCESS_TOLERANCE,
 };
-use crate::mpc::CostToGo;
+use crate::mpc::{CostToGo, Dynamics, Mpc, PathCost, PathWeights, QpBackend, StageCost};
 use crate::obstacle::{footprint_clearance, BadObstacle, Obstacle};
 use crate::progress::{ProgressChecker, ProgressSettings};
 
@@ -84,6 +84,13 @@ pub enum Tracking {
     /// progress markers, passed by projection as with the carrot; after the
     /// first stall the subgoals are the targets (the field knows no heading).
     Field,
+    /// Progress along the planned path is the MPC's cost in place of the
+    /// critic ([`PathCost`]: arc length left, lateral and heading errors;
+    /// issue 27's design (a)), one direction of travel at a time; within
+    /// `path_handover` of the next cusp or the path's end the critic drives
+    /// to that pose. The subgoals remain the progress markers, passed by
+    /// projection as with the carrot.
+    Path,
 }
 
 impl Tracking {
@@ -92,6 +99,7 @@ impl Tracking {
             Tracking::Subgoals => "subgoals",
             Tracking::Carrot => "carrot",
             Tracking::Field => "field",
+            Tracking::Path => "path",
         }
     }
 }
@@ -116,6 +124,17 @@ pub struct NavigatorSettings {
     /// way leaves the machine room to turn: the field knows no heading.
     /// Default 0.15 (the route's).
     pub field_margin: f64,
+    /// `Tracking::Path`: within this arc length of the next cusp or the
+    /// path's end the critic takes over and drives to that pose [m]. Default
+    /// 3 (the approach distance: the critic's final approach, as today).
+    pub path_handover: f64,
+    /// `Tracking::Path`: the prices of the squared lateral error [1/m²], the
+    /// heading error (1 − cos) and the squared controls relative to their
+    /// bounds, each a multiple of the critic's cost of a metre (the arc
+    /// length left is priced at 1 ×). Defaults 4, 3, 0.1.
+    pub path_lateral: f64,
+    pub path_heading: f64,
+    pub path_control: f64,
     /// A subgoal is passed (the next one becomes the target) when the front
     /// axle is within this distance of it [m]. Default 1.0: before the MPC
     /// slows down for it.
@@ -224,6 +243,10 @@ impl Default for NavigatorSettings {
             carrot_distance: 3.0,
             field_gain: 1.0,
             field_margin: 0.15,
+            path_handover: 3.0,
+            path_lateral: 4.0,
+            path_heading: 3.0,
+            path_control: 0.1,
             subgoal_radius: 1.0,
             subgoal_spacing: 2.5,
             progress: ProgressSettings::default(),
@@ -278,6 +301,7 @@ impl NavigatorSettings {
             ("carrot_distance", self.carrot_distance),
             ("field_gain", self.field_gain),
             ("field_margin", self.field_margin),
+            ("path_handover", self.path_handover),
             ("subgoal_spacing", self.subgoal_spacing),
             ("progress.timeout", self.progress.timeout),
             ("replan_after", self.replan_after),
@@ -306,6 +330,9 @@ impl NavigatorSettings {
         let non_negative = [
             ("progress.min_approach", self.progress.min_approach),
             ("back_up_distance", self.back_up_distance),
+            ("path_lateral", self.path_lateral),
+            ("path_heading", self.path_heading),
+            ("path_control", self.path_control),
             ("clearance_margin", self.clearance_margin),
             ("direct_margin", self.direct_margin),
             ("direction_change_penalty", self.direction_change_penalty),
@@ -570,11 +597,25 @@ pub struct Navigator {
     field: CostToGo,
     /// The plan count the field was computed at.
     field_plan: Option<u64>,
-    field_version: u64,
+    /// Counts the changes of the MPC's cost terms (field and path).
+    cost_version: u64,
     /// `Tracking::Field` stalled once on this goal: subgoals from then on.
     field_stalled: bool,
-    /// The field's weight: `field_gain` × the critic's cost of a metre.
-    field_weight: f64,
+    /// The critic's cost of a metre (calibrated at construction).
+    cost_per_metre: f64,
+    /// `Tracking::Path`: the current direction's part of the path, and what
+    /// it was made for (plan count, index of its last pose, handed over).
+    path_cost: PathCost,
+    path_key: Option<(u64, usize)>,
+    /// Within the handover distance of its end: the critic drives.
+    path_handed: bool,
+    /// The path cost's segment the machine was last projected onto.
+    path_hint: usize,
+    /// `Tracking::Path`: the goal shot a path ends with, driven again by the
+    /// actor (the search keeps only where it starts), for the plan count
+    /// `shot_plan`; its forward part extends the path cost to the goal.
+    shot: Vec<State>,
+    shot_plan: Option<u64>,
 }
 
 impl Navigator {
@@ -632,9 +673,17 @@ impl Navigator {
             field_distance: ObstacleHeuristic::new(cells),
             field: CostToGo::with_cells(cells),
             field_plan: None,
-            field_version: 0,
+            cost_version: 0,
             field_stalled: false,
-            field_weight: settings.field_gain * cost_per_metre,
+            cost_per_metre,
+            path_cost: PathCost::new(),
+            path_key: None,
+            path_handed: false,
+            path_hint: 0,
+            shot: Vec::with_capacity(
+                hybrid_astar::shot_steps(settings.shot_range, settings.rollout_dt) + 1,
+            ),
+            shot_plan: None,
             world: World::new(params, settings.max_obstacles, settings.clearance_margin),
             networks,
             planner,
@@ -795,6 +844,7 @@ impl Navigator {
         }
         let (target, final_target) = self.drive_target(x);
         self.refresh_field(x);
+        self.refresh_path(x);
         NavStep::Drive {
             target,
             final_target,
@@ -851,8 +901,11 @@ impl Navigator {
         self.aborted = None;
         self.field.clear();
         self.field_plan = None;
-        self.field_version += 1;
         self.field_stalled = false;
+        self.path_cost.clear();
+        self.path_key = None;
+        self.path_handed = false;
+        self.cost_version += 1;
     }
 
     /// Passes every subgoal within `subgoal_radius` (never the goal); with a
@@ -860,8 +913,10 @@ impl Navigator {
     /// carrot may cut a corner at more than the radius from its subgoal).
     fn advance(&mut self, x: &State, now: f64) {
         let s = &self.settings;
-        let following =
-            matches!(s.tracking, Tracking::Carrot | Tracking::Field) && !self.path.is_empty();
+        let following = matches!(
+            s.tracking,
+            Tracking::Carrot | Tracking::Field | Tracking::Path
+        ) && !self.path.is_empty();
         if following {
             self.path_index = carrot::project(
                 &self.path,
@@ -896,6 +951,16 @@ impl Navigator {
         let s = &self.settings;
         if self.driving_to_goal_in_field() {
             // The field knows the way: the MPC drives to the goal itself.
+            return (self.route[last], true);
+        }
+        if let Some(end) = self.forward_end().filter(|_| self.route_index < last) {
+            // The end of this forward drive: a cusp, or the path's end (then
+            // the goal). The path cost drives there; the critic, with this
+            // target, does the last part.
+            if end + 1 < self.path.len() {
+                let p = &self.path[end];
+                return (Goal::new(p.x, p.y, p.theta), false);
+            }
             return (self.route[last], true);
         }
         if s.tracking == Tracking::Carrot && !self.path.is_empty() && self.route_index < last {
@@ -1018,7 +1083,7 @@ impl Navigator {
         let Some(goal) = goal else {
             if !self.field.is_empty() {
                 self.field.clear();
-                self.field_version += 1;
+                self.cost_version += 1;
             }
             self.field_plan = None;
             return;
@@ -1027,7 +1092,7 @@ impl Navigator {
             return;
         }
         self.field_plan = Some(self.plans);
-        self.field_version += 1;
+        self.cost_version += 1;
         let s = &self.settings;
         // A grid of the search's size, centred between machine and goal.
         let centre = [0.5 * (x[ix::X] + goal.x), 0.5 * (x[ix::Y] + goal.y)];
@@ -1038,7 +1103,136 @@ impl Navigator {
             .compute(frame, &self.world, [goal.x, goal.y]);
         self.world.set_margin(margin);
         self.field_distance
-            .write_excess(self.field_weight, &mut self.field);
+            .write_excess(s.field_gain * self.cost_per_metre, &mut self.field);
+    }
+
+    /// The path cost while `Tracking::Path` follows a forward part of a
+    /// planned path: that part (from the machine's projection to the next
+    /// cusp or the path's end, continued by the goal shot a path may end
+    /// with), set once per plan and part; empty once the machine is within
+    /// `path_handover` of its end (the critic's part), and without a path.
+    fn refresh_path(&mut self, x: &State) {
+        let goal = self.goal;
+        let key = self
+            .forward_end()
+            .zip(goal)
+            .map(|(end, _)| (self.plans, end));
+        if key != self.path_key {
+            self.path_key = key;
+            self.path_handed = false;
+            self.path_hint = 0;
+            self.cost_version += 1;
+            match (key, goal) {
+                (Some((_, end)), Some(g)) => self.set_path_cost(end, &g),
+                _ => self.path_cost.clear(),
+            }
+        }
+        if self.path_handed || self.path_cost.is_empty() {
+            return;
+        }
+        let (left, segment) = self.path_cost.arc_left(x[ix::X], x[ix::Y], self.path_hint);
+        self.path_hint = segment;
+        // An open end is where the search's goal shot started: the critic
+        // takes over there, where the shot showed the way is open.
+        let handover = if self.path_cost.open_end() {
+            0.0
+        } else {
+            self.settings.path_handover
+        };
+        if left <= handover {
+            self.path_handed = true;
+            self.path_cost.clear();
+            self.cost_version += 1;
+        }
+    }
+
+    /// The path cost for the forward part ending at pose `end`. A path that
+    /// ends where a goal shot starts is continued by the shot (the actor's
+    /// way to the goal, driven again), up to where it first reverses; a shot
+    /// that cannot be driven again leaves the path's end open.
+    fn set_path_cost(&mut self, end: usize, goal: &Goal) {
+        let shot = self.shot_ends_path(goal, end);
+        if shot {
+            self.trace_shot(goal);
+        }
+        let s = &self.settings;
+        let start = carrot::direction_start(&self.path, self.path_index)
+            .max(self.path_index.saturating_sub(1));
+        let c = self.cost_per_metre;
+        let weights = PathWeights {
+            per_metre: c,
+            lateral: s.path_lateral * c,
+            heading: s.path_heading * c,
+            control: s.path_control * c,
+        };
+        let poses = self.path[start..=end].iter().map(|p| [p.x, p.y, p.theta]);
+        let tail = self
+            .shot
+            .iter()
+            .take(if shot { self.shot_forward() } else { 0 })
+            .map(|x| [x[ix::X], x[ix::Y], x[ix::THETA]]);
+        let open_end = shot && self.shot_forward() == 0;
+        self.path_cost
+            .set(poses.chain(tail), weights, &self.params, open_end);
+    }
+
+    /// Drives the goal shot from the path's end again (once per plan):
+    /// `shot` holds its states (none when it does not reach the goal).
+    fn trace_shot(&mut self, goal: &Goal) {
+        if self.shot_plan == Some(self.plans) {
+            return;
+        }
+        self.shot_plan = Some(self.plans);
+        self.shot.clear();
+        let (Some(n), Some(p)) = (self.networks.as_mut(), self.path.last()) else {
+            return;
+        };
+        let s = &self.settings;
+        let start = State::new(p.x, p.y, p.theta, p.beta, 0.0, 0.0);
+        let dist = (p.x - goal.x).hypot(p.y - goal.y);
+        let r = roll_out(
+            &self.params,
+            &n.actor,
+            &mut n.actor_ws,
+            &self.world,
+            &start,
+            goal,
+            Arrival::Pose(s.shot_tolerance),
+            s.rollout_dt,
+            hybrid_astar::shot_steps(dist, s.rollout_dt),
+            Some(&mut self.shot),
+        );
+        if !r.reached {
+            self.shot.clear();
+        }
+    }
+
+    /// The states of the shot before it first reverses.
+    fn shot_forward(&self) -> usize {
+        self.shot
+            .iter()
+            .position(|x| x[ix::V] < -REACH_SPEED)
+            .unwrap_or(self.shot.len())
+    }
+
+    /// `Tracking::Path` on a forward part of a planned path: the index of its
+    /// last pose. Reversing parts go by the route's subgoals, the critic's
+    /// targets: measured, the path cost reversing (the front axle trailing
+    /// the rear) can lock the articulation and stall.
+    fn forward_end(&self) -> Option<usize> {
+        if self.settings.tracking != Tracking::Path || self.path.is_empty() {
+            return None;
+        }
+        let end = carrot::direction_end(&self.path, self.path_index);
+        (self.path[end].direction >= 0).then_some(end)
+    }
+
+    /// Whether pose `end` of the path is its last and a goal shot starts
+    /// there (it is outside the search's goal region).
+    fn shot_ends_path(&self, goal: &Goal, end: usize) -> bool {
+        let p = &self.path[end];
+        end + 1 == self.path.len()
+            && (p.x - goal.x).hypot(p.y - goal.y) > self.settings.goal_position_tolerance
     }
 
     /// `Tracking::Field` on a planned route that has not stalled: the MPC
@@ -1048,14 +1242,36 @@ impl Navigator {
     }
 
     /// The cost-to-go field the MPC adds to its cost now (`None`: the critic
-    /// alone). It changes only when [`Self::cost_to_go_version`] does.
+    /// alone). It changes only when [`Self::cost_version`] does.
     pub fn cost_to_go(&self) -> Option<&CostToGo> {
         (!self.field.is_empty()).then_some(&self.field)
     }
 
-    /// Counts the changes of [`Self::cost_to_go`].
-    pub fn cost_to_go_version(&self) -> u64 {
-        self.field_version
+    /// The path whose progress is the MPC's cost now (`None`: the critic).
+    /// It changes only when [`Self::cost_version`] does.
+    pub fn path_cost(&self) -> Option<&PathCost> {
+        (!self.path_cost.is_empty()).then_some(&self.path_cost)
+    }
+
+    /// Counts the changes of the MPC's cost terms ([`Self::cost_to_go`],
+    /// [`Self::path_cost`]).
+    pub fn cost_version(&self) -> u64 {
+        self.cost_version
+    }
+
+    /// Gives `mpc` the navigator's cost terms if they changed since `seen`
+    /// (the last [`Self::cost_version`] given; `None` at first): after every
+    /// `update`, so the MPC solves with what the navigator decided.
+    pub fn sync_costs<C: StageCost, D: Dynamics, B: QpBackend>(
+        &self,
+        mpc: &mut Mpc<C, D, B>,
+        seen: &mut Option<u64>,
+    ) {
+        if *seen != Some(self.cost_version) {
+            *seen = Some(self.cost_version);
+            mpc.set_cost_to_go(self.cost_to_go());
+            mpc.set_path_cost(self.path_cost());
+        }
     }
 
     /// At rest within `approach_distance` of the goal: stopped short of it,

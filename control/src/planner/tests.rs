@@ -513,7 +513,7 @@ fn the_field_drives_to_the_goal_around_the_wall_and_gives_way_to_subgoals_after_
     let (v, g) = field.eval(2.0, -0.3);
     assert!(v > 1.0 && g[1] > 0.0, "{v} {g:?}");
     assert_eq!(field.eval(6.0, 0.0).0, 0.0);
-    let version = nav.cost_to_go_version();
+    let version = nav.cost_version();
     // Stalled there: the replan hands the MPC the route's subgoals and no field.
     let mut t = 0.0;
     while t < replan_after + 0.5 {
@@ -525,11 +525,73 @@ fn the_field_drives_to_the_goal_around_the_wall_and_gives_way_to_subgoals_after_
             };
             assert_ne!(target, goal);
             assert!(nav.cost_to_go().is_none());
-            assert!(nav.cost_to_go_version() > version);
+            assert!(nav.cost_version() > version);
             return;
         }
     }
     panic!("no replan by {t} s");
+}
+
+#[test]
+fn the_path_cost_leads_forward_along_the_route_and_the_critic_takes_the_goal() {
+    let settings = NavigatorSettings {
+        tracking: Tracking::Path,
+        ..NavigatorSettings::default()
+    };
+    let handover = settings.path_handover;
+    let mut nav = Navigator::new(params(), settings, None).unwrap();
+    let goal = Goal::new(8.0, 0.0, 0.0);
+    nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &wall())
+        .unwrap();
+    let path = nav.path().to_vec();
+    assert!(path.len() > 10 && path.iter().all(|p| p.direction >= 0));
+    let length: f64 = path
+        .windows(2)
+        .map(|w| (w[1].x - w[0].x).hypot(w[1].y - w[0].y))
+        .sum();
+    let mut version = nav.cost_version();
+    let mut handed_over_at = None;
+    let mut hint = 0;
+    // The machine driven exactly along the path, one pose per tick.
+    for (i, p) in path.iter().enumerate() {
+        let x = State::new(p.x, p.y, p.theta, p.beta, 0.0, 0.5);
+        // Without networks the search ends in its goal region (no shot): the
+        // path's end is the goal's, the target throughout.
+        assert_eq!(nav.update(&x, 0.2 * i as f64), drive(goal, true));
+        let left: f64 = path[i..]
+            .windows(2)
+            .map(|w| (w[1].x - w[0].x).hypot(w[1].y - w[0].y))
+            .sum();
+        match nav.path_cost() {
+            Some(cost) => {
+                assert!(handed_over_at.is_none(), "the path came back at pose {i}");
+                assert!(left > handover - 0.7, "pose {i}: {left:.2} m left");
+                // The whole path, and the cost falls along it (its value at
+                // the machine is the arc left, priced at a metre's cost).
+                assert!((cost.length() - length).abs() < 1e-9 || i > 0);
+                // Projected from the last tick's segment, as the MPC does.
+                let term = cost.eval(&x, &Control::zeros(), hint);
+                hint = term.segment;
+                let here = term.value;
+                assert!(
+                    (here - FALLBACK_COST_PER_METRE * left).abs() < 1e-6,
+                    "pose {i}: {here} vs {left}"
+                );
+            }
+            None => {
+                if handed_over_at.is_none() {
+                    assert!(nav.cost_version() > version);
+                    handed_over_at = Some(left);
+                }
+            }
+        }
+        version = nav.cost_version();
+    }
+    let left = handed_over_at.expect("the critic takes over before the end");
+    assert!(
+        left <= handover + 1e-9,
+        "handed over {left:.2} m before the end"
+    );
 }
 
 #[test]
