@@ -3,10 +3,10 @@
 //! conditions checked from the CSC data (not through the layout's maps it
 //! reads), on a badly scaled QP, and in the closed loop.
 
-use control::model::{Goal, MachineParams, State};
+use control::model::{MachineParams, State};
 use control::mpc::{
-    ClarabelBackend, LinearDynamics, Mpc, MpcSettings, ObstacleConstraint, QpBackend, QpData,
-    QpLayout, QpOutcome, QpSolver, QpStatus, QuadraticCost, RiccatiBackend,
+    ClarabelBackend, Mpc, MpcSettings, ObstacleConstraint, QpBackend, QpData, QpLayout, QpOutcome,
+    QpSolver, QpSolverBackend, QpStatus, RiccatiBackend, StepStatus,
 };
 use control::{Critic, HessianMode, Plant, PlantConfig};
 
@@ -101,7 +101,9 @@ fn tight(settings: MpcSettings) -> MpcSettings {
 /// Riccati interior point finds Clarabel's solution: primal within 1e-5 of
 /// its scale, objective within 1e-6 relative, the obstacle rows' multipliers
 /// (which the exact-penalty logic reads) within 1e-3 of their scale, and its
-/// own KKT residuals, computed from the CSC data, small.
+/// own KKT residuals, computed from the CSC data, small; at the MPC's
+/// tolerance (1e-6) its plans are no further from the exact ones than
+/// Clarabel's (largest error over the case within 2 × Clarabel's + 1e-5).
 #[test]
 fn agrees_with_clarabel_on_the_mpcs_qps() {
     let mut largest_obs = 0;
@@ -120,6 +122,7 @@ fn agrees_with_clarabel_on_the_mpcs_qps() {
             ..MpcSettings::default()
         };
         let qps = mpc_qps(settings, circles, 24, 4);
+        let (mut err_r, mut err_c, mut iterations) = (0.0f64, 0.0f64, [0u32; 2]);
         for (i, (l, d)) in qps.iter().enumerate() {
             largest_obs = largest_obs.max(l.n_obs);
             let what = format!(
@@ -132,10 +135,6 @@ fn agrees_with_clarabel_on_the_mpcs_qps() {
             let (oc, wc, zc) = solve(&mut c);
             let (or, wr, zr) = solve(&mut r);
             assert_eq!(oc.status, QpStatus::Solved, "{what}: Clarabel");
-            eprintln!(
-                "{what}: tight Riccati {:?} {} it, Clarabel {} it",
-                or.status, or.iterations, oc.iterations
-            );
             assert!(or.status.is_usable(), "{what}: Riccati {:?}", or.status);
             let scale = inf(wc.iter().copied()).max(1.0);
             let dw = inf(wc.iter().zip(&wr).map(|(a, b)| a - b));
@@ -171,23 +170,8 @@ fn agrees_with_clarabel_on_the_mpcs_qps() {
                 res.iter().all(|&x| x <= tol),
                 "{what}: KKT residuals {res:?} > {tol:e}"
             );
-            // At the MPC's own tolerance both are as far from the exact
-            // solution: the Riccati's error within 10 × Clarabel's (+1e-5).
-            let mut r7 = RiccatiBackend::new(
-                l,
-                d,
-                &MpcSettings {
-                    qp_tolerance: 1e-7,
-                    ..settings
-                },
-            )
-            .unwrap();
-            let (o7, w7, _) = solve(&mut r7);
-            let err7 = inf(wc.iter().zip(&w7).map(|(a, b)| a - b));
-            eprintln!(
-                "{what}: at 1e-7 Riccati {:?} {} it error {err7:.1e}",
-                o7.status, o7.iterations
-            );
+            // At the MPC's own tolerance: usable, and as far from the exact
+            // solution as Clarabel's over the case (below).
             let mut r6 = RiccatiBackend::new(l, d, &settings).unwrap();
             let mut c6 = ClarabelBackend::new(l, d, &settings).unwrap();
             let (o6, w6, _) = solve(&mut r6);
@@ -198,14 +182,20 @@ fn agrees_with_clarabel_on_the_mpcs_qps() {
                 "{what}: Clarabel {:?} at 1e-6",
                 oc6.status
             );
-            let err_r = inf(wc.iter().zip(&w6).map(|(a, b)| a - b));
-            let err_c = inf(wc.iter().zip(&wc6).map(|(a, b)| a - b));
-            eprintln!("{what}: at 1e-6, Riccati {} it, error {err_r:.1e}; Clarabel {} it, error {err_c:.1e}", o6.iterations, oc6.iterations);
-            assert!(
-                err_r <= 10.0 * err_c + 1e-5 * scale,
-                "{what}: at 1e-6 the primal is {err_r:e} from the exact (Clarabel's {err_c:e})"
-            );
+            err_r = err_r.max(inf(wc.iter().zip(&w6).map(|(a, b)| a - b)) / scale);
+            err_c = err_c.max(inf(wc.iter().zip(&wc6).map(|(a, b)| a - b)) / scale);
+            iterations[0] += o6.iterations;
+            iterations[1] += oc6.iterations;
         }
+        eprintln!(
+            "{circles} circles {form:?} {hessian:?} at 1e-6: largest relative primal error \
+             Riccati {err_r:.1e} Clarabel {err_c:.1e}, iterations {iterations:?}"
+        );
+        assert!(
+            err_r <= 2.0 * err_c + 1e-5,
+            "{circles} circles {form:?} {hessian:?}: at 1e-6 the Riccati's plans are up to \
+             {err_r:e} from the exact, Clarabel's {err_c:e}"
+        );
     }
     assert!(
         largest_obs >= 4,
@@ -358,4 +348,61 @@ fn a_badly_scaled_qp_ends_in_a_status() {
     let on = r.solve();
     assert_eq!((on.status, on.iterations), (QpStatus::NumericalError, 0));
     assert!(!on.status.is_usable());
+}
+
+/// The closed loop on the bench's workload (committed critic and actor, two
+/// circles, N = 20, the MPC's defaults otherwise): an MPC on the Riccati
+/// interior point sends the commands the one on Clarabel sends, tick by tick
+/// from the same measured states (the plant follows Clarabel's), within
+/// 1e-4 in β̇ [rad/s] and v [m/s] (4.6e-6 seen), with the same status every
+/// tick (the penetration check discards the plans of 8 of these 15 ticks).
+/// Over longer runs the two plans drift apart as any two QP solutions within
+/// the tolerance do under real-time iterations (β̇ 0.04 apart at tick 22);
+/// the closed-loop equivalence is the simulator's (README).
+#[test]
+fn closed_loop_commands_match_clarabels() {
+    let p = MachineParams::default();
+    let (critic, actor) = networks();
+    let settings = MpcSettings {
+        horizon: 20,
+        time_budget: 10.0,
+        ..MpcSettings::default()
+    };
+    let build = |qp_solver| {
+        let mut mpc = Mpc::new(
+            p,
+            critic.clone(),
+            Some(actor.clone()),
+            MpcSettings {
+                qp_solver,
+                ..settings
+            },
+        )
+        .unwrap();
+        mpc.set_goal(GOAL, &CIRCLES[..2]).unwrap();
+        mpc
+    };
+    let (mut clarabel, mut riccati) = (build(QpSolver::Clarabel), build(QpSolver::Riccati));
+    assert!(matches!(riccati.backend(), QpSolverBackend::Riccati(_)));
+    let mut plant = Plant::new(p, PlantConfig::default(), State::zeros()).unwrap();
+    let (mut largest, mut solved): (f64, usize) = (0.0, 0);
+    for k in 0..15 {
+        let now = k as f64 * settings.dt;
+        let x = plant.state();
+        let a = clarabel.step(&x, now).unwrap().clone();
+        let b = riccati.step(&x, now).unwrap().clone();
+        assert_eq!(a.status, b.status, "tick {k}");
+        solved += usize::from(b.status == StepStatus::Solved);
+        let d = (a.command.beta_dot - b.command.beta_dot)
+            .abs()
+            .max((a.command.v - b.command.v).abs());
+        largest = largest.max(d);
+        assert!(d <= 1e-4, "tick {k}: {:?} vs {:?}", a.command, b.command);
+        clarabel.sent(now, a.command);
+        riccati.sent(now, a.command);
+        plant.command(a.command).unwrap();
+        plant.advance(settings.dt);
+    }
+    eprintln!("largest command difference {largest:.1e}, {solved} of 15 ticks solved");
+    assert!(solved >= 5, "{solved} of 15 ticks solved");
 }
