@@ -13,6 +13,10 @@
 //! 150 ticks. Cases (e.g. `20/Exact/2`) select some; default all 18. Under
 //! `valgrind --tool=callgrind` (instructions, not seconds: unaffected by other
 //! jobs) the difference between two TICKS counts is the ticks' own cost.
+//!
+//! `WLNAV_QP_SOLVER=riccati` (or `clarabel`) picks the QP solver in builds
+//! that have `MpcSettings::qp_solver` (issue 30); it is set through serde so
+//! that this file still builds at older commits, which reject it at run time.
 
 use std::time::Instant;
 
@@ -35,6 +39,17 @@ fn critic() -> (Critic, control::Actor) {
         .join(control::weights::DEFAULT_DIR);
     control::networks::load_networks(&dir, &MachineParams::default(), MpcSettings::default().dt)
         .unwrap_or_else(|e| panic!("the committed networks: {e}"))
+}
+
+/// `settings` with `WLNAV_QP_SOLVER`'s solver, if set (through serde: see above).
+fn with_solver(settings: MpcSettings) -> MpcSettings {
+    let Ok(solver) = std::env::var("WLNAV_QP_SOLVER") else {
+        return settings;
+    };
+    let mut v = serde_json::to_value(settings).expect("settings serialise");
+    v["qp_solver"] = serde_json::Value::String(solver.clone());
+    serde_json::from_value(v)
+        .unwrap_or_else(|e| panic!("WLNAV_QP_SOLVER={solver}: not in this build ({e})"))
 }
 
 fn main() {
@@ -61,14 +76,14 @@ fn main() {
                     if !cases.is_empty() && !cases.contains(&case) {
                         continue;
                     }
-                    let settings = MpcSettings {
+                    let settings = with_solver(MpcSettings {
                         horizon,
                         hessian,
                         // No time limit: a loaded machine (or callgrind, ~50× slower)
                         // must not turn QPs into time-outs and change the work done.
                         time_budget: 1e3,
                         ..MpcSettings::default()
-                    };
+                    });
                     let obstacles = circles(n);
                     let mut mpc = Mpc::new(p, critic.clone(), Some(actor.clone()), settings)
                         .expect("valid settings");

@@ -1,8 +1,9 @@
 //! Acceptance (6): a tick allocates nothing on the heap outside the QP solver.
 //! A counting global allocator counts every allocation during `Mpc::step` and
 //! the safety envelope's check of its command (issue 26), and,
-//! separately, those inside the Clarabel backend's update and solve (through a
-//! wrapping `QpBackend`). The set of circles within the horizon's reach
+//! separately, those inside the QP backend's update and solve (through a
+//! wrapping `QpBackend`): Clarabel's (its timers) are allowed, the Riccati
+//! interior point's (issue 30) are not. The set of circles within the horizon's reach
 //! changes during the run (issue 30: the QP in use changes with it). One test
 //! in this binary, so no other test thread allocates while we count.
 
@@ -12,7 +13,8 @@ use control::envelope::{self, EnvelopeInput, EnvelopeSettings};
 use control::model::{Goal, MachineParams, State};
 use control::mpc::FallbackReason;
 use control::mpc::{
-    ClarabelBackend, Mpc, MpcSettings, Obstacle, QpBackend, QpData, QpOutcome, Rk4Model, StepStatus,
+    Mpc, MpcSettings, Obstacle, QpBackend, QpData, QpOutcome, QpSolver, QpSolverBackend, Rk4Model,
+    StepStatus,
 };
 use control::{HessianMode, Plant, PlantConfig, VelocityCommand};
 
@@ -23,9 +25,10 @@ fn count() -> usize {
     common::allocations()
 }
 
-/// Clarabel, with the allocations made inside it counted.
+/// The QP solver (Clarabel or the Riccati interior point), with the
+/// allocations made inside it counted.
 struct CountedClarabel {
-    inner: ClarabelBackend,
+    inner: QpSolverBackend,
     allocations: usize,
 }
 
@@ -53,11 +56,16 @@ impl QpBackend for CountedClarabel {
 #[test]
 fn tick_allocates_only_inside_clarabel() {
     let p = MachineParams::default();
-    for horizon in [10, 20, 40] {
-        for hessian in [HessianMode::Exact, HessianMode::GaussNewton] {
+    for (horizon, hessian, qp_solver) in [10, 20, 40]
+        .into_iter()
+        .flat_map(|n| [HessianMode::Exact, HessianMode::GaussNewton].map(|h| (n, h)))
+        .flat_map(|(n, h)| [QpSolver::Clarabel, QpSolver::Riccati].map(|s| (n, h, s)))
+    {
+        {
             let settings = MpcSettings {
                 horizon,
                 hessian,
+                qp_solver,
                 sqp_iterations: 2,
                 // This test counts allocations, not time: a debug build on a
                 // loaded CI machine can exceed the 0.1 s budget at N = 40 (the
@@ -83,7 +91,7 @@ fn tick_allocates_only_inside_clarabel() {
                 settings,
                 |l, d, s| {
                     Ok(CountedClarabel {
-                        inner: ClarabelBackend::new(l, d, s)?,
+                        inner: QpSolverBackend::new(l, d, s)?,
                         allocations: 0,
                     })
                 },
@@ -123,7 +131,7 @@ fn tick_allocates_only_inside_clarabel() {
                         sol.status,
                         StepStatus::Solved | StepStatus::Fallback(FallbackReason::PlanPenetrates)
                     ),
-                    "N={horizon} {hessian:?}: {:?}",
+                    "N={horizon} {hessian:?} {qp_solver:?}: {:?}",
                     sol.status
                 );
                 solves += sol.sqp_iterations as usize;
@@ -153,10 +161,10 @@ fn tick_allocates_only_inside_clarabel() {
             active_counts.dedup();
             assert!(
                 active_counts.len() >= 2,
-                "N={horizon} {hessian:?}: the circles within reach never changed: {active_counts:?}"
+                "N={horizon} {hessian:?} {qp_solver:?}: the circles within reach never changed: {active_counts:?}"
             );
             eprintln!(
-                "N={horizon} {hessian:?}: {ticks} ticks, {solves} QP solves, {clarabel} allocations inside Clarabel \
+                "N={horizon} {hessian:?} {qp_solver:?}: {ticks} ticks, {solves} QP solves, {clarabel} allocations inside the QP solver \
                  ({:.1} per solve), {} elsewhere",
                 clarabel as f64 / solves as f64,
                 total - clarabel
@@ -164,8 +172,15 @@ fn tick_allocates_only_inside_clarabel() {
             assert_eq!(
                 total - clarabel,
                 0,
-                "N={horizon} {hessian:?}: heap allocations outside the QP solver"
+                "N={horizon} {hessian:?} {qp_solver:?}: heap allocations outside the QP solver"
             );
+            // The Riccati interior point allocates nothing at all.
+            if qp_solver == QpSolver::Riccati {
+                assert_eq!(
+                    clarabel, 0,
+                    "N={horizon} {hessian:?} {qp_solver:?}: allocations inside the Riccati backend"
+                );
+            }
         }
     }
 }

@@ -8,7 +8,7 @@
 //!
 //! ```toml
 //! [machine]            # control::MachineParams: l_f, l_r, beta_max, beta_dot_max, v_max, beta_ddot_max, a_max
-//! [mpc]                # control::mpc::MpcSettings: horizon, dt, hessian, delay, time_budget, ...
+//! [mpc]                # control::mpc::MpcSettings: horizon, dt, hessian, delay, time_budget, qp_solver, ...
 //! [envelope]           # control::envelope::EnvelopeSettings: the safety envelope (DESIGN §14)
 //! margin = 0.01        # m kept beyond the tolerances below
 //! geometry_tolerance = 0.0  # m: how far the true rear axle may be from the configured L_f, L_r
@@ -807,6 +807,20 @@ mod tests {
         );
         back.given = c.given;
         assert_eq!(back, c);
+    }
+
+    /// `[mpc] qp_solver` picks the MPC's QP solver (issue 30); a name it
+    /// does not know is an error naming the key.
+    #[test]
+    fn mpc_qp_solver_is_read() {
+        let c = Config::from_toml("[mpc]\nqp_solver = \"riccati\"\n", "t").unwrap();
+        assert_eq!(c.mpc_settings().qp_solver, control::mpc::QpSolver::Riccati);
+        let d = Config::from_toml("[mpc]\nhorizon = 20\n", "t").unwrap();
+        assert_eq!(
+            d.mpc_settings().qp_solver,
+            control::mpc::MpcSettings::default().qp_solver
+        );
+        assert!(err("[mpc]\nqp_solver = \"qdldl\"\n").contains("qp_solver"));
     }
 
     fn err(text: &str) -> String {

@@ -3,6 +3,7 @@
 //! ```text
 //! wlnav-sim eval --scenarios sim/scenarios/paper128.csv --methods mpc,actor,baseline,min-time \
 //!     [--horizon N] [--hessian exact|gauss-newton] [--obstacles distance|cbf] \
+//!     [--qp-solver clarabel|riccati] \
 //!     [--sqp-iterations K] [--step-length A] [--obstacle-margin M] \
 //!     [--delay 0.2] [--lag 0.1] [--tolerance 0.1] [--weights critic-weights/avant635] --out out/eval \
 //!     [--plant-scale-lf K] [--plant-scale-lr K] [--plant-delay S] [--actuator-gain K] \
@@ -21,7 +22,7 @@ use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand, ValueEnum};
 use control::critic::HessianMode;
 use control::envelope::EnvelopeSettings;
-use control::mpc::{MpcSettings, ObstacleConstraint};
+use control::mpc::{MpcSettings, ObstacleConstraint, QpSolver};
 use control::planner::{NavigatorSettings, PlannerKind, Tracking};
 use control::plant::PlantConfig;
 use control::scenario;
@@ -68,6 +69,12 @@ impl std::fmt::Display for Planner {
         let v = self.to_possible_value().expect("no skipped variants");
         f.write_str(v.get_name())
     }
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum QpSolverArg {
+    Clarabel,
+    Riccati,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -203,6 +210,9 @@ enum Command {
         /// Obstacle constraint form (default: the daemon's).
         #[arg(long, value_enum)]
         obstacles: Option<Obstacles>,
+        /// The MPC's QP solver (default: the daemon's, `MpcSettings::qp_solver`).
+        #[arg(long, value_enum)]
+        qp_solver: Option<QpSolverArg>,
         /// SQP iterations per tick (1 = real-time iteration; default: the daemon's).
         #[arg(long)]
         sqp_iterations: Option<usize>,
@@ -411,6 +421,7 @@ fn main() -> Result<()> {
             horizon,
             hessian,
             obstacles,
+            qp_solver,
             sqp_iterations,
             step_length,
             obstacle_margin,
@@ -464,6 +475,10 @@ fn main() -> Result<()> {
                 obstacle_constraint: obstacles.map_or(d.obstacle_constraint, |o| match o {
                     Obstacles::Distance => ObstacleConstraint::Distance,
                     Obstacles::Cbf => ObstacleConstraint::Cbf,
+                }),
+                qp_solver: qp_solver.map_or(d.qp_solver, |q| match q {
+                    QpSolverArg::Clarabel => QpSolver::Clarabel,
+                    QpSolverArg::Riccati => QpSolver::Riccati,
                 }),
                 sqp_iterations: sqp_iterations.unwrap_or(d.sqp_iterations),
                 step_length: step_length.unwrap_or(d.step_length),

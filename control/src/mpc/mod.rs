@@ -14,10 +14,13 @@
 //!
 //! The parts talk through small traits so tests can swap them:
 //! [`StageCost`] (the critic, or [`QuadraticCost`]), [`Dynamics`] ([`Rk4Model`],
-//! or [`LinearDynamics`]) and [`QpBackend`] ([`ClarabelBackend`]).
+//! or [`LinearDynamics`]) and [`QpBackend`] ([`ClarabelBackend`], or
+//! [`RiccatiBackend`], the interior point over the stages; [`QpSolverBackend`]
+//! picks one by `MpcSettings::qp_solver`).
 //!
 //! Files: `settings` (settings and errors), `layout` (variables, rows, sparsity
-//! pattern), `cost`, `dynamics`, `constraints`, `qp` (solver backend), `sqp`
+//! pattern), `cost`, `dynamics`, `constraints`, `qp` (solver backend),
+//! `riccati` (the structure-exploiting backend), `sqp`
 //! (one tick), `solution` (what a tick returns).
 //!
 //! Rows that exist (issue 30): the QP constrains only the circles within the
@@ -40,6 +43,7 @@ pub mod dynamics;
 pub mod layout;
 pub mod path_cost;
 pub mod qp;
+pub mod riccati;
 pub mod settings;
 pub mod solution;
 mod sqp;
@@ -50,8 +54,9 @@ pub use cost_to_go::CostToGo;
 pub use dynamics::{Dynamics, LinearDynamics, Rk4Model};
 pub use layout::QpLayout;
 pub use path_cost::{PathCost, PathWeights};
-pub use qp::{ClarabelBackend, QpBackend, QpData, QpOutcome, QpStatus};
-pub use settings::{MpcError, MpcSettings, ObstacleConstraint, MAX_OBSTACLES};
+pub use qp::{ClarabelBackend, QpBackend, QpData, QpOutcome, QpSolverBackend, QpStatus};
+pub use riccati::RiccatiBackend;
+pub use settings::{MpcError, MpcSettings, ObstacleConstraint, QpSolver, MAX_OBSTACLES};
 pub use solution::{FallbackReason, Solution, StepStatus};
 
 use crate::actor::{Actor, ActorWorkspace};
@@ -61,7 +66,7 @@ use crate::gain::GainEstimator;
 use crate::model::{Control, Goal, MachineParams, State, VelocityCommand};
 
 /// The MPC: built once, then `set_goal` and `step` every tick.
-pub struct Mpc<C: StageCost, D: Dynamics = Rk4Model, B: QpBackend = ClarabelBackend> {
+pub struct Mpc<C: StageCost, D: Dynamics = Rk4Model, B: QpBackend = QpSolverBackend> {
     params: MachineParams,
     settings: MpcSettings,
     cost: C,
@@ -141,7 +146,7 @@ pub fn reachable_obstacles(
 }
 
 impl<C: StageCost> Mpc<C> {
-    /// The MPC with the RK4 model and Clarabel.
+    /// The MPC with the RK4 model and the QP solver `settings.qp_solver`.
     pub fn new(
         params: MachineParams,
         cost: C,
@@ -154,7 +159,7 @@ impl<C: StageCost> Mpc<C> {
             Rk4Model { params },
             actor,
             settings,
-            ClarabelBackend::new,
+            QpSolverBackend::new,
         )
     }
 }

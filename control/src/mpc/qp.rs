@@ -10,7 +10,8 @@ use clarabel::solver::{
 };
 
 use super::layout::QpLayout;
-use super::settings::{MpcError, MpcSettings};
+use super::riccati::RiccatiBackend;
+use super::settings::{MpcError, MpcSettings, QpSolver};
 
 /// Outcome of one QP solve, independent of the solver used.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -200,5 +201,56 @@ impl QpBackend for ClarabelBackend {
 
     fn dual(&self) -> &[f64] {
         &self.solver.solution.z
+    }
+}
+
+/// The backend `MpcSettings::qp_solver` names, chosen at construction (the
+/// default backend of [`super::Mpc`], so a daemon or simulator switches
+/// solvers by a setting).
+#[derive(Debug)]
+#[allow(clippy::large_enum_variant)]
+pub enum QpSolverBackend {
+    Clarabel(ClarabelBackend),
+    Riccati(RiccatiBackend),
+}
+
+impl QpSolverBackend {
+    /// Builds the backend of `settings.qp_solver` (arguments as
+    /// [`ClarabelBackend::new`]).
+    pub fn new(layout: &QpLayout, data: &QpData, settings: &MpcSettings) -> Result<Self, MpcError> {
+        Ok(match settings.qp_solver {
+            QpSolver::Clarabel => Self::Clarabel(ClarabelBackend::new(layout, data, settings)?),
+            QpSolver::Riccati => Self::Riccati(RiccatiBackend::new(layout, data, settings)?),
+        })
+    }
+}
+
+impl QpBackend for QpSolverBackend {
+    fn update(&mut self, data: &QpData) -> Result<(), String> {
+        match self {
+            Self::Clarabel(b) => b.update(data),
+            Self::Riccati(b) => b.update(data),
+        }
+    }
+
+    fn solve(&mut self) -> QpOutcome {
+        match self {
+            Self::Clarabel(b) => b.solve(),
+            Self::Riccati(b) => b.solve(),
+        }
+    }
+
+    fn primal(&self) -> &[f64] {
+        match self {
+            Self::Clarabel(b) => b.primal(),
+            Self::Riccati(b) => b.primal(),
+        }
+    }
+
+    fn dual(&self) -> &[f64] {
+        match self {
+            Self::Clarabel(b) => b.dual(),
+            Self::Riccati(b) => b.dual(),
+        }
     }
 }

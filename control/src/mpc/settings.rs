@@ -21,6 +21,18 @@ pub enum ObstacleConstraint {
     Cbf,
 }
 
+/// The QP solver behind the MPC (issue 30).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum QpSolver {
+    /// Clarabel's general sparse interior point ([`super::ClarabelBackend`]).
+    #[default]
+    Clarabel,
+    /// The interior point over the horizon's stages with a Riccati recursion
+    /// ([`super::RiccatiBackend`]).
+    Riccati,
+}
+
 /// Everything the MPC can be tuned with. `Default` gives the values below.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -94,6 +106,8 @@ pub struct MpcSettings {
     pub qp_iterative_refinement: bool,
     /// Clarabel's Ruiz equilibration (computed once, on nominal data). Default true.
     pub qp_equilibrate: bool,
+    /// The QP solver. Default Clarabel.
+    pub qp_solver: QpSolver,
     /// Time budget of one tick [s]: Clarabel's time limit, and no further SQP
     /// iteration is started if it would not fit. Default 0.1.
     pub time_budget: f64,
@@ -124,6 +138,7 @@ impl Default for MpcSettings {
             qp_max_iterations: 100,
             qp_iterative_refinement: false,
             qp_equilibrate: true,
+            qp_solver: QpSolver::Clarabel,
             time_budget: 0.1,
         }
     }
@@ -346,6 +361,10 @@ mod tests {
         assert_eq!(s.horizon, 20);
         assert_eq!(s.hessian, HessianMode::GaussNewton);
         assert_eq!(s.dt, 0.2);
+        assert_eq!(s.qp_solver, QpSolver::Clarabel);
+        let r: MpcSettings = serde_json::from_str(r#"{"qp_solver": "riccati"}"#).unwrap();
+        assert_eq!(r.qp_solver, QpSolver::Riccati);
+        assert!(serde_json::from_str::<MpcSettings>(r#"{"qp_solver": "qdldl"}"#).is_err());
         assert!(serde_json::from_str::<MpcSettings>(r#"{"horizn": 20}"#).is_err());
     }
 }
