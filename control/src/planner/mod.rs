@@ -1148,8 +1148,8 @@ impl Navigator {
 
     /// The path cost for the forward part ending at pose `end`. A path that
     /// ends where a goal shot starts is continued by the shot (the actor's
-    /// way to the goal, driven again), up to where it first reverses; a shot
-    /// that cannot be driven again leaves the path's end open.
+    /// way to the goal, driven again); a shot that reverses or cannot be
+    /// driven again leaves the path's end open (the critic takes over there).
     fn set_path_cost(&mut self, end: usize, goal: &Goal) {
         let shot = self.shot_ends_path(goal, end);
         if shot {
@@ -1166,12 +1166,14 @@ impl Navigator {
             control: s.path_control * c,
         };
         let poses = self.path[start..=end].iter().map(|p| [p.x, p.y, p.theta]);
+        // A shot that reverses on the way is a manoeuvre for the critic.
+        let drivable = shot && !self.shot.is_empty() && !self.shot_reverses();
         let tail = self
             .shot
             .iter()
-            .take(if shot { self.shot_forward() } else { 0 })
+            .take(if drivable { self.shot.len() } else { 0 })
             .map(|x| [x[ix::X], x[ix::Y], x[ix::THETA]]);
-        let open_end = shot && self.shot_forward() == 0;
+        let open_end = shot && !drivable;
         self.path_cost
             .set(poses.chain(tail), weights, &self.params, open_end);
     }
@@ -1207,12 +1209,9 @@ impl Navigator {
         }
     }
 
-    /// The states of the shot before it first reverses.
-    fn shot_forward(&self) -> usize {
-        self.shot
-            .iter()
-            .position(|x| x[ix::V] < -REACH_SPEED)
-            .unwrap_or(self.shot.len())
+    /// Whether the shot drives backwards anywhere.
+    fn shot_reverses(&self) -> bool {
+        self.shot.iter().any(|x| x[ix::V] < -REACH_SPEED)
     }
 
     /// `Tracking::Path` on a forward part of a planned path: the index of its

@@ -595,6 +595,43 @@ fn the_path_cost_leads_forward_along_the_route_and_the_critic_takes_the_goal() {
 }
 
 #[test]
+fn a_path_that_ends_with_a_goal_shot_is_continued_by_it() {
+    let settings = NavigatorSettings {
+        tracking: Tracking::Path,
+        ..NavigatorSettings::default()
+    };
+    let tolerance = settings.shot_tolerance;
+    let mut nav = Navigator::new(params(), settings, Some(trained())).unwrap();
+    let goal = Goal::new(8.0, 0.0, 0.0);
+    let start = at_rest(0.0, 0.0, 0.0);
+    nav.set_goal(&start, goal, &wall()).unwrap();
+    let end = *nav.path().last().expect("a route around the wall");
+    let path_arc: f64 = nav
+        .path()
+        .windows(2)
+        .map(|w| (w[1].x - w[0].x).hypot(w[1].y - w[0].y))
+        .sum();
+    // The search shot the goal from its last node (it stops short of it).
+    assert!((end.x - goal.x).hypot(end.y - goal.y) > 1.0, "{end:?}");
+    nav.update(&start, 0.0);
+    let cost = nav.path_cost().expect("a path cost");
+    if cost.open_end() {
+        // The shot reverses: the path's own length, open beyond its end.
+        assert!((cost.length() - path_arc).abs() < 1e-9);
+    } else {
+        // Driven again, the shot ends at the goal: the cost runs there.
+        // Projected from the last segment (a hint beyond it is clamped).
+        let (left, _) = cost.arc_left(goal.x, goal.y, usize::MAX);
+        assert!(
+            cost.length() > path_arc + 1.0,
+            "{} vs {path_arc}",
+            cost.length()
+        );
+        assert!(left.abs() < tolerance + 0.3, "{left}");
+    }
+}
+
+#[test]
 fn the_critics_cost_of_a_metre_is_its_slope_in_the_goal_distance() {
     let (_, critic) = trained();
     let mut ws = CriticWorkspace::new(&critic);
