@@ -603,8 +603,8 @@ pub struct Navigator {
     field_stalled: bool,
     /// The critic's cost of a metre (calibrated at construction).
     cost_per_metre: f64,
-    /// `Tracking::Path`: the current direction's part of the path, and what
-    /// it was made for (plan count, index of its last pose, handed over).
+    /// `Tracking::Path`: the current forward part of the path, and what it
+    /// was made for (plan count, index of its last pose).
     path_cost: PathCost,
     path_key: Option<(u64, usize)>,
     /// Within the handover distance of its end: the critic drives.
@@ -613,7 +613,7 @@ pub struct Navigator {
     path_hint: usize,
     /// `Tracking::Path`: the goal shot a path ends with, driven again by the
     /// actor (the search keeps only where it starts), for the plan count
-    /// `shot_plan`; its forward part extends the path cost to the goal.
+    /// `shot_plan`; unless it reverses, it extends the path cost to the goal.
     shot: Vec<State>,
     shot_plan: Option<u64>,
 }
@@ -1168,11 +1168,8 @@ impl Navigator {
         let poses = self.path[start..=end].iter().map(|p| [p.x, p.y, p.theta]);
         // A shot that reverses on the way is a manoeuvre for the critic.
         let drivable = shot && !self.shot.is_empty() && !self.shot_reverses();
-        let tail = self
-            .shot
-            .iter()
-            .take(if drivable { self.shot.len() } else { 0 })
-            .map(|x| [x[ix::X], x[ix::Y], x[ix::THETA]]);
+        let tail: &[State] = if drivable { &self.shot } else { &[] };
+        let tail = tail.iter().map(|x| [x[ix::X], x[ix::Y], x[ix::THETA]]);
         let open_end = shot && !drivable;
         self.path_cost
             .set(poses.chain(tail), weights, &self.params, open_end);
