@@ -138,9 +138,11 @@ fn jacobian_product(layer: &Layer, prev: &[[f64; NZ]], out: &mut [[f64; NZ]]) {
             layer.row(i + 3),
         ];
         let mut acc = [[0.0; NZ]; 4];
-        for (k, p) in prev.iter().enumerate().take(n_in) {
-            for r in 0..4 {
-                let c = w[r][k];
+        // Rows and inputs cut to n_in up front so the loop has no bounds checks
+        // (same FMAs in the same order as indexing them).
+        let (w0, w1, w2, w3) = (&w[0][..n_in], &w[1][..n_in], &w[2][..n_in], &w[3][..n_in]);
+        for ((((p, &c0), &c1), &c2), &c3) in prev.iter().zip(w0).zip(w1).zip(w2).zip(w3) {
+            for (r, c) in [c0, c1, c2, c3].into_iter().enumerate() {
                 for j in 0..NZ {
                     acc[r][j] = c.mul_add(p[j], acc[r][j]);
                 }
