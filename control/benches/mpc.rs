@@ -6,7 +6,8 @@
 //! 0, 2 and 8 circles (issue 30; criterion times the 2-circle case). Besides
 //! criterion's estimates it prints the median and p99 of 400 ticks per
 //! configuration and the tick's split into the critic's derivatives, the rest
-//! of the QP's assembly, and the QP solve (medians).
+//! of the QP's assembly, and the QP solve (medians), with each QP solver
+//! (`MpcSettings::qp_solver`: Clarabel, Riccati); criterion times the default's.
 
 use std::time::{Duration, Instant};
 
@@ -15,7 +16,9 @@ use control::delay::DelayCompensator;
 use control::envelope::{self, EnvelopeInput, EnvelopeSettings};
 use control::mlp::PAPER_HIDDEN;
 use control::model::{MachineParams, State};
-use control::mpc::{ClarabelBackend, Mpc, MpcSettings, Obstacle, Rk4Model};
+use control::mpc::{
+    ClarabelBackend, Mpc, MpcSettings, Obstacle, QpSolver, QpSolverBackend, Rk4Model,
+};
 use control::weights::{self, random_network, NetworkMetadata, NetworkRole, WeightsProblem};
 use control::{Actor, Critic, HessianMode, Plant, PlantConfig, VelocityCommand};
 use criterion::{criterion_group, criterion_main, Criterion};
@@ -70,9 +73,19 @@ struct Loop {
 
 impl Loop {
     fn new(horizon: usize, hessian: HessianMode, circles: usize) -> Self {
+        Self::with_solver(horizon, hessian, circles, MpcSettings::default().qp_solver)
+    }
+
+    fn with_solver(
+        horizon: usize,
+        hessian: HessianMode,
+        circles: usize,
+        qp_solver: QpSolver,
+    ) -> Self {
         let settings = MpcSettings {
             horizon,
             hessian,
+            qp_solver,
             ..MpcSettings::default()
         };
         let (critic, actor) = networks();
@@ -152,8 +165,8 @@ impl Loop {
     }
 }
 
-fn percentiles(horizon: usize, hessian: HessianMode, circles: usize) {
-    let mut l = Loop::new(horizon, hessian, circles);
+fn percentiles(horizon: usize, hessian: HessianMode, circles: usize, solver: QpSolver) {
+    let mut l = Loop::with_solver(horizon, hessian, circles, solver);
     for _ in 0..20 {
         l.tick();
     }
@@ -178,7 +191,7 @@ fn percentiles(horizon: usize, hessian: HessianMode, circles: usize) {
     );
     t.sort_by(f64::total_cmp);
     println!(
-        "mpc tick N={horizon:2} {hessian:?} {circles} circles: median {:.3} ms, p99 {:.3} ms, max {:.3} ms \
+        "mpc tick N={horizon:2} {hessian:?} {circles} circles {solver:?}: median {:.3} ms, p99 {:.3} ms, max {:.3} ms \
          (400 ticks; medians: critic derivatives {d:.3}, assembly {a:.3}, QP {q:.3} ms; \
          the envelope {:.3} ms a tick, {:.1} % of the tick)",
         t[t.len() / 2],
@@ -260,7 +273,7 @@ fn probe() {
                 |layout, data, settings| {
                     let mut s = ClarabelBackend::settings(settings)?;
                     tweak(&mut s);
-                    ClarabelBackend::with_settings(layout, data, s)
+                    ClarabelBackend::with_settings(layout, data, s).map(QpSolverBackend::Clarabel)
                 },
             )
             .expect("valid settings");
@@ -293,10 +306,34 @@ fn bench(c: &mut Criterion) {
         probe();
         return;
     }
+    // `MPC_BENCH_SPLIT=20/Exact/2,40/Exact/2`: only these cases' percentiles
+    // and split, with both solvers, in ROUNDS rounds (`MPC_BENCH_ROUNDS`, 1).
+    if let Ok(cases) = std::env::var("MPC_BENCH_SPLIT") {
+        let rounds = std::env::var("MPC_BENCH_ROUNDS").map_or(1, |r| r.parse().expect("ROUNDS"));
+        for _ in 0..rounds {
+            for case in cases.split(',') {
+                let mut f = case.split('/');
+                let mut next = || f.next().expect("N/HESSIAN/CIRCLES");
+                let horizon = next().parse().expect("N");
+                let hessian = match next() {
+                    "Exact" => HessianMode::Exact,
+                    "GaussNewton" => HessianMode::GaussNewton,
+                    h => panic!("{h}: Exact or GaussNewton"),
+                };
+                let circles = next().parse().expect("CIRCLES");
+                for solver in [QpSolver::Clarabel, QpSolver::Riccati] {
+                    percentiles(horizon, hessian, circles, solver);
+                }
+            }
+        }
+        return;
+    }
     for hessian in [HessianMode::Exact, HessianMode::GaussNewton] {
         for horizon in [10, 20, 40] {
             for circles in [0, 2, 8] {
-                percentiles(horizon, hessian, circles);
+                for solver in [QpSolver::Clarabel, QpSolver::Riccati] {
+                    percentiles(horizon, hessian, circles, solver);
+                }
             }
         }
     }
