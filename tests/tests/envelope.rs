@@ -25,9 +25,14 @@ fn a_command_inside_the_margin_is_overridden_and_flagged() {
     std::fs::create_dir_all(&dir).expect("temp dir");
     let config = dir.join("wlnavd.toml");
     let mut f = std::fs::File::create(&config).expect("config file");
+    // With its own --config, the daemon's solver budget (0.1 s, also the start-up
+    // self-test's) is scaled here, as SimDaemon does without one: unscaled, the arm64
+    // daemon's first solve under qemu fell back on a loaded machine and it exited.
     writeln!(
         f,
-        "[controller]\nplanner = \"none\"\n\n[envelope]\nmargin = {MARGIN}\nresponse_lag = 0.2"
+        "[controller]\nplanner = \"none\"\n\n[envelope]\nmargin = {MARGIN}\nresponse_lag = 0.2\n\n\
+         [mpc]\ntime_budget = {}",
+        e2e::timing_scale::secs(0.1)
     )
     .expect("write config");
     drop(f);
