@@ -53,7 +53,7 @@ fn a_command_inside_the_margin_is_overridden_and_flagged() {
     let req = GoalRequest::set_goal(id, goal, &[circle]).expect("one obstacle");
     let reply = d
         .client
-        .request(&req, Duration::from_secs(2))
+        .request(&req, e2e::timing_scale::real(Duration::from_secs(2)))
         .expect("reply");
     assert!(
         reply.is_accepted(),
@@ -69,7 +69,10 @@ fn a_command_inside_the_margin_is_overridden_and_flagged() {
     let mut ended = false;
     // Until the goal ends: reached past the circle, or aborted (no progress)
     // in front of it; 40 simulated seconds at most.
-    let deadline = Instant::now() + Duration::from_secs_f64(40.0 / scale + 10.0);
+    // The daemon's clock runs at `scale` / WLNAV_TIMING_SCALE (SimDaemon): the wall-clock
+    // limit is scaled by that factor (unscaled, under qemu it ended after 15 of the 40 s).
+    let deadline =
+        Instant::now() + e2e::timing_scale::real(Duration::from_secs_f64(40.0 / scale + 10.0));
     while Instant::now() < deadline && ticks < 200 {
         let Some(t) = d
             .telemetry
