@@ -148,6 +148,6 @@ if [ $cross = 1 ]; then
   cat target/cross-check-build.log
   phase "arm64 tests under qemu, examples, package (cross-check.sh run)" bash scripts/cross-check.sh run
 else
-  echo "test.sh: cross check not run (opt-in: WLNAV_CROSS_CHECK=1 and no arguments run it; README, \"The Jetson\": measured whole from scratch, 46 min)"
+  echo "test.sh: cross check not run (opt-in: WLNAV_CROSS_CHECK=1 and no arguments run it; README, \"The Jetson\": measured whole from scratch, 35 min on shared cores)"
 fi
 echo "test.sh: passed"
