@@ -7,17 +7,23 @@
 //! ```
 //!
 //! Exit status 0 when the goal ends `succeeded`, 1 on any other outcome or error.
+//! Its timeouts are multiplied by `WLNAV_TIMING_SCALE` when set (a slower CPU, e.g. the
+//! arm64 daemon under qemu in `scripts/cross-check.sh`; `tests/timing_scale.rs`).
 
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
 use shm_ipc::{Client, GoalOutcome, IpcConfig, Obstacle, Pose2};
 
+#[path = "../tests/timing_scale.rs"]
+mod timing_scale;
+use timing_scale::real;
+
 fn main() -> Result<()> {
     let prefix = prefix_arg()?;
     let config = IpcConfig::new(prefix.clone());
     // The daemon may still be starting: wait for its services.
-    let client = Client::connect(&config, Duration::from_secs(20))
+    let client = Client::connect(&config, real(Duration::from_secs(20)))
         .with_context(|| format!("no wlnavd on prefix `{prefix}`"))?;
     let telemetry = client.subscribe_telemetry()?;
 
@@ -25,9 +31,9 @@ fn main() -> Result<()> {
     let goal = Pose2::new(6.0, 0.0, 0.0);
     let obstacles = [Obstacle::new(3.0, 0.0, 0.6)];
     // Goals are refused until the daemon has its first pose and machine state.
-    let deadline = Instant::now() + Duration::from_secs(20);
+    let deadline = Instant::now() + real(Duration::from_secs(20));
     let request_id = loop {
-        let reply = client.set_goal(goal, &obstacles, Duration::from_secs(2))?;
+        let reply = client.set_goal(goal, &obstacles, real(Duration::from_secs(2)))?;
         if reply.is_accepted() {
             break reply.request_id;
         }
@@ -42,7 +48,8 @@ fn main() -> Result<()> {
     );
 
     // Every tick's telemetry; the goal's outcome is reported once, with its request id.
-    let deadline = Instant::now() + Duration::from_secs(90);
+    let timeout = real(Duration::from_secs(90));
+    let deadline = Instant::now() + timeout;
     let mut last_print = Instant::now();
     while Instant::now() < deadline {
         let Some(t) = telemetry.recv_timeout(Duration::from_secs(1))? else {
@@ -76,7 +83,7 @@ fn main() -> Result<()> {
             );
         }
     }
-    bail!("no outcome within 90 s")
+    bail!("no outcome within {timeout:?}")
 }
 
 /// `--prefix P` (default `wlnav`, the daemon's).

@@ -15,12 +15,19 @@
 //! ```
 //!
 //! It sends one goal 3 m ahead and exits 0 once the daemon has taken its poses through
-//! the whole drive (no stale or rejected pose, the goal succeeded); 1 otherwise.
+//! the whole drive (no stale or rejected pose, the goal succeeded); 1 otherwise. Its
+//! timeouts (not the pose rate) are multiplied by `WLNAV_TIMING_SCALE` when set (a slower
+//! CPU, e.g. the arm64 daemon under qemu in `scripts/cross-check.sh`;
+//! `tests/timing_scale.rs`).
 
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
 use shm_ipc::{fault_flags, monotonic_now_ns, Client, GoalOutcome, IpcConfig, Pose2, PoseEstimate};
+
+#[path = "../tests/timing_scale.rs"]
+mod timing_scale;
+use timing_scale::real;
 
 /// The Avant 635's axle distances from the joint [m] (`[machine]` l_f, l_r).
 const L_F: f64 = 0.6;
@@ -30,8 +37,11 @@ const RATE_HZ: f64 = 20.0;
 
 fn main() -> Result<()> {
     let prefix = prefix_arg()?;
-    let client = Client::connect(&IpcConfig::new(prefix.clone()), Duration::from_secs(20))
-        .with_context(|| format!("no wlnavd on prefix `{prefix}`"))?;
+    let client = Client::connect(
+        &IpcConfig::new(prefix.clone()),
+        real(Duration::from_secs(20)),
+    )
+    .with_context(|| format!("no wlnavd on prefix `{prefix}`"))?;
     let telemetry = client.subscribe_telemetry()?;
 
     // The simulated machine starts at the origin (`sim.initial_state`).
@@ -41,9 +51,10 @@ fn main() -> Result<()> {
     let mut request_id = None;
     let mut pose_faults = 0u32;
     let period = Duration::from_secs_f64(1.0 / RATE_HZ);
+    let timeout = real(Duration::from_secs(60));
     let start = Instant::now();
     let mut last = Instant::now();
-    while start.elapsed() < Duration::from_secs(60) {
+    while start.elapsed() < timeout {
         // Odometry: integrate over the time since the last pose.
         let now = Instant::now();
         let dt = (now - last).as_secs_f64();
@@ -86,7 +97,8 @@ fn main() -> Result<()> {
         }
         // Once the daemon has a pose, drive somewhere.
         if request_id.is_none() && sequence % 10 == 0 {
-            let reply = client.set_goal(Pose2::new(3.0, 0.0, 0.0), &[], Duration::from_secs(1))?;
+            let reply =
+                client.set_goal(Pose2::new(3.0, 0.0, 0.0), &[], real(Duration::from_secs(1)))?;
             if reply.is_accepted() {
                 println!("goal {} accepted", reply.request_id);
                 request_id = Some(reply.request_id);
@@ -94,7 +106,7 @@ fn main() -> Result<()> {
         }
         std::thread::sleep(period.saturating_sub(now.elapsed()));
     }
-    bail!("no outcome within 60 s")
+    bail!("no outcome within {timeout:?}")
 }
 
 /// `--prefix P` (default `wlnav`, the daemon's).

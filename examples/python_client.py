@@ -12,10 +12,15 @@ The payloads are the `#[repr(C)]` structs of `shm-ipc/src/msg.rs` (wire v2): the
 names, sizes and alignments below must equal the Rust ones, which iceoryx2 checks when the
 service is opened; the offsets are the ones `msg.rs` asserts at compile time. Telemetry is
 read as bytes at those offsets (only the fields this client shows).
+
+Its timeouts are multiplied by WLNAV_TIMING_SCALE when set (a slower CPU, e.g. an arm64
+daemon under qemu in scripts/cross-check.sh; the rule of tests/timing_scale.rs).
 """
 
 import argparse
 import ctypes
+import math
+import os
 import struct
 import sys
 import time
@@ -96,6 +101,21 @@ for t, size in [(Pose2, 24), (Obstacle, 24), (GoalRequest, 232), (GoalReply, 152
     assert ctypes.sizeof(t) == size and ctypes.alignment(t) == 8, t
 
 
+def timing_scale() -> float:
+    """WLNAV_TIMING_SCALE, as tests/timing_scale.rs reads it: unset or empty is 1, and
+    anything but a number >= 1 is an error."""
+    s = os.environ.get("WLNAV_TIMING_SCALE", "").strip()
+    if not s:
+        return 1.0
+    try:
+        f = float(s)
+    except ValueError:
+        f = float("nan")
+    if not (math.isfinite(f) and f >= 1.0):
+        raise SystemExit(f"WLNAV_TIMING_SCALE={s!r}: must be a number >= 1 (the slow-down of this CPU)")
+    return f
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--prefix", default="wlnav", help="the daemon's ipc.prefix (default wlnav)")
@@ -107,13 +127,14 @@ def main() -> int:
         print(f"--goal must be x,y,heading (got {args.goal!r})", file=sys.stderr)
         return 2
 
+    scale = timing_scale()
     iox2.set_log_level_from_env_or(iox2.LogLevel.Warn)
     node = iox2.NodeBuilder.new().create(iox2.ServiceType.Ipc)
     goal_name = iox2.ServiceName.new(f"{args.prefix}/{API_VERSION}/goal")
     telemetry_name = iox2.ServiceName.new(f"{args.prefix}/{API_VERSION}/telemetry")
 
     # The daemon creates the services; wait for it to come up.
-    deadline = time.monotonic() + 20.0
+    deadline = time.monotonic() + 20.0 * scale
     while True:
         try:
             goal_service = node.service_builder(goal_name).request_response(GoalRequest, GoalReply).open()
@@ -131,14 +152,14 @@ def main() -> int:
 
     # Goals are refused until the daemon has its first pose and machine state.
     request_id = int(time.time() * 1e6)
-    deadline = time.monotonic() + 20.0
+    deadline = time.monotonic() + 20.0 * scale
     while True:
         request = GoalRequest(request_id=request_id, kind=GOAL_KIND_SET_GOAL, obstacle_count=0,
                               goal=Pose2(x, y, heading))
         pending = client.send_copy(request)
         notifier.notify_with_custom_event_id(iox2.EventId.new(EVENT_GOAL_REQUEST))
         reply = None
-        until = time.monotonic() + 2.0
+        until = time.monotonic() + 2.0 * scale
         while reply is None and time.monotonic() < until:
             response = pending.receive()
             if response is not None:
@@ -156,7 +177,7 @@ def main() -> int:
     print(f"goal {request_id} accepted: ({x}, {y}, {heading})")
 
     # Telemetry, every tick; the outcome comes once, with the goal's request id.
-    deadline = time.monotonic() + 90.0
+    deadline = time.monotonic() + 90.0 * scale
     last_print = 0.0
     while time.monotonic() < deadline:
         sample = telemetry.receive()
@@ -174,7 +195,7 @@ def main() -> int:
             last_print = time.monotonic()
             xf, yf, _, _, _, vf = struct.unpack_from("<6d", bytes(t), 80)  # state
             print(f"at ({xf:.2f}, {yf:.2f}) {vf:.2f} m/s, error {t.field('<d', 64):.2f} m")
-    print("no outcome within 90 s", file=sys.stderr)
+    print(f"no outcome within {90.0 * scale:g} s", file=sys.stderr)
     return 1
 
 

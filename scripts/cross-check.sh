@@ -11,7 +11,8 @@
 # $CROSS_TIMING_SCALE, the one documented factor for emulation; tests/timing_scale.rs,
 # README "The Jetson"): no test is skipped because of emulation.
 #
-# Everything arm64 is built once, in the profile `cross` (Cargo.toml: optimised, debug
+# Everything arm64 is built once, in the profile `cross` (Cargo.toml: the workspace's crates
+# at opt-level 3, other dependencies at 1, host-only crates at 0, one codegen unit, debug
 # assertions on, no debug info), test executables and binaries with one feature set (step
 # 3); the test executables then run directly under qemu. The package is checked, not shipped
 # (README, "The Jetson"). The build goes to target/cross (Debian's rustc 1.96 is not the
@@ -109,7 +110,8 @@ if has_phase run; then
   grep -q '^enabled' $binfmt/qemu-aarch64 || fail "binfmt_misc: qemu-aarch64 is registered but disabled"
 fi
 
-# 3. Build, once, in one profile (`cross`: optimised, debug assertions on, no debug info;
+# 3. Build, once, in one profile (`cross`: workspace opt-level 3, dependencies 1, debug
+# assertions on, no debug info;
 # Cargo.toml): the test executables of the four suites run below and the binaries they,
 # the examples and the package need (wlnavd, wlnav, wlnav-fleet, goal-client,
 # pose-publisher), nothing else. Every cargo invocation here selects the same packages,

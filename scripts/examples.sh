@@ -22,7 +22,8 @@ venv=target/python-examples
 # WLNAV_TIMING_SCALE > 1 (a slower CPU; the arm64 binaries under qemu, scripts/cross-check.sh):
 # the daemon's solver budget, wlnavd's default mpc.time_budget of 0.1 s (also its start-up
 # self-test's), times that factor, in a copy of the example's configuration (weights
-# paths made absolute, as the copy lives in target/).
+# paths made absolute, as the copy lives in target/); each example's 180-s limit here
+# times it too, as the examples' own timeouts are (they read WLNAV_TIMING_SCALE).
 scale=${WLNAV_TIMING_SCALE:-1}
 budget_config() {
   local name=$1 config=$2 out=target/example-$1.toml
@@ -47,7 +48,7 @@ run() {
   "$bin/wlnavd" "${args[@]}" >"$log" 2>&1 &
   local daemon=$!
   echo "example $name: $* --prefix $prefix"
-  if ! timeout 180 "$@" --prefix "$prefix"; then
+  if ! timeout "$(python3 -c "print(round(180 * float('$scale')))")" "$@" --prefix "$prefix"; then
     echo "example $name FAILED; wlnavd log:" >&2
     tail -n 40 "$log" >&2
     kill "$daemon" 2>/dev/null || true

@@ -9,7 +9,9 @@
 //! This one file is the helper of every crate's tests: the e2e crate exports it
 //! (`e2e::timing_scale`), the others include it with
 //! `#[path = ".../tests/timing_scale.rs"] mod timing_scale;` (control and daemon cannot
-//! depend on the e2e crate).
+//! depend on the e2e crate). The Rust programs of `examples/` include it the same way for
+//! their timeouts (`examples/python_client.py` reads the variable by the same rule), as
+//! `scripts/cross-check.sh` runs them against an arm64 daemon under qemu.
 #![allow(dead_code)]
 
 use std::time::Duration;

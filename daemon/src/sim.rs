@@ -122,6 +122,13 @@ pub fn spawn(
     };
     let (daemon_end, machine_end) = LoopbackBus::pair("sim");
     let handle = SimHandle::default();
+    // A recording run with a tick limit (the soak test) has its log's room from the
+    // start (a command a tick), so that the heap does not grow with it while the daemon's
+    // own heap is watched.
+    if record {
+        let ticks = usize::try_from(config.control.max_ticks).unwrap_or(0);
+        handle.with(|l| l.commands.reserve(ticks));
+    }
     let machine = Machine {
         bus: machine_end,
         plant,
