@@ -41,8 +41,10 @@ fn set_goal_and_update_do_not_allocate() {
             if kind == PlannerKind::WaypointGraph && !networks {
                 continue;
             }
+            // The path smoother on too (off by default): it smooths in place.
             let settings = NavigatorSettings {
                 planner: kind,
+                smooth_iterations: 30,
                 ..NavigatorSettings::default()
             };
             let nets = networks.then(trained);

@@ -274,22 +274,53 @@ enum Command {
         field_margin: Option<f64>,
         /// Navigator: follow the planned path with progress along it as the
         /// MPC's cost, the critic within --path-handover of a cusp or the
-        /// goal, instead of point subgoals (issue 27, design (a)).
+        /// goal, instead of point subgoals (issue 27, design (a); the default).
         #[arg(long, conflicts_with_all = ["carrot_distance", "field_gain"])]
         path_following: bool,
-        /// Navigator: with --path-following, where the critic takes over [m of
+        /// Navigator: point subgoals every --subgoal-spacing along the planned
+        /// path (issue 27, design (c), the default before path following).
+        #[arg(long, conflicts_with_all = ["carrot_distance", "field_gain", "path_following"])]
+        subgoals: bool,
+        /// Navigator: following the path (the default), where the critic takes over [m of
         /// arc before the cusp or the path's end].
-        #[arg(long, value_name = "M", requires = "path_following")]
+        #[arg(long, value_name = "M")]
         path_handover: Option<f64>,
-        /// Navigator: with --path-following, the prices of the squared lateral
+        /// Navigator: following the path (the default), the prices of the squared lateral
         /// error, the heading error and the squared controls, each × the
         /// critic's cost of a metre.
-        #[arg(long, value_name = "W", requires = "path_following")]
+        #[arg(long, value_name = "W")]
         path_lateral: Option<f64>,
-        #[arg(long, value_name = "W", requires = "path_following")]
+        #[arg(long, value_name = "W")]
         path_heading: Option<f64>,
-        #[arg(long, value_name = "W", requires = "path_following")]
+        #[arg(long, value_name = "W")]
         path_control: Option<f64>,
+        /// Navigator: sweeps of the path smoother over Hybrid A*'s paths (0: off).
+        #[arg(long, value_name = "N")]
+        smooth_iterations: Option<usize>,
+        /// Navigator: the smoother's pull back to the search's path, in [0, 0.4].
+        #[arg(long, value_name = "W")]
+        smooth_data_weight: Option<f64>,
+        /// Navigator: Hybrid A*'s expansions after the first way to the goal,
+        /// in search of a cheaper one (0: the first is taken).
+        #[arg(long, value_name = "N")]
+        refine_expansions: Option<usize>,
+        /// Navigator: retry a stall near the goal with the goal in sight among
+        /// circles too, not only in open ground (true or false).
+        #[arg(long, value_name = "BOOL")]
+        retry_in_sight: Option<bool>,
+        /// Navigator: plan every goal among circles, not only blocked ones
+        /// (true or false).
+        #[arg(long, value_name = "BOOL")]
+        plan_every_goal: Option<bool>,
+        /// Navigator: Hybrid A*'s cost factor of reversing.
+        #[arg(long, value_name = "K")]
+        reverse_penalty: Option<f64>,
+        /// Navigator: Hybrid A*'s cost of a cusp [m].
+        #[arg(long, value_name = "M")]
+        direction_change_penalty: Option<f64>,
+        /// Navigator: Hybrid A*'s goal shots per search.
+        #[arg(long, value_name = "N")]
+        max_shots: Option<usize>,
         /// Navigator: clearance margin of the planned route [m].
         #[arg(long)]
         route_margin: Option<f64>,
@@ -441,7 +472,16 @@ fn main() -> Result<()> {
             field_gain,
             field_margin,
             path_following,
+            subgoals,
             path_handover,
+            smooth_iterations,
+            smooth_data_weight,
+            refine_expansions,
+            plan_every_goal,
+            retry_in_sight,
+            reverse_penalty,
+            direction_change_penalty,
+            max_shots,
             path_lateral,
             path_heading,
             path_control,
@@ -502,16 +542,26 @@ fn main() -> Result<()> {
                     },
                     subgoal_radius: subgoal_radius.unwrap_or(nd.subgoal_radius),
                     subgoal_spacing: subgoal_spacing.unwrap_or(nd.subgoal_spacing),
-                    tracking: match (carrot_distance, field_gain, path_following) {
-                        (Some(_), _, _) => Tracking::Carrot,
-                        (None, Some(_), _) => Tracking::Field,
-                        (None, None, true) => Tracking::Path,
-                        (None, None, false) => nd.tracking,
+                    tracking: match (carrot_distance, field_gain, path_following, subgoals) {
+                        (Some(_), _, _, _) => Tracking::Carrot,
+                        (None, Some(_), _, _) => Tracking::Field,
+                        (None, None, true, _) => Tracking::Path,
+                        (None, None, false, true) => Tracking::Subgoals,
+                        (None, None, false, false) => nd.tracking,
                     },
                     path_handover: path_handover.unwrap_or(nd.path_handover),
                     path_lateral: path_lateral.unwrap_or(nd.path_lateral),
                     path_heading: path_heading.unwrap_or(nd.path_heading),
                     path_control: path_control.unwrap_or(nd.path_control),
+                    smooth_iterations: smooth_iterations.unwrap_or(nd.smooth_iterations),
+                    refine_expansions: refine_expansions.unwrap_or(nd.refine_expansions),
+                    max_shots: max_shots.unwrap_or(nd.max_shots),
+                    plan_every_goal: plan_every_goal.unwrap_or(nd.plan_every_goal),
+                    retry_in_sight: retry_in_sight.unwrap_or(nd.retry_in_sight),
+                    reverse_penalty: reverse_penalty.unwrap_or(nd.reverse_penalty),
+                    direction_change_penalty: direction_change_penalty
+                        .unwrap_or(nd.direction_change_penalty),
+                    smooth_data_weight: smooth_data_weight.unwrap_or(nd.smooth_data_weight),
                     carrot_distance: carrot_distance.unwrap_or(nd.carrot_distance),
                     field_gain: field_gain.unwrap_or(nd.field_gain),
                     field_margin: field_margin.unwrap_or(nd.field_margin),
@@ -566,6 +616,32 @@ fn main() -> Result<()> {
                         );
                     }
                     Tracking::Subgoals => {}
+                }
+                if n.smooth_iterations > 0 {
+                    text += &format!(
+                        ", smoothed ({} sweeps, w_d {})",
+                        n.smooth_iterations, n.smooth_data_weight
+                    );
+                }
+                if (n.reverse_penalty, n.direction_change_penalty)
+                    != (nd.reverse_penalty, nd.direction_change_penalty)
+                {
+                    text += &format!(
+                        ", reverse x{}, cusp {} m",
+                        n.reverse_penalty, n.direction_change_penalty
+                    );
+                }
+                if n.retry_in_sight {
+                    text += ", retries in sight";
+                }
+                if n.plan_every_goal {
+                    text += ", every goal planned";
+                }
+                if n.refine_expansions > 0 {
+                    text += &format!(
+                        ", search refined {} expansions, {} shots",
+                        n.refine_expansions, n.max_shots
+                    );
                 }
                 if n.back_up_distance > 0.0 {
                     text += &format!(", back-up {} m", n.back_up_distance);

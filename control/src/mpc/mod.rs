@@ -53,7 +53,7 @@ pub use cost::{QuadraticCost, StageCost};
 pub use cost_to_go::CostToGo;
 pub use dynamics::{Dynamics, LinearDynamics, Rk4Model};
 pub use layout::QpLayout;
-pub use path_cost::{PathCost, PathWeights};
+pub use path_cost::{PathCost, PathWeights, MAX_PATH_POSES};
 pub use qp::{ClarabelBackend, QpBackend, QpData, QpOutcome, QpSolverBackend, QpStatus};
 pub use riccati::RiccatiBackend;
 pub use settings::{MpcError, MpcSettings, ObstacleConstraint, QpSolver, MAX_OBSTACLES};

@@ -15,6 +15,10 @@
 //! a successful goal shot: the actor rolled out from the node reaches the goal
 //! pose without touching the margin (the MPC drives the last leg itself, so
 //! the shot checks exactly what will happen; Nav2 shoots a Reeds–Shepp curve).
+//! The first way found is not taken at once: a shot from a node that heads
+//! away from the goal reaches it on a wide loop. The search goes on for
+//! `refine_expansions` and keeps the cheapest, a shot priced at its duration
+//! at top speed (the edges' metres of time).
 //!
 //! Bounded: at most `max_expansions` expansions, at most `max_nodes` nodes
 //! (pool and heap preallocated), a grid allocated once. Allocation-free after
@@ -51,6 +55,8 @@ pub struct SearchStats {
     pub nodes: usize,
     pub shots: usize,
     pub duration: Duration,
+    /// The cost of the way found [m of time] (0 without one).
+    pub cost: f64,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -120,6 +126,7 @@ struct SearchSettings {
     max_shots: usize,
     shot_range: f64,
     shot_tolerance: f64,
+    refine_expansions: usize,
     dt: f64,
 }
 
@@ -166,6 +173,7 @@ impl HybridAStar {
                 max_shots: s.max_shots,
                 shot_range: s.shot_range,
                 shot_tolerance: s.shot_tolerance,
+                refine_expansions: s.refine_expansions,
                 dt: s.rollout_dt,
             },
         }
@@ -226,7 +234,20 @@ impl HybridAStar {
             node: 0,
         });
         let mut since_shot = s.shot_interval;
-        let mut found: Option<u32> = None;
+        // The cheapest way to the goal found so far: its last node and total
+        // cost (a goal shot's priced as its duration at top speed, metres as
+        // the edges); the search goes on `refine_expansions` past the first.
+        let mut best: Option<(u32, f64)> = None;
+        let mut stop_after = usize::MAX;
+        let v_max = self.params.v_max;
+        let refine = s.refine_expansions;
+        let offer =
+            |best: &mut Option<(u32, f64)>, stop_after: &mut usize, node, total, at: usize| {
+                if best.is_none_or(|(_, t)| total < t) {
+                    *best = Some((node, total));
+                    *stop_after = (*stop_after).min(at.saturating_add(refine));
+                }
+            };
         while let Some(Open { node, .. }) = self.open.pop() {
             let k = node as usize;
             if self.nodes[k].closed {
@@ -234,10 +255,17 @@ impl HybridAStar {
             }
             self.nodes[k].closed = true;
             stats.expansions += 1;
-            let n = self.nodes[k];
-            if self.in_goal_region(&n.pose, goal) {
-                found = Some(node);
+            if stats.expansions > stop_after {
                 break;
+            }
+            let n = self.nodes[k];
+            // h is a lower bound: nothing through this node beats the best.
+            if best.is_some_and(|(_, t)| n.g + self.h(&n.pose, goal) >= t) {
+                continue;
+            }
+            if self.in_goal_region(&n.pose, goal) {
+                offer(&mut best, &mut stop_after, node, n.g, stats.expansions);
+                continue;
             }
             // The goal shot, when the goal is in sight and not too far.
             since_shot += 1;
@@ -268,8 +296,9 @@ impl HybridAStar {
                         None,
                     );
                     if r.reached {
-                        found = Some(node);
-                        break;
+                        let total = n.g + r.duration(s.dt) * v_max;
+                        offer(&mut best, &mut stop_after, node, total, stats.expansions);
+                        continue;
                     }
                 }
             }
@@ -281,6 +310,8 @@ impl HybridAStar {
                 break;
             }
         }
+        let found = best.map(|(node, _)| node);
+        stats.cost = best.map_or(0.0, |(_, cost)| cost);
         stats.nodes = self.nodes.len();
         let result = match found {
             Some(end) => {

@@ -39,6 +39,17 @@ fn navigator(kind: PlannerKind, networks: bool) -> Navigator {
     Navigator::new(params(), settings, networks.then(trained)).unwrap()
 }
 
+/// The same with point subgoals as the MPC's targets (design (c)), whose
+/// switching the tests below check.
+fn subgoal_navigator(kind: PlannerKind, networks: bool) -> Navigator {
+    let settings = NavigatorSettings {
+        planner: kind,
+        tracking: Tracking::Subgoals,
+        ..NavigatorSettings::default()
+    };
+    Navigator::new(params(), settings, networks.then(trained)).unwrap()
+}
+
 /// Each planner, with and without the networks (the graph needs them).
 const COMBINATIONS: [(PlannerKind, bool); 3] = [
     (PlannerKind::HybridAStar, false),
@@ -166,7 +177,7 @@ fn open_ground_is_direct_from_the_first_tick() {
 #[test]
 fn a_wall_is_in_the_way_and_the_route_goes_around_it() {
     for (kind, networks) in COMBINATIONS {
-        let mut nav = navigator(kind, networks);
+        let mut nav = subgoal_navigator(kind, networks);
         let goal = Goal::new(8.0, 0.0, 0.0);
         let obstacles = wall();
         nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &obstacles)
@@ -205,6 +216,99 @@ fn a_wall_is_in_the_way_and_the_route_goes_around_it() {
             other => panic!("{other:?}"),
         }
     }
+}
+
+/// The smoother (issue 27) on the route around the wall: the same start,
+/// cusps and end, a shorter path that turns less in all, and still clear of
+/// the circles by the route's margin at every pose.
+#[test]
+fn a_smoothed_route_around_the_wall_is_shorter_and_keeps_the_margin() {
+    let goal = Goal::new(8.0, 0.0, 0.0);
+    let obstacles = wall();
+    let plan = |smooth_iterations: usize| {
+        let settings = NavigatorSettings {
+            smooth_iterations,
+            smooth_data_weight: 0.0,
+            ..NavigatorSettings::default()
+        };
+        let mut nav = Navigator::new(params(), settings, None).unwrap();
+        nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &obstacles)
+            .unwrap();
+        assert_eq!(nav.last_plan().unwrap().outcome, PlanOutcome::Route);
+        assert_path_clear(&nav, &obstacles, nav.settings().clearance_margin);
+        nav
+    };
+    let (raw, smoothed) = (plan(0), plan(100));
+    let length = |path: &[PathPose]| carrot::arc_between(path, 0, path.len());
+    let turning = |path: &[PathPose]| -> f64 {
+        path.windows(2)
+            .map(|w| wrap_angle(w[1].theta - w[0].theta).abs())
+            .sum()
+    };
+    let (a, b) = (raw.path(), smoothed.path());
+    assert_eq!(a.len(), b.len());
+    assert!(
+        length(b) < length(a) - 0.01,
+        "{} m against {} m",
+        length(b),
+        length(a)
+    );
+    assert!(
+        turning(b) < turning(a),
+        "{} against {} rad",
+        turning(b),
+        turning(a)
+    );
+    for i in [0, a.len() - 1] {
+        assert_eq!(a[i], b[i]);
+    }
+    for (i, (p, q)) in a.iter().zip(b).enumerate() {
+        assert_eq!(p.direction, q.direction);
+        if carrot::is_cusp(a, i) {
+            assert_eq!(p, q, "cusp {i} moved");
+        }
+    }
+}
+
+/// `wall000` of obstacles-tuning100 (moving and articulated at the start,
+/// heading away from the way around): the first goal shot found reaches the
+/// goal on a wide loop. Searching on after it finds a cheaper way, and never
+/// a dearer one.
+#[test]
+fn searching_on_after_the_first_shot_finds_a_cheaper_way() {
+    let start = State::new(0.0, 0.0, -0.2724, -0.4505, 0.0, 0.6874);
+    let goal = Goal::new(7.6888, 1.8681, -0.5231);
+    let obstacles: Vec<Obstacle> = [
+        (4.116, -0.0826),
+        (3.7006, 0.5497),
+        (3.285, 1.1821),
+        (2.8695, 1.8144),
+    ]
+    .iter()
+    .map(|&(x, y)| Obstacle::new(x, y, 0.5044))
+    .collect();
+    let plan = |refine_expansions: usize| {
+        let settings = NavigatorSettings {
+            refine_expansions,
+            ..NavigatorSettings::default()
+        };
+        let mut nav = Navigator::new(params(), settings, Some(trained())).unwrap();
+        nav.set_goal(&start, goal, &obstacles).unwrap();
+        let report = nav.last_plan().unwrap();
+        assert_eq!(report.outcome, PlanOutcome::Route);
+        assert_path_clear(&nav, &obstacles, nav.settings().clearance_margin);
+        report.search
+    };
+    let (first, refined) = (plan(0), plan(1000));
+    assert!(first.cost > 0.0);
+    assert!(
+        refined.cost < 0.9 * first.cost,
+        "refined {} m against the first {} m",
+        refined.cost,
+        first.cost
+    );
+    assert!(refined.expansions > first.expansions);
+    assert!(refined.expansions <= first.expansions + 1000 + 1);
 }
 
 #[test]
@@ -306,7 +410,7 @@ fn goals_and_starts_in_collision_are_rejected() {
 
 #[test]
 fn subgoals_are_passed_within_the_radius_and_the_last_target_is_the_goal() {
-    let mut nav = navigator(PlannerKind::HybridAStar, false);
+    let mut nav = subgoal_navigator(PlannerKind::HybridAStar, false);
     let goal = Goal::new(8.0, 0.0, 0.0);
     nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &wall())
         .unwrap();
