@@ -318,6 +318,16 @@ enum Command {
         /// Navigator: Hybrid A*'s cost of a cusp [m].
         #[arg(long, value_name = "M")]
         direction_change_penalty: Option<f64>,
+        /// Navigator: Hybrid A*'s articulations as fractions of β_max (each
+        /// also mirrored), comma-separated.
+        #[arg(long, value_name = "F,F,..", value_delimiter = ',')]
+        articulations: Option<Vec<f64>>,
+        /// Navigator: Hybrid A*'s primitive arc length [m].
+        #[arg(long, value_name = "M")]
+        primitive_length: Option<f64>,
+        /// Navigator: Hybrid A*'s heading bins.
+        #[arg(long, value_name = "N")]
+        heading_bins: Option<usize>,
         /// Navigator: Hybrid A*'s goal shots per search.
         #[arg(long, value_name = "N")]
         max_shots: Option<usize>,
@@ -477,6 +487,9 @@ fn main() -> Result<()> {
             smooth_iterations,
             smooth_data_weight,
             refine_expansions,
+            articulations,
+            primitive_length,
+            heading_bins,
             plan_every_goal,
             retry_in_sight,
             reverse_penalty,
@@ -556,6 +569,9 @@ fn main() -> Result<()> {
                     smooth_iterations: smooth_iterations.unwrap_or(nd.smooth_iterations),
                     refine_expansions: refine_expansions.unwrap_or(nd.refine_expansions),
                     max_shots: max_shots.unwrap_or(nd.max_shots),
+                    articulations: articulations.unwrap_or(nd.articulations.clone()),
+                    primitive_length: primitive_length.unwrap_or(nd.primitive_length),
+                    heading_bins: heading_bins.unwrap_or(nd.heading_bins),
                     plan_every_goal: plan_every_goal.unwrap_or(nd.plan_every_goal),
                     retry_in_sight: retry_in_sight.unwrap_or(nd.retry_in_sight),
                     reverse_penalty: reverse_penalty.unwrap_or(nd.reverse_penalty),
@@ -636,6 +652,14 @@ fn main() -> Result<()> {
                 }
                 if n.plan_every_goal {
                     text += ", every goal planned";
+                }
+                if (&n.articulations, n.primitive_length, n.heading_bins)
+                    != (&nd.articulations, nd.primitive_length, nd.heading_bins)
+                {
+                    text += &format!(
+                        ", primitives at {:?} × β_max, {} m, {} headings",
+                        n.articulations, n.primitive_length, n.heading_bins
+                    );
                 }
                 if n.refine_expansions > 0 {
                     text += &format!(
