@@ -991,6 +991,47 @@ fn a_stop_beside_the_goal_is_retried_from_the_approach_pose_behind_it() {
     );
 }
 
+/// Among circles, a machine crawling back and forth beside the goal, which
+/// is in sight, is retried from the approach pose: a replan would shoot at
+/// the goal and hand back the same route. Without the goal in sight (a
+/// circle between), it is replanned.
+#[test]
+fn a_crawl_beside_the_goal_in_sight_among_circles_is_retried() {
+    let goal = Goal::new(5.0, 0.0, 0.0);
+    let s = NavigatorSettings::default();
+    let behind = Goal::new(5.0 - s.approach_distance, 0.0, 0.0);
+    // Away from the straight way and the goal: the start is direct.
+    let aside = [Obstacle::new(2.5, 4.0, 0.5)];
+    // Between the crawling machine (0.6 m to the goal's left) and the goal.
+    let between = [Obstacle::new(5.1, 0.45, 0.12)];
+    for (obstacles, retried) in [(&aside, true), (&between, false)] {
+        let mut nav = navigator(PlannerKind::HybridAStar, false);
+        nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, obstacles)
+            .unwrap();
+        let plans = nav.plans();
+        let dt = 0.2;
+        let mut t = 0.0;
+        let mut first_new_plan = None;
+        while t < s.replan_after + 2.0 * dt && first_new_plan.is_none() {
+            // 0.1 m/s one way, then the other, 0.6 m beside the goal.
+            let v = if (t / dt) as i64 % 2 == 0 { 0.1 } else { -0.1 };
+            let crawl = State::new(5.0, 0.6, 0.0, 0.7, 0.0, v);
+            let step = nav.update(&crawl, t);
+            if nav.plans() > plans {
+                first_new_plan = Some((step, nav.last_plan().unwrap().outcome));
+            }
+            t += dt;
+        }
+        let (step, outcome) = first_new_plan.expect("a stall was handled");
+        if retried {
+            assert_eq!(outcome, PlanOutcome::Retry);
+            assert_eq!(step, drive(behind, false));
+        } else {
+            assert_ne!(outcome, PlanOutcome::Retry, "{step:?}");
+        }
+    }
+}
+
 #[test]
 fn no_retry_while_moving_or_far_from_the_goal() {
     let goal = Goal::new(5.0, 0.0, 0.0);
