@@ -196,12 +196,11 @@ pub struct NavigatorSettings {
     /// planned route and in the "in the way" test [m]. Default 0.15.
     pub clearance_margin: f64,
     /// Plan every goal among circles, not only those the actor's roll-out
-    /// finds blocked: the MPC's critic does not drive the actor's way, and
-    /// beside a circle the roll-out passes it can stall (a search whose
-    /// cheapest way is the goal shot from the start gives the path cost that
-    /// roll-out to follow). Without circles the way is direct, as always.
-    /// Default false: measured, the path cost along the actor's roll-out is
-    /// slower than the critic driving alone (`docs/global-layer.md`).
+    /// finds blocked: where the roll-out finds the way open, the search's way
+    /// is taken only if it is cheaper than the roll-out (its duration at top
+    /// speed; the critic alone drives the open way, as without planning).
+    /// Without circles the way is direct, as always. Default true (measured:
+    /// `docs/global-layer.md`, "Shaping the route").
     pub plan_every_goal: bool,
     /// Clearance the actor's roll-out must keep for "nothing in the way"
     /// [m]: more than the route's, since the MPC does not drive the actor's
@@ -293,7 +292,7 @@ impl Default for NavigatorSettings {
             max_back_ups: 1,
             reached_tolerance: SUCCESS_TOLERANCE,
             clearance_margin: 0.15,
-            plan_every_goal: false,
+            plan_every_goal: true,
             direct_margin: 0.3,
             workspace_half_size: 14.0,
             grid_resolution: 0.3,
@@ -1054,10 +1053,19 @@ impl Navigator {
             search: SearchStats::default(),
             replan: force,
         };
+        let plan_every_goal = s.plan_every_goal;
         self.world.set_margin(direct_margin);
-        let direct = self.world.is_empty()
-            || (!force && !s.plan_every_goal && self.nothing_in_the_way(start, &goal));
+        let open_cost = if self.world.is_empty() {
+            Some(0.0)
+        } else if force {
+            None
+        } else {
+            self.open_way_cost(start, &goal)
+        };
         self.world.set_margin(margin);
+        // Planning every goal, an open way is searched too, and kept (the
+        // critic alone) unless the search finds a cheaper one.
+        let direct = self.world.is_empty() || (open_cost.is_some() && !plan_every_goal);
         let mut new_route = true;
         if direct {
             self.path.clear();
@@ -1084,6 +1092,10 @@ impl Navigator {
             };
             report.search = stats;
             match result {
+                Ok(()) if open_cost.is_some_and(|c| stats.cost >= c) => {
+                    // Planning every goal: the open way is as cheap.
+                    self.path.clear();
+                }
                 Ok(()) => {
                     report.outcome = PlanOutcome::Route;
                     // A waypoint graph's path is its waypoints, not arcs to smooth.
@@ -1103,12 +1115,7 @@ impl Navigator {
                     // Planning every goal: a search that fails (its budget)
                     // where the roll-out finds the way open goes direct, as it
                     // would have without the search.
-                    self.world.set_margin(direct_margin);
-                    let open = self.settings.plan_every_goal
-                        && !force
-                        && self.nothing_in_the_way(start, &goal);
-                    self.world.set_margin(margin);
-                    if !open {
+                    if open_cost.is_none() {
                         report.outcome = PlanOutcome::NoRoute;
                         self.pending_no_route = true;
                         // A replan that fails keeps the old route, a first plan has [goal].
@@ -1456,6 +1463,14 @@ impl Navigator {
     /// the start (what the MPC's warm start does) keeps the margin all the way,
     /// or, without networks, a straight corridor of both axle points does.
     fn nothing_in_the_way(&mut self, start: &State, goal: &Goal) -> bool {
+        self.open_way_cost(start, goal).is_some()
+    }
+
+    /// [`Self::nothing_in_the_way`] with the open way's cost in the search's
+    /// units (the roll-out's duration at top speed; ∞ when it keeps the margin
+    /// without arriving; without networks the straight distance), `None` when
+    /// something is in the way.
+    fn open_way_cost(&mut self, start: &State, goal: &Goal) -> Option<f64> {
         let s = &self.settings;
         match self.networks.as_mut() {
             Some(n) => {
@@ -1472,9 +1487,14 @@ impl Navigator {
                     steps,
                     None,
                 );
-                !r.collided
+                match (r.collided, r.reached) {
+                    (true, _) => None,
+                    (false, true) => Some(r.duration(s.rollout_dt) * self.params.v_max),
+                    (false, false) => Some(f64::INFINITY),
+                }
             }
-            None => straight_corridor_free(&self.world, start, goal, s.sample_spacing),
+            None => straight_corridor_free(&self.world, start, goal, s.sample_spacing)
+                .then(|| (start[ix::X] - goal.x).hypot(start[ix::Y] - goal.y)),
         }
     }
 }

@@ -311,6 +311,32 @@ fn searching_on_after_the_first_shot_finds_a_cheaper_way() {
     assert!(refined.expansions <= first.expansions + 1000 + 1);
 }
 
+/// Planning every goal: `circles004` of obstacles200 (a circle beside the
+/// way, the goal's heading needing a loop) has an open way by the actor's
+/// roll-out, but the search finds a cheaper one, which is taken; a goal
+/// straight ahead with a circle far aside stays direct (the critic alone):
+/// the open way is the cheapest.
+#[test]
+fn planning_every_goal_takes_the_search_only_where_it_is_cheaper() {
+    let start = at_rest(0.0, 0.0, 2.0828);
+    let goal = Goal::new(-1.0857, 9.3091, -0.7819);
+    let beside = [Obstacle::new(-1.0923, 4.4899, 0.6043)];
+    let far = [Obstacle::new(6.0, -6.0, 0.6)];
+    let outcome = |plan_every_goal: bool, goal: Goal, obstacles: &[Obstacle]| {
+        let settings = NavigatorSettings {
+            plan_every_goal,
+            ..NavigatorSettings::default()
+        };
+        let mut nav = Navigator::new(params(), settings, Some(trained())).unwrap();
+        nav.set_goal(&start, goal, obstacles).unwrap();
+        (nav.last_plan().unwrap().outcome, nav.path().is_empty())
+    };
+    assert_eq!(outcome(false, goal, &beside), (PlanOutcome::Direct, true));
+    assert_eq!(outcome(true, goal, &beside), (PlanOutcome::Route, false));
+    let ahead = Goal::new(-3.0, 7.0, 2.0828);
+    assert_eq!(outcome(true, ahead, &far), (PlanOutcome::Direct, true));
+}
+
 #[test]
 fn a_gap_between_two_walls_is_taken() {
     for (kind, networks) in COMBINATIONS {
