@@ -1349,9 +1349,9 @@ impl Navigator {
         }
     }
 
-    /// At rest within `approach_distance` of the goal: stopped short of it,
-    /// not manoeuvring towards it (a turn that first raises the pose error
-    /// moves).
+    /// Slower than [`STUCK_SPEED`] within `approach_distance` of the goal:
+    /// stopped (or crawling) short of it, not manoeuvring towards it (a turn
+    /// that first raises the pose error moves faster).
     fn stuck_near(&self, x: &State, goal: &Goal) -> bool {
         x[ix::V].abs() < STUCK_SPEED
             && (x[ix::X] - goal.x).hypot(x[ix::Y] - goal.y) <= self.settings.approach_distance
@@ -1389,7 +1389,7 @@ impl Navigator {
             .find(|a| {
                 self.world.is_empty()
                     || (self.world.pose_free(a.x, a.y, a.theta, 0.0)
-                        && self.nothing_in_the_way(x, a))
+                        && self.open_way_cost(x, a).is_some())
             });
         let outcome = match approach {
             Some(a) => {
@@ -1462,14 +1462,9 @@ impl Navigator {
     /// "Is anything in the way?", by measurement: the actor rolled out from
     /// the start (what the MPC's warm start does) keeps the margin all the way,
     /// or, without networks, a straight corridor of both axle points does.
-    fn nothing_in_the_way(&mut self, start: &State, goal: &Goal) -> bool {
-        self.open_way_cost(start, goal).is_some()
-    }
-
-    /// [`Self::nothing_in_the_way`] with the open way's cost in the search's
-    /// units (the roll-out's duration at top speed; ∞ when it keeps the margin
-    /// without arriving; without networks the straight distance), `None` when
-    /// something is in the way.
+    /// `None` when something is in the way, else the open way's cost in the
+    /// search's units (the roll-out's duration at top speed, ∞ when it keeps
+    /// the margin without arriving; without networks the straight distance).
     fn open_way_cost(&mut self, start: &State, goal: &Goal) -> Option<f64> {
         let s = &self.settings;
         match self.networks.as_mut() {
