@@ -71,17 +71,18 @@ impl PathSmoother {
         }
         self.original.clear();
         self.original.extend(path.iter().map(|p| [p.x, p.y]));
-        let mut kept = 0;
+        let mut sweeps = 0;
         let mut start = 0;
         while start + 1 < path.len() {
             let end = direction_end(path, start + 1);
-            kept += self.smooth_part(&mut path[start..=end], start, world, s);
+            sweeps += self.smooth_part(&mut path[start..=end], start, world, s);
             start = end;
         }
-        kept
+        sweeps
     }
 
-    /// One part of one direction (`offset`: its first pose's index in the path).
+    /// One part of one direction (`offset`: its first pose's index in the
+    /// path); returns its sweeps.
     fn smooth_part(
         &mut self,
         part: &mut [PathPose],
@@ -96,7 +97,7 @@ impl PathSmoother {
         }
         let params = world.params();
         let kappa_max = max_curvature(params);
-        let mut kept = 0;
+        let mut sweeps = 0;
         for _ in 0..s.iterations {
             let mut moved: f64 = 0.0;
             for i in 2..n - 2 {
@@ -126,12 +127,12 @@ impl PathSmoother {
                     part[i - 1..=i + 1].copy_from_slice(&saved);
                 }
             }
-            kept += 1;
+            sweeps += 1;
             if moved < CONVERGED {
                 break;
             }
         }
-        kept
+        sweeps
     }
 }
 
@@ -309,8 +310,8 @@ mod tests {
         let world = World::new(p, 4, 0.15);
         let mut path = zigzag(20, 0.05);
         let before = path.clone();
-        let kept = PathSmoother::new(64).smooth(&mut path, &world, &settings(0.0));
-        assert!(kept > 0);
+        let sweeps = PathSmoother::new(64).smooth(&mut path, &world, &settings(0.0));
+        assert!(sweeps > 0);
         assert!(
             length(&path) < length(&before) - 0.01,
             "{} vs {}",
@@ -376,8 +377,8 @@ mod tests {
             least_clearance(&path, &circle) >= 0.15,
             "the test's path must start free"
         );
-        let kept = PathSmoother::new(64).smooth(&mut path, &world, &settings(0.0));
-        assert!(kept > 0, "the corners can be rounded");
+        let sweeps = PathSmoother::new(64).smooth(&mut path, &world, &settings(0.0));
+        assert!(sweeps > 0, "the corners can be rounded");
         assert!(length(&path) < length(&before));
         let least = least_clearance(&path, &circle);
         // The smoother samples every 0.15 m: between samples a little less.
@@ -402,8 +403,8 @@ mod tests {
             direction: -1,
             ..*q
         }));
-        let kept = PathSmoother::new(64).smooth(&mut path, &world, &settings(0.0));
-        assert!(kept > 0);
+        let sweeps = PathSmoother::new(64).smooth(&mut path, &world, &settings(0.0));
+        assert!(sweeps > 0);
         assert_eq!(path[9], cusp);
         for q in &path[10..] {
             assert_eq!(q.direction, -1);
