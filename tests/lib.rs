@@ -223,13 +223,40 @@ impl SimDaemon {
         }
         let time_scale = timing_scale::daemon_time_scale(time_scale);
         let scale = (time_scale != 1.0).then_some(time_scale);
-        let mut process = DaemonProcess::spawn_sim(&bins.wlnavd, &prefix, scale, &args, Some(&log))
-            .expect("spawn wlnavd");
-        let config = IpcConfig::new(prefix);
-        // The daemon creates the services; the client waits for them.
-        let client = match process.connect(&config, timing_scale::real(Duration::from_secs(60))) {
+        let spawn = || {
+            DaemonProcess::spawn_sim(&bins.wlnavd, &prefix, scale, &args, Some(&log))
+                .expect("spawn wlnavd")
+        };
+        let mut process = spawn();
+        let config = IpcConfig::new(prefix.clone());
+        // The daemon creates the services; the client waits for them. A child that has
+        // written nothing and served nothing for `silent` never ran: under qemu-user a fork
+        // in a multithreaded emulated process can deadlock the child before it executes
+        // wlnavd (CI, 2026-12-04: an empty log after 300 s, the suite's other daemons
+        // fine). It is started once more, and said so; natively wlnavd logs within
+        // milliseconds.
+        let limit = timing_scale::real(Duration::from_secs(60));
+        let silent = limit / 2;
+        let log_is_empty = || std::fs::metadata(&log).map_or(true, |m| m.len() == 0);
+        let client = match process.connect(&config, silent) {
             Ok(c) => c,
-            Err(e) => panic!("wlnavd did not start: {e:#}"),
+            Err(e) if log_is_empty() => {
+                eprintln!(
+                    "wlnavd (pid {:?}) wrote nothing and served nothing in {silent:?}: stopped \
+                     and started again ({e:#})",
+                    process.pid()
+                );
+                drop(process);
+                process = spawn();
+                match process.connect(&config, limit) {
+                    Ok(c) => c,
+                    Err(e) => panic!("wlnavd did not start (the second time): {e:#}"),
+                }
+            }
+            Err(_) => match process.connect(&config, limit - silent) {
+                Ok(c) => c,
+                Err(e) => panic!("wlnavd did not start: {e:#}"),
+            },
         };
         let telemetry = client.subscribe_telemetry().expect("subscribe");
         let first =
