@@ -240,7 +240,8 @@ impl SimDaemon {
         let log_is_empty = || std::fs::metadata(&log).map_or(true, |m| m.len() == 0);
         let client = match process.connect(&config, silent) {
             Ok(c) => c,
-            Err(e) if log_is_empty() => {
+            // Only a child still running: one that exited silently crashed, and says so below.
+            Err(e) if log_is_empty() && matches!(process.try_wait(), Ok(None)) => {
                 eprintln!(
                     "wlnavd (pid {:?}) wrote nothing and served nothing in {silent:?}: stopped \
                      and started again ({e:#})",
