@@ -1,25 +1,21 @@
 //! The global layer on three blocked scenes (a wall, a gap between two walls,
 //! an enclosed goal): the route it hands the MPC and how long planning took.
 //!
-//! With a scenario file, times the first plan (`set_goal`) of every scenario
+//! With a scenario file, times the first plan of every scenario
 //! instead: the smallest of five runs each (the least disturbed by other
 //! load on the machine), then median / p90 / p99 / max over the file.
 //!
 //! ```text
-//! cargo run --release -p control --example navigator [-- hybrid-astar|waypoint-graph [SCENARIOS.csv]]
+//! cargo run --release -p control --example navigator [-- SCENARIOS.csv]
 //! ```
 
 use control::model::{Goal, MachineParams, State};
 use control::mpc::MpcSettings;
 use control::obstacle::Obstacle;
-use control::planner::{Navigator, NavigatorSettings, PlannerKind};
+use control::planner::{NavigatorSettings, PlanJob, PlanKind, PlanReport, RoutePlanner};
 use control::weights;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let planner = match std::env::args().nth(1).as_deref() {
-        Some("waypoint-graph") => PlannerKind::WaypointGraph,
-        _ => PlannerKind::HybridAStar,
-    };
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("..")
         .join(weights::DEFAULT_DIR);
@@ -28,11 +24,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         &MachineParams::default(),
         MpcSettings::default().dt,
     )?;
-    let networks = (actor, critic);
-    let mut settings = NavigatorSettings::default();
-    let file = std::env::args().nth(2);
-    settings.planner = planner;
-    let mut nav = Navigator::new(MachineParams::default(), settings, Some(networks))?;
+    drop(critic);
+    let settings = NavigatorSettings::default();
+    let file = std::env::args().nth(1);
+    let mut planner = RoutePlanner::new(MachineParams::default(), &settings, Some(actor))?;
+    let mut job = PlanJob::new(&settings.search);
+
     if let Some(file) = file {
         let set = control::scenario::parse(&std::fs::read_to_string(&file)?, &file)?;
         let mut times = Vec::new();
@@ -40,21 +37,22 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         for sc in &set {
             let mut best = f64::INFINITY;
             for _ in 0..5 {
-                nav.set_goal(&sc.start, sc.goal, &sc.obstacles)?;
-                let r = nav.last_plan().expect("set_goal plans");
+                let r = plan(&mut planner, &mut job, &sc.start, sc.goal, &sc.obstacles);
                 best = best.min(r.duration.as_secs_f64() * 1e3);
+                if r.search.expansions > 0 && searched.len() < times.len() + 1 {
+                    searched.push(f64::INFINITY);
+                }
             }
             times.push(best);
-            if nav.last_plan().is_some_and(|r| r.search.expansions > 0) {
-                searched.push(best);
+            if let Some(last) = searched.last_mut().filter(|v| v.is_infinite()) {
+                *last = best;
             }
         }
         for (name, v) in [("all plans", &mut times), ("searches", &mut searched)] {
             v.sort_by(f64::total_cmp);
             let q = |p: f64| v[((v.len() - 1) as f64 * p).round() as usize];
             println!(
-                "{} {name}: n {} median {:.2} / p90 {:.2} / p99 {:.2} / max {:.2} ms",
-                planner.name(),
+                "{name}: n {} median {:.2} / p90 {:.2} / p99 {:.2} / max {:.2} ms",
                 v.len(),
                 q(0.5),
                 q(0.9),
@@ -87,8 +85,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         ("gap", &gap),
         ("ring", &ring),
     ] {
-        nav.set_goal(&State::zeros(), goal, obstacles)?;
-        let r = nav.last_plan().expect("set_goal plans");
+        let r = plan(&mut planner, &mut job, &State::zeros(), goal, obstacles);
         println!(
             "{name:>10}: {:?} in {:.2} ms ({} expansions, {} nodes, {} shots); route:",
             r.outcome,
@@ -97,7 +94,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             r.search.nodes,
             r.search.shots
         );
-        for g in nav.route() {
+        for g in &job.route.targets {
             println!(
                 "            ({:6.2}, {:6.2}, {:6.1}°)",
                 g.x,
@@ -107,4 +104,21 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
     }
     Ok(())
+}
+
+/// A goal's first plan from `start`, what the planner thread runs for it.
+fn plan(
+    planner: &mut RoutePlanner,
+    job: &mut PlanJob,
+    start: &State,
+    goal: Goal,
+    obstacles: &[Obstacle],
+) -> PlanReport {
+    job.request.kind = PlanKind::First;
+    job.request.start = *start;
+    job.request.goal = goal;
+    job.request.obstacles.clear();
+    job.request.obstacles.extend_from_slice(obstacles);
+    planner.plan(job);
+    job.route.report
 }

@@ -18,6 +18,7 @@ pub mod mpc;
 pub mod networks;
 pub mod obstacle;
 pub mod planner;
+pub mod pilot;
 pub mod plant;
 pub mod progress;
 pub mod scenario;

@@ -17,7 +17,8 @@
 //! actuator_gain_max = 1.0  # the machine may achieve up to this × the commanded velocities
 //! [controller]
 //! cost = "critic"      # "critic" (the trained network) or "quadratic" (no weights; for bring-up)
-//! planner = "hybrid-astar"  # the global layer (DESIGN §10): "hybrid-astar", "waypoint-graph" or "none"
+//! planner = "hybrid-astar"  # the global layer (DESIGN §10): "hybrid-astar" or "none"
+//! [navigator]          # control::planner::NavigatorSettings: [navigator.search], [navigator.following], [navigator.stall], max_route_age
 //! [weights]
 //! critic = "critic-weights/avant635/critic.safetensors"   # control::weights::DEFAULT_DIR
 //! actor = "critic-weights/avant635/actor.safetensors"     # "" = no actor (zero-control warm start)
@@ -108,6 +109,10 @@ pub struct Config {
     pub envelope: EnvelopeSettings,
     /// Which cost the MPC uses.
     pub controller: ControllerConfig,
+    /// The global layer's settings (the measured defaults; DESIGN §10). Its
+    /// progress window and reach tolerance are the loop's (`loop.progress_*`,
+    /// `loop.reach_tolerance`): one owner each.
+    pub navigator: control::planner::NavigatorSettings,
     /// Weight files.
     pub weights: WeightsConfig,
     /// Control loop timing and safety thresholds.
@@ -147,10 +152,9 @@ pub struct KeysGiven {
 pub struct ControllerConfig {
     /// `critic` (default) or `quadratic`.
     pub cost: CostKind,
-    /// The global layer above the MPC: `hybrid-astar` (default, the better of the two
-    /// compared in `docs/global-layer.md`), `waypoint-graph` (needs the actor and the
-    /// critic) or `none` (the MPC drives straight to the goal and stops behind
-    /// obstacles).
+    /// The global layer above the MPC: `hybrid-astar` (default;
+    /// `docs/global-layer.md`) or `none` (the MPC drives straight to the goal and
+    /// stops behind obstacles).
     pub planner: PlannerChoice,
 }
 
@@ -169,21 +173,8 @@ impl Default for ControllerConfig {
 pub enum PlannerChoice {
     /// Hybrid A* over (x, y, θ) with the model's motion primitives.
     HybridAstar,
-    /// A critic-cost graph over waypoints around the circles.
-    WaypointGraph,
     /// No global layer.
     None,
-}
-
-impl PlannerChoice {
-    /// The planner, or `None` without a global layer.
-    pub fn kind(self) -> Option<control::planner::PlannerKind> {
-        match self {
-            PlannerChoice::HybridAstar => Some(control::planner::PlannerKind::HybridAStar),
-            PlannerChoice::WaypointGraph => Some(control::planner::PlannerKind::WaypointGraph),
-            PlannerChoice::None => None,
-        }
-    }
 }
 
 /// The MPC's stage cost.
@@ -670,15 +661,9 @@ impl Config {
                 "must name a file when controller.cost = \"critic\"",
             ));
         }
-        if self.controller.planner == PlannerChoice::WaypointGraph
-            && (self.controller.cost != CostKind::Critic
-                || self.weights.actor.as_os_str().is_empty())
-        {
-            return Err(invalid(
-                "controller.planner",
-                "\"waypoint-graph\" needs the critic and the actor (controller.cost = \"critic\" \
-                 and weights.actor set)",
-            ));
+        if let Some(n) = self.navigator_settings() {
+            n.validate()
+                .map_err(|e| invalid("navigator", e.to_string()))?;
         }
         if self.can.backend == CanBackend::Socketcan && self.can.interface.trim().is_empty() {
             return Err(invalid("can.interface", "must not be empty"));
@@ -772,13 +757,13 @@ impl Config {
     /// measured defaults, the configured planner, and the loop's progress window (one
     /// window for the navigator's abort and the goal lifecycle's).
     pub fn navigator_settings(&self) -> Option<control::planner::NavigatorSettings> {
-        let planner = self.controller.planner.kind()?;
-        Some(control::planner::NavigatorSettings {
-            planner,
-            progress: self.control.progress(),
-            reached_tolerance: self.control.reach_tolerance,
-            ..Default::default()
-        })
+        if self.controller.planner == PlannerChoice::None {
+            return None;
+        }
+        let mut n = self.navigator.clone();
+        n.stall.progress = self.control.progress();
+        n.stall.reached_tolerance = self.control.reach_tolerance;
+        Some(n)
     }
 
     /// The configuration as TOML (for `--print-config`).

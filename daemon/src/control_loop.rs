@@ -34,11 +34,12 @@
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
+use std::time::Instant;
 
-use control::delay::{compensate_pose_age, DelayCompensator};
-use control::envelope::{self, EnvelopeInput};
+use control::delay::compensate_pose_age;
+use control::envelope::{self, Guarded};
 use control::model::pose_error;
-use control::{Goal, MachineParams, Obstacle, State, VelocityCommand};
+use control::{Goal, MachineParams, State, VelocityCommand};
 use shm_ipc::{fault_flags, AbortReason, DaemonEndpoint, GoalOutcome, Mode, Pose2, Telemetry};
 use tokio::sync::mpsc;
 
@@ -105,9 +106,6 @@ pub struct ControlLoop {
     latched: u32,
     /// The last command sent (the stop ramp starts from it).
     last_command: VelocityCommand,
-    /// The loop's own record of the commands sent, for the safety envelope
-    /// (independent of the controller's).
-    sent: DelayCompensator,
     /// Envelope overrides are logged at a limited rate.
     envelope_log: LogLimiter,
     /// Every pose sample passes this gate (age, future stamps, plausibility).
@@ -146,6 +144,8 @@ struct Solve {
     /// The command, unless the step failed.
     command: Option<VelocityCommand>,
     solve_time: Option<f64>,
+    /// The safety envelope replaced the proposed command.
+    envelope_override: bool,
 }
 
 impl ControlLoop {
@@ -154,10 +154,6 @@ impl ControlLoop {
         let params = ctx.config.machine;
         let period = ctx.config.period();
         let pose_gate = PoseGate::new(ctx.config.pose_gate());
-        // The configuration was validated: delay ≥ 0, dt > 0.
-        let sent =
-            envelope::command_record(params, &ctx.config.envelope, ctx.config.mpc.delay, period)
-                .unwrap_or_else(|e| panic!("validated configuration: {e}"));
         Self {
             ctx,
             controller,
@@ -168,7 +164,6 @@ impl ControlLoop {
             dropped_outcomes: 0,
             latched: 0,
             last_command: VelocityCommand::ZERO,
-            sent,
             envelope_log: LogLimiter::new(5, 10.0),
             pose_gate,
             pose_log: LogLimiter::new(5, 10.0),
@@ -225,6 +220,7 @@ impl ControlLoop {
     /// One tick: inputs → goal lifecycle → safety decision ([`crate::safety`]) →
     /// controller step when driving → command → telemetry.
     fn tick(&mut self, start: f64) -> TickOutcome {
+        let tick_start = Instant::now();
         self.tick += 1;
         let mut t = Telemetry::ZERO;
         t.tick = self.tick;
@@ -255,9 +251,12 @@ impl ControlLoop {
 
         let mut solve = None;
         if let (Decision::Track, TickPlan::Track(g), Some(x)) = (decision, &plan, &inputs.x) {
-            let s = self.solve(x, g, start, &mut t);
+            let s = self.solve(x, g, start, tick_start, &mut t);
             if matches!(s.result, SolveResult::Fallback | SolveResult::Failed) {
                 flags |= fault_flags::FALLBACK_PLAN;
+            }
+            if s.envelope_override {
+                flags |= fault_flags::ENVELOPE_OVERRIDE;
             }
             decision = safety::after_solve(s.result, self.solve_failures, self.fallback_ticks());
             if let Decision::Stop(cause) = decision {
@@ -279,9 +278,10 @@ impl ControlLoop {
             self.period,
         );
         let (mode, drive, command) = match (decision, &plan, &inputs.x) {
-            (Decision::Track, TickPlan::Track(g), Some(x)) => {
+            (Decision::Track, TickPlan::Track(_), Some(_)) => {
+                // The controller's command has passed its envelope (the pilot's);
+                // without one, the stop at the limits.
                 let c = solve.as_ref().and_then(|s| s.command).unwrap_or(ramp);
-                let c = self.guard(start, x, g.obstacles(), c, &mut flags);
                 (Mode::Tracking, DriveMode::Drive, c)
             }
             (Decision::Track, _, _) => (Mode::Tracking, DriveMode::Drive, ramp),
@@ -309,62 +309,31 @@ impl ControlLoop {
         }
     }
 
-    /// The safety envelope (DESIGN §14, [`envelope::guard`]) on the command
-    /// proposed while tracking: the command to send. An override is flagged in
-    /// telemetry, counted and logged (rate-limited).
-    fn guard(
-        &mut self,
-        now: f64,
-        x: &State,
-        obstacles: &[Obstacle],
-        proposed: VelocityCommand,
-        flags: &mut u32,
-    ) -> VelocityCommand {
-        let configured = self.ctx.config.mpc.delay;
-        let delay = self
-            .controller
-            .compensated_delay()
-            .map_or(configured, |d| d.max(configured));
-        self.sent.set_delay(delay);
-        let g = envelope::guard(
-            &EnvelopeInput {
-                params: &self.params,
-                settings: &self.ctx.config.envelope,
-                sent: &self.sent,
-                now,
-                state: x,
-                obstacles,
-                dt: self.period,
-                last: self.last_command,
-            },
-            proposed,
-        );
-        if g.overridden() {
-            *flags |= fault_flags::ENVELOPE_OVERRIDE;
-            self.ctx
-                .stats
-                .lock()
-                .unwrap_or_else(|p| p.into_inner())
-                .envelope_overrides += 1;
-            if let LogDecision::Log { suppressed } = self.envelope_log.check(now) {
-                tracing::warn!(
-                    "envelope: command (β̇ {:.3}, v {:.3}) would come {:.3} m inside the \
-                     margin: sent {} (β̇ {:.3}, v {:.3}){}",
-                    proposed.beta_dot,
-                    proposed.v,
-                    -g.proposed_excess,
-                    g.choice.name(),
-                    g.command.beta_dot,
-                    g.command.v,
-                    if suppressed > 0 {
-                        format!("; {suppressed} more overrides since the last report")
-                    } else {
-                        String::new()
-                    }
-                );
-            }
+    /// Counts and logs (rate-limited) an override by the safety envelope
+    /// (DESIGN §14; the pilot runs it on every proposal).
+    fn note_override(&mut self, now: f64, proposed: VelocityCommand, g: &Guarded) {
+        self.ctx
+            .stats
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .envelope_overrides += 1;
+        if let LogDecision::Log { suppressed } = self.envelope_log.check(now) {
+            tracing::warn!(
+                "envelope: command (β̇ {:.3}, v {:.3}) would come {:.3} m inside the \
+                 margin: sent {} (β̇ {:.3}, v {:.3}){}",
+                proposed.beta_dot,
+                proposed.v,
+                -g.proposed_excess,
+                g.choice.name(),
+                g.command.beta_dot,
+                g.command.v,
+                if suppressed > 0 {
+                    format!("; {suppressed} more overrides since the last report")
+                } else {
+                    String::new()
+                }
+            );
         }
-        g.command
     }
 
     fn fallback_ticks(&self) -> u32 {
@@ -511,7 +480,6 @@ impl ControlLoop {
         let sent = match self.ctx.commands.try_send(OutCommand { command, mode }) {
             Ok(()) => {
                 self.controller.sent(now, command);
-                self.sent.record(now, command);
                 true
             }
             Err(e) => {
@@ -655,11 +623,19 @@ impl ControlLoop {
     /// The controller owns the fallback: it returns its shifted plan when a solve
     /// fails; a step without any usable command is `Failed` (the tick ramps down).
     /// An end by the global layer is reported to the goal lifecycle here.
-    fn solve(&mut self, x: &State, g: &AcceptedGoal, now: f64, t: &mut Telemetry) -> Solve {
+    fn solve(
+        &mut self,
+        x: &State,
+        g: &AcceptedGoal,
+        now: f64,
+        tick_start: Instant,
+        t: &mut Telemetry,
+    ) -> Solve {
         let failed = |solve_time| Solve {
             result: SolveResult::Failed,
             command: None,
             solve_time,
+            envelope_override: false,
         };
         if self.engaged_generation != Some(g.generation) {
             tracing::info!(
@@ -673,7 +649,7 @@ impl ControlLoop {
             self.controller.reset();
             self.latched = 0;
             self.solve_failures = 0;
-            if let Err(e) = self.controller.set_goal(x, g.goal, g.obstacles()) {
+            if let Err(e) = self.controller.set_goal(x, g.goal, g.obstacles(), now) {
                 // Validated goals cannot fail here; stop at once as on a solver failure.
                 tracing::error!("controller refused the goal: {e}");
                 self.solve_failures = GOAL_REFUSED;
@@ -681,7 +657,7 @@ impl ControlLoop {
             }
             self.engaged_generation = Some(g.generation);
         }
-        let solve = match self.controller.step(x, now) {
+        let solve = match self.controller.step(x, now, tick_start) {
             Ok(Step::Abort(reason)) => {
                 let (wire, what) = match reason {
                     control::planner::AbortReason::NoRoute => (
@@ -698,6 +674,7 @@ impl ControlLoop {
                     result: SolveResult::RouteEnded,
                     command: None,
                     solve_time: None,
+                    envelope_override: false,
                 };
             }
             Ok(Step::Drive(plan)) => {
@@ -706,17 +683,27 @@ impl ControlLoop {
                 let solve_time = Some(plan.solve_time.as_secs_f64());
                 let finite = plan.command.is_finite()
                     && plan.states.iter().all(|s| s.iter().all(|v| v.is_finite()));
-                match (finite, plan.status) {
+                let overridden = plan
+                    .guarded
+                    .filter(|g| g.overridden())
+                    .map(|g| (plan.proposed, g));
+                let solve = match (finite, plan.status) {
                     (false, _) => failed(solve_time),
                     (true, status) => Solve {
                         result: match status {
-                            PlanStatus::Solved => SolveResult::Solved,
+                            // Holding for the first route is no failure.
+                            PlanStatus::Solved | PlanStatus::Holding => SolveResult::Solved,
                             PlanStatus::Fallback => SolveResult::Fallback,
                         },
                         command: Some(plan.command),
                         solve_time,
+                        envelope_override: overridden.is_some(),
                     },
+                };
+                if let Some((proposed, g)) = overridden {
+                    self.note_override(now, proposed, &g);
                 }
+                solve
             }
             Err(e) => {
                 tracing::warn!("solve failed: {e}");

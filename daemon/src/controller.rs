@@ -1,23 +1,25 @@
-//! What the control loop needs from a controller, and the MPC behind it.
+//! What the control loop needs from a controller, and the pilot behind it.
 //!
 //! The loop talks to a [`Controller`]: set a goal, step from the measured state,
-//! reset. [`MpcController`] wraps `control::mpc::Mpc` (critic or quadratic cost)
-//! and, when configured, the global layer above it (`control::planner::Navigator`,
-//! DESIGN §10): the navigator picks the target each tick (a subgoal of its route or
-//! the goal), the MPC drives to it, and a goal without a route or without progress
-//! ends as [`Step::Abort`]. Tests plug in their own controllers (one that fails on
+//! reset. [`PilotController`] wraps `control::pilot::Pilot` — the MPC (critic or
+//! quadratic cost), the global layer above it when configured (its routes planned
+//! on a planner thread, never in the tick) and the safety envelope — the same
+//! composition `wlnav-sim` runs. A goal without a route or without progress ends
+//! as [`Step::Abort`]. Tests plug in their own controllers (one that fails on
 //! demand, one that stalls) without touching the loop.
 //!
 //! Loading ([`load_controller`]) reads and validates the weight files before the
 //! loop starts: corrupt or incompatible weights stop start-up with an error that
 //! names the file and the problem.
 
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
-use control::mpc::{Mpc, MpcSettings, Obstacle, QuadraticCost, StageCost, StepStatus};
-use control::planner::{self, NavStep, Navigator, NavigatorSettings};
+use control::envelope::Guarded;
+use control::mpc::{Mpc, MpcSettings, QuadraticCost, StageCost, StepStatus};
+use control::pilot::{Pilot, PilotDecision};
+use control::planner::{self, Navigator, NavigatorSettings, PlannerThread, RoutePlanner};
 use control::weights::{self, NetworkRole};
-use control::{Actor, Critic, Goal, MachineParams, State, VelocityCommand};
+use control::{Actor, Critic, Goal, MachineParams, Obstacle, State, VelocityCommand};
 use shm_ipc::{Pose2, Telemetry};
 use thiserror::Error;
 
@@ -32,16 +34,23 @@ pub enum PlanStatus {
     /// The controller could not solve and returned its shifted previous plan; the
     /// command is still usable for a short while.
     Fallback,
+    /// Holding (at rest) while the global layer plans the goal's first route.
+    Holding,
 }
 
 /// One step's result. `states` is x₀..x_N of the plan.
 #[derive(Debug, Clone, Copy)]
 pub struct Plan<'a> {
-    /// (β̇, v_f) to send now.
+    /// (β̇, v_f) to send now (after the safety envelope).
     pub command: VelocityCommand,
-    /// Solved or fallback.
+    /// What the controller proposed before the envelope.
+    pub proposed: VelocityCommand,
+    /// Solved, fallback or holding.
     pub status: PlanStatus,
-    /// Planned states x₀..x_N.
+    /// The safety envelope's verdict on the proposal (`None`: the controller
+    /// has no envelope of its own; the loop's stop rules still apply).
+    pub guarded: Option<Guarded>,
+    /// Planned states x₀..x_N (empty while holding).
     pub states: &'a [State],
     /// Optimal cost (NaN if unknown).
     pub cost: f64,
@@ -56,11 +65,15 @@ pub struct Plan<'a> {
     /// The global route not yet passed, ending with the goal (empty without a global
     /// layer).
     pub route: &'a [Goal],
+    /// The last route plan's wall time, on the planner thread.
+    pub plan_time: Duration,
+    /// How old the route followed was when it arrived [s].
+    pub route_age: f64,
 }
 
 impl Plan<'_> {
     /// Puts the plan on the tick's telemetry: solver figures, the planned
-    /// trajectory, the subgoal and the remaining route.
+    /// trajectory, the subgoal, the remaining route and the plan's time and age.
     pub fn fill_telemetry(&self, t: &mut Telemetry) {
         if let Some(s) = self.subgoal {
             t.subgoal_active = 1;
@@ -73,6 +86,8 @@ impl Plan<'_> {
         }
         t.set_route(&route[..n]);
         t.solve_time_us = self.solve_time.as_secs_f64() * 1e6;
+        t.plan_time_us = self.plan_time.as_secs_f64() * 1e6;
+        t.route_age_s = self.route_age;
         t.cost = self.cost;
         t.qp_iterations = self.qp_iterations;
         t.sqp_iterations = self.sqp_iterations;
@@ -103,27 +118,34 @@ pub struct ControllerError(pub String);
 /// The controller as the daemon's loop uses it. Implementations are built on the
 /// control thread (they need not be `Send`).
 pub trait Controller {
-    /// Sets the goal and obstacles, seen from the measured state `start` (the global
-    /// layer plans its route here); the next `step` drives towards it.
+    /// Sets the goal and obstacles, seen from the state `start` measured at `now`;
+    /// the next `step` drives towards it (the global layer plans its route off the
+    /// tick).
     fn set_goal(
         &mut self,
         start: &State,
         goal: Goal,
         obstacles: &[Obstacle],
+        now: f64,
     ) -> Result<(), ControllerError>;
     /// Forgets goal and plan (before a new goal), not the commands sent: they
     /// still act on the machine.
     fn reset(&mut self);
     /// One control period from the state measured at time `now` [s, the daemon's
-    /// clock] (called once per tick while tracking).
-    fn step(&mut self, state: &State, now: f64) -> Result<Step<'_>, ControllerError>;
+    /// clock] (called once per tick while tracking); `tick_start` is when the
+    /// tick began (the solver's time budget counts from it).
+    fn step(
+        &mut self,
+        state: &State,
+        now: f64,
+        tick_start: Instant,
+    ) -> Result<Step<'_>, ControllerError>;
     /// The command sent to the machine at `now`, whoever decided it (the step's
     /// command, a stop ramp, a hold): every tick, so the delay compensation
     /// works with what the machine was told on the real clock.
     fn sent(&mut self, now: f64, command: VelocityCommand);
     /// The actuator delay the controller compensates now [s] (its online
-    /// estimate), if it has one: the safety envelope assumes the longer of it
-    /// and the configured delay.
+    /// estimate), if it has one.
     fn compensated_delay(&self) -> Option<f64> {
         None
     }
@@ -133,34 +155,20 @@ pub trait Controller {
 pub type ControllerFactory =
     Box<dyn FnOnce() -> Result<Box<dyn Controller>, ControllerError> + Send>;
 
-/// The actor-critic MPC (or the MPC with a quadratic cost), with the global layer
-/// above it when one is configured.
-pub struct MpcController<C: StageCost> {
-    mpc: Mpc<C>,
-    navigator: Option<Navigator>,
-    /// The navigator's cost terms' version the MPC has (issue 27).
-    costs_seen: Option<u64>,
+/// The pilot (MPC, global layer, envelope) as the loop's controller.
+pub struct PilotController<C: StageCost> {
+    pilot: Pilot<C>,
 }
 
-impl<C: StageCost> MpcController<C> {
-    /// Wraps a built MPC, without a global layer.
-    pub fn new(mpc: Mpc<C>) -> Self {
-        Self {
-            mpc,
-            navigator: None,
-            costs_seen: None,
-        }
+impl<C: StageCost> PilotController<C> {
+    pub fn new(pilot: Pilot<C>) -> Self {
+        Self { pilot }
     }
 
-    /// Wraps a built MPC under a navigator (allocated here, once: set_goal and
-    /// step allocate nothing).
-    pub fn with_navigator(mut mpc: Mpc<C>, navigator: Navigator) -> Self {
-        mpc.reserve_cost_to_go(navigator.settings().grid_cells());
-        Self {
-            mpc,
-            navigator: Some(navigator),
-            costs_seen: None,
-        }
+    /// The MPC alone under the envelope of `config` (no global layer): for tests.
+    pub fn without_navigator(mpc: Mpc<C>, config: &Config) -> Result<Self, ControllerError> {
+        let pilot = Pilot::new(config.machine, mpc, None, config.envelope).map_err(err)?;
+        Ok(Self::new(pilot))
     }
 }
 
@@ -168,77 +176,59 @@ fn err(e: impl std::fmt::Display) -> ControllerError {
     ControllerError(e.to_string())
 }
 
-impl<C: StageCost> Controller for MpcController<C> {
+impl<C: StageCost> Controller for PilotController<C> {
     fn set_goal(
         &mut self,
         start: &State,
         goal: Goal,
         obstacles: &[Obstacle],
+        now: f64,
     ) -> Result<(), ControllerError> {
-        // The first target starts from an actor roll-out (`set_goal`); later ones
-        // (subgoal switches, replans) keep the collision-free plan (`retarget`).
-        let first = match &mut self.navigator {
-            Some(nav) => {
-                nav.set_goal(start, goal, obstacles).map_err(err)?;
-                nav.route().first().copied().unwrap_or(goal)
-            }
-            None => goal,
-        };
-        self.mpc.set_goal(first, obstacles).map_err(err)
+        self.pilot.set_goal(start, goal, obstacles, now).map_err(err)
     }
 
     fn reset(&mut self) {
-        self.mpc.clear_goal();
-        if let Some(nav) = &mut self.navigator {
-            nav.clear();
-        }
+        self.pilot.reset();
     }
 
-    fn step(&mut self, state: &State, now: f64) -> Result<Step<'_>, ControllerError> {
-        let mut subgoal = None;
-        if let Some(nav) = &mut self.navigator {
-            match nav.update(state, now) {
-                NavStep::Drive {
-                    target,
-                    final_target,
-                } => {
-                    if self.mpc.goal() != Some(target) {
-                        self.mpc.retarget(target).map_err(err)?;
-                    }
-                    // The MPC's copies of the field and the path, as `wlnav-sim eval`.
-                    nav.sync_costs(&mut self.mpc, &mut self.costs_seen);
-                    subgoal = (!final_target).then_some(target);
-                }
-                NavStep::Abort(reason) => return Ok(Step::Abort(reason)),
-            }
-        }
-        let route = self
-            .navigator
-            .as_ref()
-            .map_or(&[][..], |nav| nav.remaining_route());
-        let s = self.mpc.step(state, now).map_err(err)?;
+    fn step(
+        &mut self,
+        state: &State,
+        now: f64,
+        tick_start: Instant,
+    ) -> Result<Step<'_>, ControllerError> {
+        let p = match self.pilot.step(state, now, tick_start).map_err(err)? {
+            PilotDecision::Abort(reason) => return Ok(Step::Abort(reason)),
+            PilotDecision::Drive(p) => p,
+        };
+        let status = match p.solution.map(|s| s.status) {
+            None => PlanStatus::Holding,
+            Some(StepStatus::Solved) => PlanStatus::Solved,
+            Some(StepStatus::Fallback(_)) => PlanStatus::Fallback,
+        };
         Ok(Step::Drive(Plan {
-            command: s.command,
-            status: match s.status {
-                StepStatus::Solved => PlanStatus::Solved,
-                StepStatus::Fallback(_) => PlanStatus::Fallback,
-            },
-            states: &s.states,
-            cost: s.cost,
-            qp_iterations: s.qp_iterations,
-            sqp_iterations: s.sqp_iterations,
-            solve_time: s.solve_time,
-            subgoal,
-            route,
+            command: p.command,
+            proposed: p.proposed,
+            status,
+            guarded: Some(p.guarded),
+            states: p.solution.map_or(&[][..], |s| &s.states),
+            cost: p.solution.map_or(f64::NAN, |s| s.cost),
+            qp_iterations: p.solution.map_or(0, |s| s.qp_iterations),
+            sqp_iterations: p.solution.map_or(0, |s| s.sqp_iterations),
+            solve_time: p.solution.map_or(Duration::ZERO, |s| s.solve_time),
+            subgoal: p.subgoal,
+            route: p.route,
+            plan_time: p.plan_time,
+            route_age: p.route_age,
         }))
     }
 
     fn sent(&mut self, now: f64, command: VelocityCommand) {
-        self.mpc.sent(now, command);
+        self.pilot.sent(now, command);
     }
 
     fn compensated_delay(&self) -> Option<f64> {
-        Some(self.mpc.compensated_delay())
+        Some(self.pilot.compensated_delay())
     }
 }
 
@@ -286,7 +276,15 @@ pub fn load_controller(config: &Config) -> Result<ControllerFactory, LoadError> 
         )?;
         Some(Actor::from_weights(w)?)
     };
-    let nav_settings = config.navigator_settings();
+    let parts = ControllerParts {
+        machine,
+        navigator: config.navigator_settings(),
+        envelope: config.envelope,
+    };
+    if let Some(s) = &parts.navigator {
+        s.validate()
+            .map_err(|e| LoadError::Navigator(e.to_string()))?;
+    }
     match config.controller.cost {
         CostKind::Critic => {
             let w = weights::load_for(
@@ -301,57 +299,67 @@ pub fn load_controller(config: &Config) -> Result<ControllerFactory, LoadError> 
             // control thread (the MPC need not be `Send`).
             Mpc::new(machine, critic.clone(), actor.clone(), settings)
                 .map_err(|e| LoadError::Mpc(e.to_string()))?;
-            if let Some(s) = &nav_settings {
-                build_navigator(machine, s, networks.clone())?;
-            }
             Ok(Box::new(move || {
                 let mpc = Mpc::new(machine, critic, actor, settings).map_err(err)?;
-                controller(mpc, machine, nav_settings, networks)
+                controller(mpc, &parts, networks)
             }))
         }
         CostKind::Quadratic => {
-            if let Some(s) = &nav_settings {
-                build_navigator(machine, s, None)?;
-            }
             Ok(Box::new(move || {
                 let mpc = Mpc::new(machine, quadratic_cost(), actor, settings).map_err(err)?;
-                controller(mpc, machine, nav_settings, None)
+                controller(mpc, &parts, None)
             }))
         }
     }
 }
 
+/// The global layer for `machine`: a navigator whose routes are planned on a
+/// planner thread of their own (`networks`: the actor's roll-outs and shots, the
+/// critic's cost of a metre).
 fn build_navigator(
     machine: MachineParams,
     settings: &NavigatorSettings,
     networks: Option<(Actor, Critic)>,
 ) -> Result<Navigator, LoadError> {
-    Navigator::new(machine, settings.clone(), networks)
-        .map_err(|e| LoadError::Navigator(e.to_string()))
+    let fail = |e: &dyn std::fmt::Display| LoadError::Navigator(e.to_string());
+    let (actor, critic) = match networks {
+        Some((a, c)) => (Some(a), Some(c)),
+        None => (None, None),
+    };
+    let planner = RoutePlanner::new(machine, settings, actor).map_err(|e| fail(&e))?;
+    let thread = PlannerThread::spawn(planner).map_err(|e| fail(&e))?;
+    Navigator::with_routes(machine, settings.clone(), critic.as_ref(), Box::new(thread))
+        .map_err(|e| fail(&e))
 }
 
-/// The MPC, under the navigator when one is configured.
+/// The pilot: the MPC, under the navigator when one is configured, and the envelope.
 fn controller<C: StageCost + 'static>(
     mpc: Mpc<C>,
-    machine: MachineParams,
-    nav_settings: Option<NavigatorSettings>,
+    config: &ControllerParts,
     networks: Option<(Actor, Critic)>,
 ) -> Result<Box<dyn Controller>, ControllerError> {
-    Ok(match nav_settings {
-        Some(s) => {
-            let nav = build_navigator(machine, &s, networks).map_err(err)?;
-            Box::new(MpcController::with_navigator(mpc, nav))
-        }
-        None => Box::new(MpcController::new(mpc)),
-    })
+    let navigator = match &config.navigator {
+        Some(s) => Some(build_navigator(config.machine, s, networks).map_err(err)?),
+        None => None,
+    };
+    let pilot = Pilot::new(config.machine, mpc, navigator, config.envelope).map_err(err)?;
+    Ok(Box::new(PilotController::new(pilot)))
+}
+
+/// What the control thread builds the pilot from.
+#[derive(Clone)]
+struct ControllerParts {
+    machine: MachineParams,
+    navigator: Option<NavigatorSettings>,
+    envelope: control::envelope::EnvelopeSettings,
 }
 
 /// The start-up self-test: a first solve from rest towards a goal 3 m ahead must
 /// succeed with a finite command before the daemon reports READY=1.
 pub fn first_solve(c: &mut dyn Controller) -> Result<Duration, ControllerError> {
     c.reset();
-    c.set_goal(&State::zeros(), Goal::new(3.0, 0.0, 0.0), &[])?;
-    let result = match c.step(&State::zeros(), 0.0) {
+    c.set_goal(&State::zeros(), Goal::new(3.0, 0.0, 0.0), &[], 0.0)?;
+    let result = match c.step(&State::zeros(), 0.0, Instant::now()) {
         Ok(Step::Drive(plan)) if plan.status == PlanStatus::Solved && plan.command.is_finite() => {
             Ok(plan.solve_time)
         }

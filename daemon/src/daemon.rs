@@ -267,6 +267,9 @@ async fn run_async(
     let control = std::thread::Builder::new()
         .name("wlnavd-control".into())
         .spawn(move || -> Option<ExitReason> {
+            // No route search runs here: the planner thread plans (a debug
+            // build asserts it).
+            control::planner::mark_tick_thread();
             let mut controller = match factory() {
                 Ok(c) => c,
                 Err(e) => {

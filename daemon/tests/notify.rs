@@ -16,12 +16,12 @@ use control::mpc::{Mpc, Obstacle, QuadraticCost};
 use control::{Goal, State};
 use shm_ipc::Mode;
 use wlnavd::controller::{
-    quadratic_cost, Controller, ControllerError, ControllerFactory, MpcController, Step,
+    quadratic_cost, Controller, ControllerError, ControllerFactory, PilotController, Step,
 };
 
 /// Stalls (sleeps in `step`) once when asked, recording when.
 struct Stalling {
-    inner: MpcController<QuadraticCost>,
+    inner: PilotController<QuadraticCost>,
     stall: Arc<AtomicBool>,
     window: Arc<Mutex<Option<(Instant, Instant)>>>,
 }
@@ -34,19 +34,25 @@ impl Controller for Stalling {
         start: &State,
         goal: Goal,
         obstacles: &[Obstacle],
+        now: f64,
     ) -> Result<(), ControllerError> {
-        self.inner.set_goal(start, goal, obstacles)
+        self.inner.set_goal(start, goal, obstacles, now)
     }
     fn reset(&mut self) {
         self.inner.reset()
     }
-    fn step(&mut self, state: &State, now: f64) -> Result<Step<'_>, ControllerError> {
+    fn step(
+        &mut self,
+        state: &State,
+        now: f64,
+        tick_start: std::time::Instant,
+    ) -> Result<Step<'_>, ControllerError> {
         if self.stall.swap(false, Ordering::SeqCst) {
             let start = Instant::now();
             std::thread::sleep(STALL);
             *self.window.lock().unwrap() = Some((start, Instant::now()));
         }
-        self.inner.step(state, now)
+        self.inner.step(state, now, tick_start)
     }
     fn sent(&mut self, now: f64, command: control::VelocityCommand) {
         self.inner.sent(now, command)
@@ -83,11 +89,12 @@ fn ready_then_watchdog_on_healthy_ticks_only() {
     let stall = Arc::new(AtomicBool::new(false));
     let window = Arc::new(Mutex::new(None));
     let (s, w) = (stall.clone(), window.clone());
+    let pilot_config = config.clone();
     let factory: ControllerFactory = Box::new(move || {
         let mpc = Mpc::new(machine, quadratic_cost(), None, settings)
             .map_err(|e| ControllerError(e.to_string()))?;
         Ok(Box::new(Stalling {
-            inner: MpcController::new(mpc),
+            inner: PilotController::without_navigator(mpc, &pilot_config)?,
             stall: s,
             window: w,
         }) as Box<dyn Controller>)

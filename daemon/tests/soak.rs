@@ -227,14 +227,20 @@ impl Controller for Leaking {
         start: &State,
         goal: Goal,
         obstacles: &[Obstacle],
+        now: f64,
     ) -> Result<(), ControllerError> {
-        self.inner.set_goal(start, goal, obstacles)
+        self.inner.set_goal(start, goal, obstacles, now)
     }
     fn reset(&mut self) {
         self.inner.reset()
     }
-    fn step(&mut self, state: &State, now: f64) -> Result<Step<'_>, ControllerError> {
-        self.inner.step(state, now)
+    fn step(
+        &mut self,
+        state: &State,
+        now: f64,
+        tick_start: std::time::Instant,
+    ) -> Result<Step<'_>, ControllerError> {
+        self.inner.step(state, now, tick_start)
     }
     fn sent(&mut self, now: f64, command: VelocityCommand) {
         // Written, so that it is resident too.

@@ -292,7 +292,7 @@
 //! | 32 | f64 | heading | front-body heading θ_f \[rad\] |
 //! | 40 | f64\[9\] | covariance | row-major 3×3 of (x, y, heading) \[m², m·rad, rad²\] |
 //!
-//! [`Telemetry`] (`wlnav::v2::Telemetry`), 2704 bytes:
+//! [`Telemetry`] (`wlnav::v2::Telemetry`), 2720 bytes:
 //!
 //! | offset | type | field | meaning |
 //! |---|---|---|---|
@@ -376,7 +376,8 @@
 //!                  uint32_t outcome, abort_reason, outcome_seq, outcome_text_len;
 //!                  uint8_t outcome_text[128];
 //!                  uint32_t subgoal_active, route_len;
-//!                  wlnav_pose2 subgoal, route[16]; } wlnav_telemetry; /* 2704 */
+//!                  wlnav_pose2 subgoal, route[16];
+//!                  double plan_time_us, route_age_s; } wlnav_telemetry; /* 2720 */
 //! ```
 //!
 //! ## Start-up clean-up

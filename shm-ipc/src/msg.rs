@@ -703,7 +703,7 @@ pub mod fault_flags {
     }
 }
 
-/// Published on `{prefix}/v2/telemetry` by the daemon once per control tick. 2704 bytes,
+/// Published on `{prefix}/v2/telemetry` by the daemon once per control tick. 2720 bytes,
 /// alignment 8.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
@@ -764,6 +764,10 @@ pub struct Telemetry {
     pub subgoal: Pose2,
     /// The global route: `route_len` poses from the machine towards the goal, rest zero.
     pub route: [Pose2; MAX_ROUTE],
+    /// Wall time of the last route plan, on the planner thread, not in the tick [µs].
+    pub plan_time_us: f64,
+    /// How old the route followed was when it arrived from the planner [s].
+    pub route_age_s: f64,
 }
 
 impl Telemetry {
@@ -799,6 +803,8 @@ impl Telemetry {
         route_len: 0,
         subgoal: Pose2::new(0.0, 0.0, 0.0),
         route: [Pose2::new(0.0, 0.0, 0.0); MAX_ROUTE],
+        plan_time_us: 0.0,
+        route_age_s: 0.0,
     };
 
     /// The decoded mode, or the unknown wire code.
@@ -938,7 +944,7 @@ const _: () = assert!(offset_of!(PoseEstimate, y) == 24);
 const _: () = assert!(offset_of!(PoseEstimate, heading) == 32);
 const _: () = assert!(offset_of!(PoseEstimate, covariance) == 40);
 
-const _: () = assert!(size_of::<Telemetry>() == 2704 && align_of::<Telemetry>() == 8);
+const _: () = assert!(size_of::<Telemetry>() == 2720 && align_of::<Telemetry>() == 8);
 const _: () = assert!(offset_of!(Telemetry, tick) == 0);
 const _: () = assert!(offset_of!(Telemetry, timestamp_ns) == 8);
 const _: () = assert!(offset_of!(Telemetry, goal_request_id) == 16);
@@ -966,3 +972,5 @@ const _: () = assert!(offset_of!(Telemetry, subgoal_active) == 2288);
 const _: () = assert!(offset_of!(Telemetry, route_len) == 2292);
 const _: () = assert!(offset_of!(Telemetry, subgoal) == 2296);
 const _: () = assert!(offset_of!(Telemetry, route) == 2320);
+const _: () = assert!(offset_of!(Telemetry, plan_time_us) == 2704);
+const _: () = assert!(offset_of!(Telemetry, route_age_s) == 2712);

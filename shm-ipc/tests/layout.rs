@@ -45,7 +45,7 @@ fn sizes_alignments_and_offsets() {
         (size_of::<PoseEstimate>(), align_of::<PoseEstimate>()),
         (112, 8)
     );
-    assert_eq!((size_of::<Telemetry>(), align_of::<Telemetry>()), (2704, 8));
+    assert_eq!((size_of::<Telemetry>(), align_of::<Telemetry>()), (2720, 8));
 
     // No implicit padding: the sizes are the sums of the fields.
     assert_eq!(

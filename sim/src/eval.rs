@@ -168,7 +168,7 @@ pub fn obstacle_rows_text(ev: &Evaluation, weight: f64) -> String {
 
 /// The global layer's figures (MPC runs with a navigator): how many runs
 /// planned a route, plan times (median / p99 / max over every plan, the
-/// direct decisions included), `update` times, and aborts by reason.
+/// direct decisions included), the pilot's tick times, and aborts by reason.
 pub fn navigation_text(ev: &Evaluation) -> String {
     let navs: Vec<&crate::runner::Navigation> = ev
         .runs
@@ -182,9 +182,9 @@ pub fn navigation_text(ev: &Evaluation) -> String {
         .iter()
         .flat_map(|n| n.plan_ms.iter().copied())
         .collect();
-    let updates: Vec<f64> = navs
+    let ticks: Vec<f64> = navs
         .iter()
-        .flat_map(|n| n.update_ms.iter().copied())
+        .flat_map(|n| n.tick_ms.iter().copied())
         .collect();
     let routed = navs
         .iter()
@@ -196,13 +196,12 @@ pub fn navigation_text(ev: &Evaluation) -> String {
             .filter(|&&o| o == outcome)
             .count()
     };
-    let (retries, back_ups) = (outcomes(PlanOutcome::Retry), outcomes(PlanOutcome::BackUp));
+    let retries = outcomes(PlanOutcome::Retry);
     let replans = navs
         .iter()
         .map(|n| n.plan_ms.len().saturating_sub(1))
         .sum::<usize>()
-        - retries
-        - back_ups;
+        - retries;
     let aborts =
         |r: control::planner::AbortReason| navs.iter().filter(|n| n.abort == Some(r)).count();
     let stats = |v: &[f64]| {
@@ -218,14 +217,14 @@ pub fn navigation_text(ev: &Evaluation) -> String {
         }
     };
     format!(
-        "navigation: {} runs, {routed} with a route, {replans} replans, {back_ups} back-ups, {retries} retries; aborted no-route {}, no-progress {}\n\
-         navigation: plan {} ({} plans); update {}\n",
+        "navigation: {} runs, {routed} with a route, {replans} replans, {retries} retries; aborted no-route {}, no-progress {}\n\
+         navigation: plan {} ({} plans, on the planner's side); tick {} (the pilot's step: navigator, MPC, envelope)\n",
         navs.len(),
         aborts(control::planner::AbortReason::NoRoute),
         aborts(control::planner::AbortReason::NoProgress),
         stats(&plans),
         plans.len(),
-        stats(&updates),
+        stats(&ticks),
     )
 }
 

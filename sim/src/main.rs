@@ -19,11 +19,11 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
-use clap::{Parser, Subcommand, ValueEnum};
+use clap::{Parser, Subcommand};
 use control::critic::HessianMode;
 use control::envelope::EnvelopeSettings;
 use control::mpc::{MpcSettings, ObstacleConstraint, QpSolver};
-use control::planner::{NavigatorSettings, PlannerKind, Tracking};
+use control::planner::{NavigatorSettings, PlanDelay};
 use control::plant::PlantConfig;
 use control::scenario;
 use control::MachineParams;
@@ -41,46 +41,50 @@ struct Cli {
     command: Command,
 }
 
-#[derive(Clone, Copy, ValueEnum)]
-enum Hessian {
-    Exact,
-    GaussNewton,
+/// A value of one of control's settings enums, read as its serde name
+/// (`gauss-newton`, `riccati`, …): the flag and the daemon's configuration
+/// take the same words from the same declaration.
+fn serde_value<T: serde::de::DeserializeOwned>(s: &str) -> Result<T, String> {
+    T::deserialize(serde::de::value::StrDeserializer::<serde::de::value::Error>::new(s))
+        .map_err(|e| e.to_string())
 }
 
-#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
-enum Planner {
-    HybridAstar,
-    WaypointGraph,
-    None,
+/// A navigator setting `group.key=value` (`search.heuristic_weight=1.5`): the
+/// value is TOML, read by the settings' own serde declaration.
+fn navigator_override(s: &str) -> Result<(String, toml::Value), String> {
+    let (key, value) = s
+        .split_once('=')
+        .ok_or_else(|| format!("`{s}`: expected KEY=VALUE, e.g. search.heuristic_weight=1.5"))?;
+    let value: toml::Value = toml::from_str::<toml::Table>(&format!("v = {value}"))
+        .map_err(|e| format!("`{s}`: the value is not TOML: {e}"))?
+        .get("v")
+        .cloned()
+        .ok_or_else(|| format!("`{s}`: no value"))?;
+    Ok((key.trim().to_string(), value))
 }
 
-impl Default for Planner {
-    /// The measured better candidate (docs/global-layer.md).
-    fn default() -> Self {
-        match NavigatorSettings::default().planner {
-            PlannerKind::HybridAStar => Planner::HybridAstar,
-            PlannerKind::WaypointGraph => Planner::WaypointGraph,
+/// The default navigator settings with `overrides` applied (each a dotted key
+/// of [`NavigatorSettings`]); unknown keys are errors.
+fn navigator_settings(overrides: &[(String, toml::Value)]) -> Result<NavigatorSettings> {
+    let mut table = toml::Table::new();
+    for (key, value) in overrides {
+        let mut parts: Vec<&str> = key.split('.').collect();
+        let last = parts.pop().unwrap_or_default();
+        let mut t = &mut table;
+        for p in parts {
+            t = t
+                .entry(p)
+                .or_insert_with(|| toml::Value::Table(toml::Table::new()))
+                .as_table_mut()
+                .with_context(|| format!("--navigator {key}: `{p}` is a value, not a group"))?;
         }
+        t.insert(last.to_string(), value.clone());
     }
-}
-
-impl std::fmt::Display for Planner {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let v = self.to_possible_value().expect("no skipped variants");
-        f.write_str(v.get_name())
-    }
-}
-
-#[derive(Clone, Copy, ValueEnum)]
-enum QpSolverArg {
-    Clarabel,
-    Riccati,
-}
-
-#[derive(Clone, Copy, ValueEnum)]
-enum Obstacles {
-    Distance,
-    Cbf,
+    let s: NavigatorSettings = toml::Value::Table(table)
+        .try_into()
+        .context("--navigator")?;
+    s.validate()?;
+    Ok(s)
 }
 
 #[derive(clap::Args, Clone)]
@@ -204,15 +208,16 @@ enum Command {
         /// MPC horizon N (default: the daemon's, `MpcSettings::default()`).
         #[arg(long)]
         horizon: Option<usize>,
-        /// Hessian of the critic cost (default: the daemon's).
-        #[arg(long, value_enum)]
-        hessian: Option<Hessian>,
-        /// Obstacle constraint form (default: the daemon's).
-        #[arg(long, value_enum)]
-        obstacles: Option<Obstacles>,
-        /// The MPC's QP solver (default: the daemon's, `MpcSettings::qp_solver`).
-        #[arg(long, value_enum)]
-        qp_solver: Option<QpSolverArg>,
+        /// Hessian of the critic cost: exact or gauss-newton (default: the daemon's).
+        #[arg(long, value_parser = serde_value::<HessianMode>)]
+        hessian: Option<HessianMode>,
+        /// Obstacle constraint form: distance or cbf (default: the daemon's).
+        #[arg(long, value_parser = serde_value::<ObstacleConstraint>)]
+        obstacles: Option<ObstacleConstraint>,
+        /// The MPC's QP solver: riccati or clarabel (the reference; default: the
+        /// daemon's, `MpcSettings::qp_solver`).
+        #[arg(long, value_parser = serde_value::<QpSolver>)]
+        qp_solver: Option<QpSolver>,
         /// SQP iterations per tick (1 = real-time iteration; default: the daemon's).
         #[arg(long)]
         sqp_iterations: Option<usize>,
@@ -250,103 +255,19 @@ enum Command {
         /// Skip the per-scenario trajectory plots.
         #[arg(long)]
         no_scenario_plots: bool,
-        /// The global layer above the MPC (DESIGN §10): the planner used when
-        /// the way is blocked, or none (the MPC drives straight to the goal).
-        #[arg(long, value_enum, default_value_t = Planner::default())]
-        planner: Planner,
-        /// Navigator: subgoal switching radius [m] (default: NavigatorSettings::default()).
+        /// Without the global layer: the MPC drives straight to the goal.
         #[arg(long)]
-        subgoal_radius: Option<f64>,
-        /// Navigator: distance between subgoals along the path [m].
-        #[arg(long)]
-        subgoal_spacing: Option<f64>,
-        /// Navigator: follow a planned path with a carrot this far ahead on it [m]
-        /// instead of point subgoals (issue 27).
-        #[arg(long, value_name = "M")]
-        carrot_distance: Option<f64>,
-        /// Navigator: drive to the goal with a cost-to-go field around the
-        /// circles added to the MPC's cost, weighted G × the critic's cost of
-        /// a metre, instead of point subgoals (issue 27, design (b)).
-        #[arg(long, value_name = "G", conflicts_with = "carrot_distance")]
-        field_gain: Option<f64>,
-        /// Navigator: with --field-gain, the clearance of the field's way [m].
-        #[arg(long, value_name = "M", requires = "field_gain")]
-        field_margin: Option<f64>,
-        /// Navigator: follow the planned path with progress along it as the
-        /// MPC's cost, the critic within --path-handover of a cusp or the
-        /// goal, instead of point subgoals (issue 27, design (a); the default).
-        #[arg(long, conflicts_with_all = ["carrot_distance", "field_gain"])]
-        path_following: bool,
-        /// Navigator: point subgoals every --subgoal-spacing along the planned
-        /// path (issue 27, design (c), the default before path following).
-        #[arg(long, conflicts_with_all = ["carrot_distance", "field_gain", "path_following"])]
-        subgoals: bool,
-        /// Navigator: following the path (the default), where the critic takes over [m of
-        /// arc before the cusp or the path's end].
-        #[arg(long, value_name = "M")]
-        path_handover: Option<f64>,
-        /// Navigator: following the path (the default), the prices of the squared lateral
-        /// error, the heading error and the squared controls, each × the
-        /// critic's cost of a metre.
-        #[arg(long, value_name = "W")]
-        path_lateral: Option<f64>,
-        #[arg(long, value_name = "W")]
-        path_heading: Option<f64>,
-        #[arg(long, value_name = "W")]
-        path_control: Option<f64>,
-        /// Navigator: sweeps of the path smoother over Hybrid A*'s paths (0: off).
-        #[arg(long, value_name = "N")]
-        smooth_iterations: Option<usize>,
-        /// Navigator: the smoother's pull back to the search's path, in [0, 0.4].
-        #[arg(long, value_name = "W")]
-        smooth_data_weight: Option<f64>,
-        /// Navigator: Hybrid A*'s expansions after the first way to the goal,
-        /// in search of a cheaper one (0: the first is taken).
-        #[arg(long, value_name = "N")]
-        refine_expansions: Option<usize>,
-        /// Navigator: retry a stall near the goal with the goal in sight among
-        /// circles too, not only in open ground (true or false).
-        #[arg(long, value_name = "BOOL")]
-        retry_in_sight: Option<bool>,
-        /// Navigator: plan every goal among circles, not only blocked ones
-        /// (true or false).
-        #[arg(long, value_name = "BOOL")]
-        plan_every_goal: Option<bool>,
-        /// Navigator: Hybrid A*'s cost factor of reversing.
-        #[arg(long, value_name = "K")]
-        reverse_penalty: Option<f64>,
-        /// Navigator: Hybrid A*'s cost of a cusp [m].
-        #[arg(long, value_name = "M")]
-        direction_change_penalty: Option<f64>,
-        /// Navigator: Hybrid A*'s articulations as fractions of β_max (each
-        /// also mirrored), comma-separated.
-        #[arg(long, value_name = "F,F,..", value_delimiter = ',')]
-        articulations: Option<Vec<f64>>,
-        /// Navigator: Hybrid A*'s primitive arc length [m].
-        #[arg(long, value_name = "M")]
-        primitive_length: Option<f64>,
-        /// Navigator: Hybrid A*'s heading bins.
-        #[arg(long, value_name = "N")]
-        heading_bins: Option<usize>,
-        /// Navigator: Hybrid A*'s goal shots per search.
-        #[arg(long, value_name = "N")]
-        max_shots: Option<usize>,
-        /// Navigator: clearance margin of the planned route [m].
-        #[arg(long)]
-        route_margin: Option<f64>,
-        /// Navigator: seconds without approach before a replan.
-        #[arg(long)]
-        replan_after: Option<f64>,
-        /// Navigator: Hybrid A*'s heuristic weight (f = g + w h; 1 = optimal routes).
-        #[arg(long, value_name = "W")]
-        heuristic_weight: Option<f64>,
-        /// Navigator: the stall ladder's back-up along the machine's own track [m]
-        /// (0: off).
-        #[arg(long, value_name = "M")]
-        back_up: Option<f64>,
-        /// Navigator: clearance the actor's roll-out keeps for "nothing in the way" [m].
-        #[arg(long)]
-        direct_margin: Option<f64>,
+        no_planner: bool,
+        /// A navigator setting, `group.key=value` (repeatable), e.g.
+        /// `--navigator search.heuristic_weight=1.5`; the groups and keys are
+        /// `control::planner::NavigatorSettings`' (search, following, stall).
+        #[arg(long = "navigator", value_name = "KEY=VALUE", value_parser = navigator_override)]
+        navigator_overrides: Vec<(String, toml::Value)>,
+        /// How a route plan's time is charged: a fixed delay [s] (default one
+        /// tick, as the daemon's planner thread answers at the next tick) or
+        /// `measured` (its wall time; not deterministic).
+        #[arg(long, value_name = "S|measured", value_parser = parse_plan_delay)]
+        plan_delay: Option<PlanDelay>,
         /// Results file whose min-time rows give T* (e.g. docs/results/worksite.csv
         /// for obstacles200), so t / T* is reported without solving the bound again.
         #[arg(long, value_name = "FILE")]
@@ -475,34 +396,9 @@ fn main() -> Result<()> {
             no_gain_estimation,
             no_delay_estimation,
             no_scenario_plots,
-            planner,
-            subgoal_radius,
-            subgoal_spacing,
-            carrot_distance,
-            field_gain,
-            field_margin,
-            path_following,
-            subgoals,
-            path_handover,
-            smooth_iterations,
-            smooth_data_weight,
-            refine_expansions,
-            articulations,
-            primitive_length,
-            heading_bins,
-            plan_every_goal,
-            retry_in_sight,
-            reverse_penalty,
-            direction_change_penalty,
-            max_shots,
-            path_lateral,
-            path_heading,
-            path_control,
-            route_margin,
-            replan_after,
-            heuristic_weight,
-            back_up,
-            direct_margin,
+            no_planner,
+            navigator_overrides,
+            plan_delay,
             t_star,
             perturbations,
             envelope,
@@ -521,18 +417,9 @@ fn main() -> Result<()> {
             let d = MpcSettings::default();
             cfg.mpc = MpcSettings {
                 horizon: horizon.unwrap_or(d.horizon),
-                hessian: hessian.map_or(d.hessian, |h| match h {
-                    Hessian::Exact => HessianMode::Exact,
-                    Hessian::GaussNewton => HessianMode::GaussNewton,
-                }),
-                obstacle_constraint: obstacles.map_or(d.obstacle_constraint, |o| match o {
-                    Obstacles::Distance => ObstacleConstraint::Distance,
-                    Obstacles::Cbf => ObstacleConstraint::Cbf,
-                }),
-                qp_solver: qp_solver.map_or(d.qp_solver, |q| match q {
-                    QpSolverArg::Clarabel => QpSolver::Clarabel,
-                    QpSolverArg::Riccati => QpSolver::Riccati,
-                }),
+                hessian: hessian.unwrap_or(d.hessian),
+                obstacle_constraint: obstacles.unwrap_or(d.obstacle_constraint),
+                qp_solver: qp_solver.unwrap_or(d.qp_solver),
                 sqp_iterations: sqp_iterations.unwrap_or(d.sqp_iterations),
                 step_length: step_length.unwrap_or(d.step_length),
                 obstacle_margin: obstacle_margin.unwrap_or(d.obstacle_margin),
@@ -544,53 +431,13 @@ fn main() -> Result<()> {
                 ..cfg.mpc
             };
             cfg.mpc.validate()?;
-            let nd = NavigatorSettings::default();
-            cfg.navigator = match planner {
-                Planner::None => None,
-                Planner::HybridAstar | Planner::WaypointGraph => Some(NavigatorSettings {
-                    planner: if planner == Planner::HybridAstar {
-                        PlannerKind::HybridAStar
-                    } else {
-                        PlannerKind::WaypointGraph
-                    },
-                    subgoal_radius: subgoal_radius.unwrap_or(nd.subgoal_radius),
-                    subgoal_spacing: subgoal_spacing.unwrap_or(nd.subgoal_spacing),
-                    tracking: match (carrot_distance, field_gain, path_following, subgoals) {
-                        (Some(_), _, _, _) => Tracking::Carrot,
-                        (None, Some(_), _, _) => Tracking::Field,
-                        (None, None, true, _) => Tracking::Path,
-                        (None, None, false, true) => Tracking::Subgoals,
-                        (None, None, false, false) => nd.tracking,
-                    },
-                    path_handover: path_handover.unwrap_or(nd.path_handover),
-                    path_lateral: path_lateral.unwrap_or(nd.path_lateral),
-                    path_heading: path_heading.unwrap_or(nd.path_heading),
-                    path_control: path_control.unwrap_or(nd.path_control),
-                    smooth_iterations: smooth_iterations.unwrap_or(nd.smooth_iterations),
-                    refine_expansions: refine_expansions.unwrap_or(nd.refine_expansions),
-                    max_shots: max_shots.unwrap_or(nd.max_shots),
-                    articulations: articulations.unwrap_or(nd.articulations.clone()),
-                    primitive_length: primitive_length.unwrap_or(nd.primitive_length),
-                    heading_bins: heading_bins.unwrap_or(nd.heading_bins),
-                    plan_every_goal: plan_every_goal.unwrap_or(nd.plan_every_goal),
-                    retry_in_sight: retry_in_sight.unwrap_or(nd.retry_in_sight),
-                    reverse_penalty: reverse_penalty.unwrap_or(nd.reverse_penalty),
-                    direction_change_penalty: direction_change_penalty
-                        .unwrap_or(nd.direction_change_penalty),
-                    smooth_data_weight: smooth_data_weight.unwrap_or(nd.smooth_data_weight),
-                    carrot_distance: carrot_distance.unwrap_or(nd.carrot_distance),
-                    field_gain: field_gain.unwrap_or(nd.field_gain),
-                    field_margin: field_margin.unwrap_or(nd.field_margin),
-                    clearance_margin: route_margin.unwrap_or(nd.clearance_margin),
-                    replan_after: replan_after.unwrap_or(nd.replan_after),
-                    heuristic_weight: heuristic_weight.unwrap_or(nd.heuristic_weight),
-                    back_up_distance: back_up.unwrap_or(nd.back_up_distance),
-                    direct_margin: direct_margin.unwrap_or(nd.direct_margin),
-                    ..nd.clone()
-                }),
+            cfg.navigator = if no_planner {
+                None
+            } else {
+                Some(navigator_settings(&navigator_overrides)?)
             };
-            if let Some(n) = &cfg.navigator {
-                n.validate()?;
+            if let Some(d) = plan_delay {
+                cfg.plan_delay = d;
             }
             cfg.plant = PlantConfig {
                 delay,
@@ -618,63 +465,23 @@ fn main() -> Result<()> {
                 );
                 ev.summaries = eval::summarize_runs(&cfg.methods, &ev.runs, &rows);
             }
-            let navigation = cfg.navigator.as_ref().map_or(String::new(), |n| {
-                let mut text = format!(" ({}", n.tracking.name());
-                match n.tracking {
-                    Tracking::Carrot => text += &format!(" {} m", n.carrot_distance),
-                    Tracking::Field => {
-                        text += &format!(" x{}, margin {} m", n.field_gain, n.field_margin);
-                    }
-                    Tracking::Path => {
-                        text += &format!(
-                            " handover {} m, lateral x{}, heading x{}, control x{}",
-                            n.path_handover, n.path_lateral, n.path_heading, n.path_control
-                        );
-                    }
-                    Tracking::Subgoals => {}
-                }
-                if n.smooth_iterations > 0 {
-                    text += &format!(
-                        ", smoothed ({} sweeps, w_d {})",
-                        n.smooth_iterations, n.smooth_data_weight
-                    );
-                }
-                if (n.reverse_penalty, n.direction_change_penalty)
-                    != (nd.reverse_penalty, nd.direction_change_penalty)
-                {
-                    text += &format!(
-                        ", reverse x{}, cusp {} m",
-                        n.reverse_penalty, n.direction_change_penalty
-                    );
-                }
-                if n.retry_in_sight {
-                    text += ", retries in sight";
-                }
-                if n.plan_every_goal {
-                    text += ", every goal planned";
-                }
-                if (&n.articulations, n.primitive_length, n.heading_bins)
-                    != (&nd.articulations, nd.primitive_length, nd.heading_bins)
-                {
-                    text += &format!(
-                        ", primitives at {:?} × β_max, {} m, {} headings",
-                        n.articulations, n.primitive_length, n.heading_bins
-                    );
-                }
-                if n.refine_expansions > 0 {
-                    text += &format!(
-                        ", search refined {} expansions, {} shots",
-                        n.refine_expansions, n.max_shots
-                    );
-                }
-                if n.back_up_distance > 0.0 {
-                    text += &format!(", back-up {} m", n.back_up_distance);
-                }
-                text + ")"
-            });
+            let nd = NavigatorSettings::default();
+            let navigation = match &cfg.navigator {
+                None => "none".to_string(),
+                Some(n) if *n == nd => "hybrid-astar (defaults)".to_string(),
+                Some(_) => format!(
+                    "hybrid-astar ({})",
+                    navigator_overrides
+                        .iter()
+                        .map(|(k, v)| format!("{k}={v}"))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+            };
             let header = format!(
-                "# eval: {}\n\nmethods {methods}, planner {planner}{navigation}, time budget {} s, N = {}, Hessian {:?}, obstacles {:?} with margin {} m, SQP iterations {} × step {}, gain estimation {}, delay estimation {}, delay {delay} s, lag {lag} s, plant perturbation: {}, tolerance {}, networks: {}, machine (MPC, plant and min-time bound): {}\n",
+                "# eval: {}\n\nmethods {methods}, planner {navigation}, plan delay {:?}, time budget {} s, N = {}, Hessian {:?}, obstacles {:?} with margin {} m, SQP iterations {} × step {}, gain estimation {}, delay estimation {}, delay {delay} s, lag {lag} s, plant perturbation: {}, tolerance {}, networks: {}, machine (MPC, plant and min-time bound): {}\n",
                 scenarios.display(),
+                cfg.plan_delay,
                 cfg.mpc.time_budget,
                 cfg.mpc.horizon,
                 cfg.mpc.hessian,
@@ -815,4 +622,12 @@ fn main() -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// `--plan-delay`: seconds, or `measured`.
+fn parse_plan_delay(s: &str) -> Result<PlanDelay, String> {
+    if s == "measured" {
+        return Ok(PlanDelay::Measured);
+    }
+    robustness::parse_seconds(s).map(PlanDelay::Fixed)
 }

@@ -21,13 +21,16 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use control::delay::{compensate_pose_age, DelayCompensator};
-use control::envelope::{self, EnvelopeInput, EnvelopeSettings};
+use control::envelope::EnvelopeSettings;
 use control::mlp::PAPER_HIDDEN;
 use control::model::{
     converged, env_step, ix, Control, Goal, MachineParams, State, REACH_SPEED, SUCCESS_TOLERANCE,
 };
 use control::mpc::{FallbackReason, Mpc, MpcSettings, StepStatus};
-use control::planner::{AbortReason, NavStep, Navigator, NavigatorSettings, PlanOutcome};
+use control::pilot::{Pilot, PilotDecision};
+use control::planner::{
+    AbortReason, InlineRoutes, Navigator, NavigatorSettings, PlanDelay, PlanOutcome, RoutePlanner,
+};
 use control::plant::{Plant, PlantConfig, PlantPerturbation};
 use control::scenario::Scenario;
 use control::weights::{self, random_network, NetworkMetadata, NetworkRole};
@@ -229,6 +232,10 @@ pub struct EvalConfig {
     /// The global layer above the MPC (DESIGN §10); `None` drives the MPC
     /// straight to the goal.
     pub navigator: Option<NavigatorSettings>,
+    /// How a route plan's time is charged (the daemon plans on a thread of its
+    /// own: an answer at the next tick). Default one tick, so the evaluation is
+    /// deterministic and honest.
+    pub plan_delay: PlanDelay,
     /// The safety envelope after the MPC (DESIGN §14), as the daemon runs it;
     /// its tolerances also widen the MPC's planned clearances.
     pub envelope: EnvelopeSettings,
@@ -259,6 +266,7 @@ impl Default for EvalConfig {
             baseline: BaselineSettings::default(),
             min_time: MinTimeSettings::default(),
             navigator: Some(NavigatorSettings::default()),
+            plan_delay: PlanDelay::Fixed(MpcSettings::default().dt),
             envelope: EnvelopeSettings::default(),
             jobs: std::thread::available_parallelism().map_or(2, |n| n.get()),
             progress: true,
@@ -302,8 +310,9 @@ pub struct Navigation {
     pub plan_work: Vec<(usize, usize)>,
     /// How each plan ended (direct, route, no route, retry).
     pub plan_outcome: Vec<PlanOutcome>,
-    /// Duration of every `update` [ms] (including the replans in it).
-    pub update_ms: Vec<f64>,
+    /// Duration of every tick of the pilot [ms] (navigator, MPC, envelope;
+    /// plans run beside it and are charged as simulated delay).
+    pub tick_ms: Vec<f64>,
     /// Why the navigator ended the run, if it did.
     pub abort: Option<AbortReason>,
     /// Tick at which it aborted.
@@ -383,58 +392,51 @@ pub fn score(
     }
 }
 
-/// The MPC in closed loop with the plant.
-pub fn run_mpc(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run> {
-    let start = Instant::now();
+/// The pilot `wlnav-sim` runs: the one the daemon runs (navigator, MPC,
+/// envelope), its routes planned inline and charged as `cfg.plan_delay`.
+pub fn pilot(cfg: &EvalConfig, nets: &Networks) -> Result<Pilot<Critic>> {
     let settings = MpcSettings {
         delay: cfg.plant.delay,
         ..cfg.mpc
     }
     .widened(cfg.envelope.tolerance_widening(&cfg.params));
-    cfg.envelope.validate()?;
-    let mut mpc = Mpc::new(
+    let mpc = Mpc::new(
         cfg.params,
         nets.critic.clone(),
         Some(nets.actor.clone()),
         settings,
     )?;
-    // The global layer hands the MPC its target each tick; without one the
-    // MPC drives to the goal. With nothing in the way the target is the goal
-    // from the first tick, so the MPC sees exactly the same calls.
-    let mut nav = match &cfg.navigator {
+    let navigator = match &cfg.navigator {
         Some(s) => {
-            let mut nav = Navigator::new(
+            let planner = RoutePlanner::new(cfg.params, s, Some(nets.actor.clone()))?;
+            let routes = Box::new(InlineRoutes::new(planner, cfg.plan_delay));
+            Some(Navigator::with_routes(
                 cfg.params,
                 s.clone(),
-                Some((nets.actor.clone(), nets.critic.clone())),
-            )?;
-            nav.set_goal(&sc.start, sc.goal, &sc.obstacles)
-                .with_context(|| format!("scenario {}", sc.name))?;
-            mpc.reserve_cost_to_go(s.grid_cells());
-            Some(nav)
+                Some(&nets.critic),
+                routes,
+            )?)
         }
-        None => {
-            mpc.set_goal(sc.goal, &sc.obstacles)?;
-            None
-        }
+        None => None,
     };
-    let mut navigation = nav.as_ref().map(|_| Navigation::default());
+    Ok(Pilot::new(cfg.params, mpc, navigator, cfg.envelope)?)
+}
+
+/// The MPC (the pilot) in closed loop with the plant.
+pub fn run_mpc(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run> {
+    let start = Instant::now();
+    let mut pilot = pilot(cfg, nets)?;
+    let dt = pilot.mpc().settings().dt;
+    let mut navigation = cfg.navigator.as_ref().map(|_| Navigation::default());
     let mut plans_seen = 0;
-    let mut costs_seen = None;
     let mut plant = scenario_plant(cfg, sc)?;
-    let steps = (cfg.duration / settings.dt).round() as usize;
+    let steps = (cfg.duration / dt).round() as usize;
     let mut states = Vec::with_capacity(steps + 1);
     let mut solve_ms = Vec::with_capacity(steps);
     let mut clearance = ClearanceMeter::new(*plant.params(), &sc.obstacles);
     clearance.observe(&plant.state());
-    let mut rest = RestCounter::new(cfg, settings.dt);
+    let mut rest = RestCounter::new(cfg, dt);
     let mut aborted = false;
-    // The envelope's own record of the commands sent (as the daemon's loop
-    // keeps one), acting after the longer of the configured and the estimated
-    // delay.
-    let mut sent =
-        envelope::command_record(cfg.params, &cfg.envelope, settings.delay, settings.dt)?;
-    let mut last = VelocityCommand::ZERO;
     let mut overrides = 0;
     let (mut penetrating_plans, mut multiplier_max) = (0, 0.0f64);
     for k in 0..=steps {
@@ -449,69 +451,57 @@ pub fn run_mpc(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run> 
         if k == steps || rest.done(&plant.state(), &sc.goal, cfg.tolerance) {
             break;
         }
-        let now = k as f64 * settings.dt;
-        if let (Some(nav), Some(rec)) = (nav.as_mut(), navigation.as_mut()) {
-            if !aborted {
-                let t0 = Instant::now();
-                let step = nav.update(&x, now);
-                rec.update_ms.push(t0.elapsed().as_secs_f64() * 1e3);
-                rec.record_plan(nav, &mut plans_seen, now);
-                nav.sync_costs(&mut mpc, &mut costs_seen);
-                match step {
-                    // The first target starts from an actor roll-out; later
-                    // ones (subgoal switches, replans) keep the plan.
-                    NavStep::Drive { target, .. } => match mpc.goal() {
-                        None => mpc.set_goal(target, &sc.obstacles)?,
-                        Some(g) if g != target => mpc.retarget(target)?,
-                        Some(_) => {}
-                    },
-                    NavStep::Abort(reason) => {
-                        rec.abort = Some(reason);
-                        rec.aborted_at = Some(now);
-                        aborted = true;
-                    }
-                }
-            }
+        let now = k as f64 * dt;
+        if k == 0 {
+            pilot
+                .set_goal(&x, sc.goal, &sc.obstacles, now)
+                .with_context(|| format!("scenario {}", sc.name))?;
         }
         let cmd = if aborted {
             // An aborted goal ends the run: the machine is commanded to rest
             // (the plant ramps down within its limits).
             VelocityCommand::ZERO
         } else {
-            let sol = mpc.step(&x, now)?;
-            solve_ms.push(sol.solve_time.as_secs_f64() * 1e3);
-            penetrating_plans +=
-                usize::from(sol.status == StepStatus::Fallback(FallbackReason::PlanPenetrates));
-            multiplier_max = multiplier_max.max(sol.obstacle_multiplier);
-            let proposed = sol.command;
-            sent.set_delay(settings.delay.max(mpc.compensated_delay()));
-            let guarded = envelope::guard(
-                &EnvelopeInput {
-                    params: &cfg.params,
-                    settings: &cfg.envelope,
-                    sent: &sent,
-                    now,
-                    state: &x,
-                    obstacles: &sc.obstacles,
-                    dt: settings.dt,
-                    last,
-                },
-                proposed,
-            );
-            overrides += usize::from(guarded.overridden());
-            guarded.command
+            let t0 = Instant::now();
+            let decision = pilot.step(&x, now, t0)?;
+            let tick_ms = t0.elapsed().as_secs_f64() * 1e3;
+            match decision {
+                PilotDecision::Abort(reason) => {
+                    if let Some(rec) = navigation.as_mut() {
+                        rec.abort = Some(reason);
+                        rec.aborted_at = Some(now);
+                    }
+                    aborted = true;
+                    VelocityCommand::ZERO
+                }
+                PilotDecision::Drive(p) => {
+                    if let Some(sol) = p.solution {
+                        solve_ms.push(sol.solve_time.as_secs_f64() * 1e3);
+                        penetrating_plans += usize::from(
+                            sol.status == StepStatus::Fallback(FallbackReason::PlanPenetrates),
+                        );
+                        multiplier_max = multiplier_max.max(sol.obstacle_multiplier);
+                    }
+                    overrides += usize::from(p.guarded.overridden());
+                    if let Some(rec) = navigation.as_mut() {
+                        rec.tick_ms.push(tick_ms);
+                    }
+                    p.command
+                }
+            }
         };
+        if let (Some(nav), Some(rec)) = (pilot.navigator(), navigation.as_mut()) {
+            rec.record_plan(nav, &mut plans_seen, now);
+        }
         plant.command(cmd)?;
-        mpc.sent(now, cmd);
-        sent.record(now, cmd);
-        last = cmd;
-        plant.advance_observed(settings.dt, |x| clearance.observe(x));
+        pilot.sent(now, cmd);
+        plant.advance_observed(dt, |x| clearance.observe(x));
     }
     let row = score(
         sc,
         Method::Mpc.name(),
         &states,
-        settings.dt,
+        dt,
         cfg.tolerance,
         &solve_ms,
         clearance.finish(),
@@ -519,7 +509,7 @@ pub fn run_mpc(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run> 
     Ok(Run {
         row,
         states,
-        dt: settings.dt,
+        dt,
         solve_ms,
         wall_s: start.elapsed().as_secs_f64(),
         navigation,

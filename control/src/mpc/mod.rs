@@ -7,7 +7,8 @@
 //! model of the critic cost, eq. 20–21, Hessian blocks made positive
 //! semidefinite; linearised RK4 dynamics; hard control bounds; soft state and
 //! obstacle constraints with exact L1 slacks, so the QP is always feasible),
-//! solve it with Clarabel, and return (β̇, v_f) of the planned x₁ (the caller
+//! solve it (the Riccati interior point by default, Clarabel as the
+//! reference; `MpcSettings::qp_solver`), and return (β̇, v_f) of the planned x₁ (the caller
 //! reports what it actually sent through [`Mpc::sent`], which the delay
 //! compensation and the online estimates use). Optionally a few more SQP
 //! iterations run within the time budget.
@@ -30,15 +31,14 @@
 //! factored, open ground pays nothing for obstacles, and a change of the set
 //! needs no symbolic factorisation in the tick.
 //!
-//! Allocation: nothing in a tick allocates except inside Clarabel's `solve`
-//! (its timers; counted in `tests/mpc_alloc.rs`).
+//! Allocation: nothing in a tick allocates (with Clarabel, except inside its
+//! `solve`: its timers; counted in `tests/mpc_alloc.rs`).
 
 // Index loops over small fixed-size blocks read like the math.
 #![allow(clippy::needless_range_loop)]
 
 pub mod constraints;
 pub mod cost;
-pub mod cost_to_go;
 pub mod dynamics;
 pub mod layout;
 pub mod path_cost;
@@ -50,7 +50,6 @@ mod sqp;
 
 pub use constraints::Obstacle;
 pub use cost::{QuadraticCost, StageCost};
-pub use cost_to_go::CostToGo;
 pub use dynamics::{Dynamics, LinearDynamics, Rk4Model};
 pub use layout::QpLayout;
 pub use path_cost::{PathCost, PathWeights, MAX_PATH_POSES};
@@ -86,9 +85,6 @@ pub struct Mpc<C: StageCost, D: Dynamics = Rk4Model, B: QpBackend = QpSolverBack
     /// `settings.delay_estimation`.
     delay_estimate: DelayEstimator,
     goal: Option<Goal>,
-    /// Added to the cost of every stage and the terminal cost: the way to the
-    /// goal around the circles ([`CostToGo`]; empty = the critic alone).
-    cost_to_go: CostToGo,
     /// While set, the cost of every stage and the terminal cost instead of
     /// the critic: progress along the navigator's path ([`PathCost`]).
     path_cost: PathCost,
@@ -219,7 +215,6 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
             gain: GainEstimator::new(params, settings.delay, settings.dt),
             delay_estimate,
             goal: None,
-            cost_to_go: CostToGo::default(),
             path_cost: PathCost::new(),
             path_hint: 0,
             obstacles: [Obstacle::default(); MAX_OBSTACLES],
@@ -286,7 +281,6 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
     /// goal while driving, or a start after a stop ramp).
     pub fn clear_goal(&mut self) {
         self.goal = None;
-        self.cost_to_go.clear();
         self.path_cost.clear();
         self.n_obstacles = 0;
         self.has_plan = false;
@@ -378,27 +372,6 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
         self.has_plan = keep;
         self.set_obstacle_weight(weight);
         Ok(())
-    }
-
-    /// Sets the cost-to-go field added to the cost from the next tick on
-    /// (`None` removes it). Allocates only when the field is larger than any
-    /// before: reserve with [`Self::reserve_cost_to_go`] at start-up.
-    pub fn set_cost_to_go(&mut self, field: Option<&CostToGo>) {
-        match field {
-            Some(f) => self.cost_to_go.copy_from(f),
-            None => self.cost_to_go.clear(),
-        }
-    }
-
-    /// Room for a cost-to-go field of `n × n` cells, so setting one in a tick
-    /// does not allocate.
-    pub fn reserve_cost_to_go(&mut self, n: usize) {
-        self.cost_to_go = CostToGo::with_cells(n);
-    }
-
-    /// The cost-to-go field in use.
-    pub fn cost_to_go(&self) -> &CostToGo {
-        &self.cost_to_go
     }
 
     /// Sets the path whose progress is the cost from the next tick on, in

@@ -21,15 +21,16 @@ pub enum ObstacleConstraint {
     Cbf,
 }
 
-/// The QP solver behind the MPC (issue 30).
+/// The QP solver behind the MPC (issue 30). The default is the Riccati
+/// interior point; Clarabel is the reference it is tested against.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum QpSolver {
     /// Clarabel's general sparse interior point ([`super::ClarabelBackend`]).
-    #[default]
     Clarabel,
     /// The interior point over the horizon's stages with a Riccati recursion
     /// ([`super::RiccatiBackend`]).
+    #[default]
     Riccati,
 }
 

@@ -11,7 +11,6 @@ use crate::obstacle::{footprint_clearance, PENETRATION_TOLERANCE};
 
 use super::constraints::{fill_bounds, fill_obstacles};
 use super::cost::{stage_block, terminal_block, StageCost};
-use super::cost_to_go::CostToGo;
 use super::dynamics::Dynamics;
 use super::layout::{QpLayout, AXLE_POINTS, NU, NX, NZ};
 use super::path_cost::PathTerm;
@@ -39,15 +38,6 @@ pub const MAX_OBSTACLE_WEIGHT: f64 = 1e6;
 
 fn derivatives_finite(value: f64, grad: &[f64], hess: &[f64]) -> bool {
     value.is_finite() && grad.iter().chain(hess).all(|v| v.is_finite())
-}
-
-/// Adds the cost-to-go field's w·φ at the front axle (x, y) and its gradient
-/// to a cost's value and gradient (its Hessian is zero: [`CostToGo`]).
-fn add_cost_to_go(field: &CostToGo, x: &State, value: &mut f64, grad: &mut [f64]) {
-    let (v, g) = field.eval(x[ix::X], x[ix::Y]);
-    *value += v;
-    grad[ix::X] += g[0];
-    grad[ix::Y] += g[1];
 }
 
 /// A path term as the derivatives of a stage cost over z = (x, u).
@@ -85,6 +75,18 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
     /// the commands sent before it. The command returned is not recorded: send
     /// it (or what is sent instead) through [`Mpc::sent`].
     pub fn step(&mut self, measured: &State, now: f64) -> Result<&Solution, MpcError> {
+        self.step_within(measured, now, Instant::now())
+    }
+
+    /// [`Self::step`] with the time budget counted from `tick_start` (the
+    /// start of the control loop's tick, so what ran before the MPC in the
+    /// tick is charged to the budget too).
+    pub fn step_within(
+        &mut self,
+        measured: &State,
+        now: f64,
+        tick_start: Instant,
+    ) -> Result<&Solution, MpcError> {
         let start = Instant::now();
         let goal = self.goal.ok_or(MpcError::NoGoal)?;
         self.measured = Some((now, *measured));
@@ -137,7 +139,7 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
                 self.has_plan = true;
             }
             self.xs[0] = x_hat;
-            self.iterate(&x_hat, &goal, start, shifted)
+            self.iterate(&x_hat, &goal, tick_start.min(start), shifted)
         };
         self.solution.status = status;
 
@@ -337,7 +339,6 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
             if !derivatives_finite(der.value, &der.grad, der.hess.as_flattened()) {
                 return false;
             }
-            add_cost_to_go(&self.cost_to_go, &self.xs[k], &mut der.value, &mut der.grad);
             cost += s.dt * der.value;
             stage_block(
                 &der,
@@ -378,12 +379,6 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
         if !derivatives_finite(term.value, &term.grad, term.hess.as_flattened()) {
             return false;
         }
-        add_cost_to_go(
-            &self.cost_to_go,
-            &self.xs[s.horizon],
-            &mut term.value,
-            &mut term.grad,
-        );
         cost += term.value;
         terminal_block(
             &term,

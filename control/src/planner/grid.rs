@@ -11,8 +11,6 @@
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 
-use crate::mpc::CostToGo;
-
 use super::world::World;
 
 /// Where the grid lies this plan.
@@ -92,8 +90,6 @@ pub struct ObstacleHeuristic {
     heap: BinaryHeap<Entry>,
     /// The goal's cell of the last `compute` (None: outside the grid).
     goal_cell: Option<(usize, usize)>,
-    /// Scratch of [`Self::write_excess`].
-    excess: Vec<f32>,
 }
 
 impl ObstacleHeuristic {
@@ -106,7 +102,6 @@ impl ObstacleHeuristic {
             // plus the goal itself, so this never grows.
             heap: BinaryHeap::with_capacity(8 * n * n + 1),
             goal_cell: None,
-            excess: vec![0.0; n * n],
         }
     }
 
@@ -182,69 +177,6 @@ impl ObstacleHeuristic {
             None => f64::INFINITY,
         }
     }
-
-    /// Writes `weight`·φ into `out`, φ the excess of the last `compute`'s
-    /// distance over the same grid's distance without circles (octile:
-    /// what 8-neighbour Dijkstra gives in the open), at every cell centre:
-    /// 0 exactly wherever the way is open ([`CostToGo`]). Blocked and
-    /// unreachable cells take the largest excess of their neighbours, repeated
-    /// outwards from the reachable cells, so the field is finite everywhere and
-    /// flat inside circles (the obstacle rows keep the plan out of them). No
-    /// reachable cell (the goal outside the grid or enclosed): an empty field.
-    /// Allocation-free when `out` was built for this grid.
-    pub fn write_excess(&mut self, weight: f64, out: &mut CostToGo) {
-        let n = self.frame.n;
-        let Some((gi, gj)) = self.goal_cell else {
-            out.clear();
-            return;
-        };
-        let res = self.frame.resolution as f32;
-        let mut reachable = false;
-        for (k, e) in self.excess.iter_mut().enumerate() {
-            let d = self.dist[k];
-            *e = if d >= 0.0 && d.is_finite() {
-                reachable = true;
-                let (di, dj) = ((k % n).abs_diff(gi) as f32, (k / n).abs_diff(gj) as f32);
-                let open = res * (di.max(dj) - di.min(dj) + std::f32::consts::SQRT_2 * di.min(dj));
-                (d - open).max(0.0)
-            } else {
-                f32::NAN
-            };
-        }
-        if !reachable {
-            out.clear();
-            return;
-        }
-        // Fill outwards: each pass gives every unfilled cell next to a filled
-        // one the largest of those neighbours (at most n passes).
-        for _ in 0..n {
-            let mut changed = false;
-            for k in 0..n * n {
-                if !self.excess[k].is_nan() {
-                    continue;
-                }
-                let mut best = f32::NAN;
-                for (m, _) in neighbours(n, k) {
-                    let e = self.excess[m];
-                    if !e.is_nan() && !(e <= best) {
-                        best = e;
-                    }
-                }
-                if !best.is_nan() {
-                    self.excess[k] = best;
-                    changed = true;
-                }
-            }
-            if !changed {
-                break;
-            }
-        }
-        let f = self.frame;
-        let centre = f.centre((0, 0));
-        out.fill(centre, f.resolution, n, |i, j| {
-            weight * f64::from(self.excess[j * n + i])
-        });
-    }
 }
 
 /// The cells next to cell `k` of an `n × n` grid (row-major), and whether each
@@ -309,41 +241,5 @@ mod tests {
         h.compute(frame, &world, [2.0, 0.0]);
         assert!(h.distance(-2.0, 0.0).is_infinite());
         assert!(h.distance(2.5, 0.0).is_finite());
-    }
-
-    #[test]
-    fn the_excess_is_zero_in_the_open_and_the_detour_behind_a_wall() {
-        let world = wall_world();
-        // Cell centres on y = 0 and at the goal: the field is symmetric.
-        let frame = GridFrame::centred([0.1, 0.1], 0.2, 100);
-        let mut h = ObstacleHeuristic::new(100);
-        let goal = [2.0, 0.0];
-        h.compute(frame, &world, goal);
-        let mut field = CostToGo::with_cells(100);
-        h.write_excess(2.0, &mut field);
-        // The goal's side of the wall sees the goal: no excess at all.
-        for (x, y) in [(2.0, 0.0), (3.5, 2.0), (1.0, -3.0), (6.0, 6.0)] {
-            assert_eq!(field.eval(x, y).0, 0.0, "({x}, {y})");
-        }
-        // Behind the wall: 2 × (the way around its end − the straight way).
-        let around = 2.0f64.hypot(3.8) + 2.0f64.hypot(3.8);
-        // The straight way is along the grid (exact); the way around is not:
-        // 8-neighbour steps make it up to 8.2 % longer (octile metric), and
-        // the blocked cells' jagged edge a little more.
-        let v = field.eval(-2.0, 0.0).0;
-        let (low, high) = (2.0 * (around - 4.0), 2.0 * (1.12 * around - 4.0));
-        assert!(v > low && v < high, "{v} not in [{low}, {high}]");
-        // Symmetric about the wall's middle; off the middle the excess falls
-        // towards the nearer end.
-        let (up, down) = (field.eval(-2.0, 1.5), field.eval(-2.0, -1.5));
-        assert!((up.0 - down.0).abs() < 1e-4, "{up:?} vs {down:?}");
-        assert!(up.1[1] < 0.0 && down.1[1] > 0.0, "{up:?} vs {down:?}");
-        // Inside the wall: finite, and not below its surroundings.
-        let inside = field.eval(0.0, 0.0).0;
-        assert!(inside.is_finite() && inside >= field.eval(-1.0, 0.0).0 * 0.5);
-        // A goal outside the grid: no field.
-        h.compute(frame, &world, [50.0, 0.0]);
-        h.write_excess(2.0, &mut field);
-        assert!(field.is_empty());
     }
 }

@@ -35,7 +35,7 @@ use super::primitives::{self, compose, Primitive};
 use super::queue::Open;
 use super::rollout::{roll_out, Arrival};
 use super::world::World;
-use super::{NavigatorSettings, PathPose};
+use super::{PathPose, SearchSettings};
 
 /// Why a search ended without a route.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -109,12 +109,12 @@ pub struct HybridAStar {
     heuristic: ObstacleHeuristic,
     /// Tightest front-axle turning radius [m] (for the heading heuristic).
     min_turn_radius: f64,
-    settings: SearchSettings,
+    settings: SearchLimits,
 }
 
-/// The settings the search uses (copied from [`NavigatorSettings`]).
+/// The settings the search uses (copied from [`SearchSettings`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
-struct SearchSettings {
+struct SearchLimits {
     max_expansions: usize,
     max_nodes: usize,
     reverse_penalty: f64,
@@ -131,7 +131,7 @@ struct SearchSettings {
 }
 
 impl HybridAStar {
-    pub fn new(params: MachineParams, s: &NavigatorSettings) -> Self {
+    pub fn new(params: MachineParams, s: &SearchSettings) -> Self {
         let betas: Vec<f64> = s
             .articulations
             .iter()
@@ -161,7 +161,7 @@ impl HybridAStar {
             open: BinaryHeap::with_capacity(s.max_nodes),
             heuristic: ObstacleHeuristic::new(n),
             min_turn_radius: (params.l_f * b.cos() + params.l_r) / b.sin(),
-            settings: SearchSettings {
+            settings: SearchLimits {
                 max_expansions: s.max_expansions,
                 max_nodes: s.max_nodes,
                 reverse_penalty: s.reverse_penalty,

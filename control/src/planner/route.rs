@@ -10,7 +10,7 @@
 
 use crate::model::Goal;
 
-use super::carrot::is_cusp;
+use super::path_geometry::is_cusp;
 use super::PathPose;
 
 /// Writes the subgoals of `path` (start first) followed by `goal` into

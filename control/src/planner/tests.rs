@@ -5,6 +5,10 @@
 use super::hybrid_astar::primitive_free;
 use super::primitives::{build, compose};
 use super::*;
+use crate::critic::CriticWorkspace;
+use crate::model::{goal_distance, ix, Control, Goal, MachineParams, State};
+use crate::obstacle::Obstacle;
+use crate::{Actor, Critic};
 use crate::goal_check::GoalConflict;
 use crate::mpc::MpcSettings;
 use crate::obstacle::{footprint_clearance, AxlePoint};
@@ -31,31 +35,12 @@ fn trained() -> (Actor, Critic) {
     (actor, critic)
 }
 
-fn navigator(kind: PlannerKind, networks: bool) -> Navigator {
-    let settings = NavigatorSettings {
-        planner: kind,
-        ..NavigatorSettings::default()
-    };
-    Navigator::new(params(), settings, networks.then(trained)).unwrap()
+fn navigator(networks: bool) -> Navigator {
+    Navigator::new(params(), NavigatorSettings::default(), networks.then(trained)).unwrap()
 }
 
-/// The same with point subgoals as the MPC's targets (design (c)), whose
-/// switching the tests below check.
-fn subgoal_navigator(kind: PlannerKind, networks: bool) -> Navigator {
-    let settings = NavigatorSettings {
-        planner: kind,
-        tracking: Tracking::Subgoals,
-        ..NavigatorSettings::default()
-    };
-    Navigator::new(params(), settings, networks.then(trained)).unwrap()
-}
-
-/// Each planner, with and without the networks (the graph needs them).
-const COMBINATIONS: [(PlannerKind, bool); 3] = [
-    (PlannerKind::HybridAStar, false),
-    (PlannerKind::HybridAStar, true),
-    (PlannerKind::WaypointGraph, true),
-];
+/// With and without the networks (the roll-outs and goal shots).
+const COMBINATIONS: [bool; 2] = [false, true];
 
 fn at_rest(x: f64, y: f64, theta: f64) -> State {
     State::new(x, y, theta, 0.0, 0.0, 0.0)
@@ -155,11 +140,11 @@ fn primitive_checks_catch_the_rear_axle_along_the_arc_and_in_the_swing() {
 #[test]
 fn open_ground_is_direct_from_the_first_tick() {
     for networks in [false, true] {
-        let mut nav = navigator(PlannerKind::HybridAStar, networks);
+        let mut nav = navigator(networks);
         let goal = Goal::new(6.0, 3.0, 1.0);
         // No obstacles, then one well off the way.
         for obstacles in [vec![], vec![Obstacle::new(-5.0, -5.0, 1.0)]] {
-            nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &obstacles)
+            nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &obstacles, 0.0)
                 .unwrap();
             assert_eq!(nav.route(), &[goal]);
             assert_eq!(nav.last_plan().unwrap().outcome, PlanOutcome::Direct);
@@ -176,19 +161,19 @@ fn open_ground_is_direct_from_the_first_tick() {
 
 #[test]
 fn a_wall_is_in_the_way_and_the_route_goes_around_it() {
-    for (kind, networks) in COMBINATIONS {
-        let mut nav = subgoal_navigator(kind, networks);
+    for networks in COMBINATIONS {
+        let mut nav = navigator(networks);
         let goal = Goal::new(8.0, 0.0, 0.0);
         let obstacles = wall();
-        nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &obstacles)
+        nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &obstacles, 0.0)
             .unwrap();
         let report = nav.last_plan().unwrap();
         assert_eq!(
             report.outcome,
             PlanOutcome::Route,
-            "{kind:?} networks {networks}"
+            "networks {networks}"
         );
-        assert_path_clear(&nav, &obstacles, nav.settings().clearance_margin);
+        assert_path_clear(&nav, &obstacles, nav.settings().search.clearance_margin);
         // Around the wall's end (|y| ≥ 3.2 + 0.6).
         let widest = nav.path().iter().map(|q| q.y.abs()).fold(0.0, f64::max);
         assert!(widest > 3.8, "path stays within |y| ≤ {widest}");
@@ -200,72 +185,28 @@ fn a_wall_is_in_the_way_and_the_route_goes_around_it() {
         for w in route.windows(2) {
             let d = (w[1].x - w[0].x).hypot(w[1].y - w[0].y);
             assert!(
-                d <= s.graph_edge_length.max(2.0 * s.subgoal_spacing + 1.0),
+                d <= 2.0 * s.following.subgoal_spacing + 1.0,
                 "{d}"
             );
         }
-        // The first tick drives to the first subgoal, not the goal.
+        // The first tick drives to the end of the path's first forward part:
+        // a cusp of the path, or the goal, with the path cost leading there.
         match nav.update(&at_rest(0.0, 0.0, 0.0), 0.0) {
             NavStep::Drive {
                 target,
                 final_target,
             } => {
-                assert_eq!(target, route[0]);
-                assert!(!final_target);
+                let end = path_geometry::direction_end(nav.path(), 0);
+                let p = nav.path()[end];
+                if final_target {
+                    assert_eq!(target, goal);
+                    assert_eq!(end + 1, nav.path().len());
+                } else {
+                    assert_eq!(target, Goal::new(p.x, p.y, p.theta));
+                }
+                assert!(nav.path_cost().is_some(), "networks {networks}");
             }
             other => panic!("{other:?}"),
-        }
-    }
-}
-
-/// The smoother (issue 27) on the route around the wall: the same start,
-/// cusps and end, a shorter path that turns less in all, and still clear of
-/// the circles by the route's margin at every pose.
-#[test]
-fn a_smoothed_route_around_the_wall_is_shorter_and_keeps_the_margin() {
-    let goal = Goal::new(8.0, 0.0, 0.0);
-    let obstacles = wall();
-    let plan = |smooth_iterations: usize| {
-        let settings = NavigatorSettings {
-            smooth_iterations,
-            smooth_data_weight: 0.0,
-            ..NavigatorSettings::default()
-        };
-        let mut nav = Navigator::new(params(), settings, None).unwrap();
-        nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &obstacles)
-            .unwrap();
-        assert_eq!(nav.last_plan().unwrap().outcome, PlanOutcome::Route);
-        assert_path_clear(&nav, &obstacles, nav.settings().clearance_margin);
-        nav
-    };
-    let (raw, smoothed) = (plan(0), plan(100));
-    let length = |path: &[PathPose]| carrot::arc_between(path, 0, path.len());
-    let turning = |path: &[PathPose]| -> f64 {
-        path.windows(2)
-            .map(|w| wrap_angle(w[1].theta - w[0].theta).abs())
-            .sum()
-    };
-    let (a, b) = (raw.path(), smoothed.path());
-    assert_eq!(a.len(), b.len());
-    assert!(
-        length(b) < length(a) - 0.01,
-        "{} m against {} m",
-        length(b),
-        length(a)
-    );
-    assert!(
-        turning(b) < turning(a),
-        "{} against {} rad",
-        turning(b),
-        turning(a)
-    );
-    for i in [0, a.len() - 1] {
-        assert_eq!(a[i], b[i]);
-    }
-    for (i, (p, q)) in a.iter().zip(b).enumerate() {
-        assert_eq!(p.direction, q.direction);
-        if carrot::is_cusp(a, i) {
-            assert_eq!(p, q, "cusp {i} moved");
         }
     }
 }
@@ -288,15 +229,13 @@ fn searching_on_after_the_first_shot_finds_a_cheaper_way() {
     .map(|&(x, y)| Obstacle::new(x, y, 0.5044))
     .collect();
     let plan = |refine_expansions: usize| {
-        let settings = NavigatorSettings {
-            refine_expansions,
-            ..NavigatorSettings::default()
-        };
+        let mut settings = NavigatorSettings::default();
+        settings.search.refine_expansions = refine_expansions;
         let mut nav = Navigator::new(params(), settings, Some(trained())).unwrap();
-        nav.set_goal(&start, goal, &obstacles).unwrap();
+        nav.set_goal(&start, goal, &obstacles, 0.0).unwrap();
         let report = nav.last_plan().unwrap();
         assert_eq!(report.outcome, PlanOutcome::Route);
-        assert_path_clear(&nav, &obstacles, nav.settings().clearance_margin);
+        assert_path_clear(&nav, &obstacles, nav.settings().search.clearance_margin);
         report.search
     };
     let (first, refined) = (plan(0), plan(1000));
@@ -323,12 +262,10 @@ fn planning_every_goal_takes_the_search_only_where_it_is_cheaper() {
     let beside = [Obstacle::new(-1.0923, 4.4899, 0.6043)];
     let far = [Obstacle::new(6.0, -6.0, 0.6)];
     let outcome = |plan_every_goal: bool, goal: Goal, obstacles: &[Obstacle]| {
-        let settings = NavigatorSettings {
-            plan_every_goal,
-            ..NavigatorSettings::default()
-        };
+        let mut settings = NavigatorSettings::default();
+        settings.search.plan_every_goal = plan_every_goal;
         let mut nav = Navigator::new(params(), settings, Some(trained())).unwrap();
-        nav.set_goal(&start, goal, obstacles).unwrap();
+        nav.set_goal(&start, goal, obstacles, 0.0).unwrap();
         (nav.last_plan().unwrap().outcome, nav.path().is_empty())
     };
     assert_eq!(outcome(false, goal, &beside), (PlanOutcome::Direct, true));
@@ -339,18 +276,18 @@ fn planning_every_goal_takes_the_search_only_where_it_is_cheaper() {
 
 #[test]
 fn a_gap_between_two_walls_is_taken() {
-    for (kind, networks) in COMBINATIONS {
-        let mut nav = navigator(kind, networks);
+    for networks in COMBINATIONS {
+        let mut nav = navigator(networks);
         let goal = Goal::new(8.0, 0.0, 0.0);
         let obstacles = gap();
-        nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &obstacles)
+        nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &obstacles, 0.0)
             .unwrap();
         assert_eq!(
             nav.last_plan().unwrap().outcome,
             PlanOutcome::Route,
-            "{kind:?}"
+            "networks {networks}"
         );
-        assert_path_clear(&nav, &obstacles, nav.settings().clearance_margin);
+        assert_path_clear(&nav, &obstacles, nav.settings().search.clearance_margin);
         // The path, then the last leg to the goal (a goal shot's), crosses
         // x = 4 between the gap's edges at 1 and 3.
         let mut pts: Vec<(f64, f64)> = nav.path().iter().map(|q| (q.x, q.y)).collect();
@@ -358,22 +295,22 @@ fn a_gap_between_two_walls_is_taken() {
         let crossing = pts
             .windows(2)
             .find(|w| w[0].0 < 4.0 && w[1].0 >= 4.0)
-            .unwrap_or_else(|| panic!("{kind:?}: no crossing of x = 4: {pts:?}"));
+            .unwrap_or_else(|| panic!("networks {networks}: no crossing of x = 4: {pts:?}"));
         let f = (4.0 - crossing[0].0) / (crossing[1].0 - crossing[0].0);
         let y = crossing[0].1 + f * (crossing[1].1 - crossing[0].1);
         assert!(
             (y - GAP_Y).abs() < 1.0,
-            "{kind:?} crosses at y {y}: {crossing:?}"
+            "networks {networks} crosses at y {y}: {crossing:?}"
         );
     }
 }
 
 #[test]
 fn an_enclosed_goal_has_no_route_and_aborts_on_the_first_tick() {
-    for (kind, networks) in COMBINATIONS {
-        let mut nav = navigator(kind, networks);
+    for networks in COMBINATIONS {
+        let mut nav = navigator(networks);
         let goal = Goal::new(8.0, 0.0, 0.0);
-        nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &ring())
+        nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &ring(), 0.0)
             .unwrap();
         let report = nav.last_plan().unwrap();
         assert_eq!(report.outcome, PlanOutcome::NoRoute);
@@ -395,7 +332,7 @@ fn an_enclosed_goal_has_no_route_and_aborts_on_the_first_tick() {
 
 #[test]
 fn goals_and_starts_in_collision_are_rejected() {
-    let mut nav = navigator(PlannerKind::HybridAStar, false);
+    let mut nav = navigator(false);
     let obstacles = [Obstacle::new(5.0, 0.0, 1.0)];
     // The goal's rear axle (4.8 − 1.2 = 3.6... no: front at 6.5, rear at 5.3) is inside.
     let e = nav
@@ -403,6 +340,7 @@ fn goals_and_starts_in_collision_are_rejected() {
             &at_rest(0.0, 0.0, 0.0),
             Goal::new(6.5, 0.0, 0.0),
             &obstacles,
+            0.0,
         )
         .unwrap_err();
     assert!(
@@ -418,6 +356,7 @@ fn goals_and_starts_in_collision_are_rejected() {
             &at_rest(4.5, 0.0, 0.0),
             Goal::new(9.0, 0.0, 0.0),
             &obstacles,
+            0.0,
         )
         .unwrap_err();
     assert!(
@@ -435,124 +374,46 @@ fn goals_and_starts_in_collision_are_rejected() {
 }
 
 #[test]
-fn subgoals_are_passed_within_the_radius_and_the_last_target_is_the_goal() {
-    let mut nav = subgoal_navigator(PlannerKind::HybridAStar, false);
+fn subgoals_are_passed_as_the_machine_follows_the_path_and_the_goal_is_last() {
+    let mut nav = navigator(false);
     let goal = Goal::new(8.0, 0.0, 0.0);
-    nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &wall())
+    nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &wall(), 0.0)
         .unwrap();
     let route = nav.route().to_vec();
-    let r = nav.settings().subgoal_radius;
-    let mut t = 0.0;
-    for (i, sub) in route.iter().enumerate() {
-        // Just outside the radius: still this target.
-        let outside = at_rest(sub.x + 1.01 * r, sub.y, sub.theta);
-        let inside = at_rest(sub.x + 0.99 * r, sub.y, sub.theta);
-        let last = i + 1 == route.len();
-        if !last {
-            assert!(
-                matches!(nav.update(&outside, t), NavStep::Drive { target, .. } if target == *sub)
-            );
-        }
-        t += 0.2;
-        let expected = if last { goal } else { route[i + 1] };
-        assert_eq!(
-            nav.update(&inside, t),
-            NavStep::Drive {
-                target: expected,
-                final_target: i + 2 >= route.len()
-            }
-        );
-        t += 0.2;
-    }
-}
-
-#[test]
-fn a_carrot_leads_along_the_path_passes_the_subgoals_and_ends_at_the_goal() {
-    let settings = NavigatorSettings {
-        tracking: Tracking::Carrot,
-        ..NavigatorSettings::default()
-    };
-    let (lead, r) = (settings.carrot_distance, settings.subgoal_radius);
-    let mut nav = Navigator::new(params(), settings, None).unwrap();
-    let goal = Goal::new(8.0, 0.0, 0.0);
-    let obstacles = wall();
-    nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &obstacles)
-        .unwrap();
     let path = nav.path().to_vec();
-    assert!(path.len() > 10 && nav.route().len() >= 3);
-    let arc: Vec<f64> = std::iter::once(0.0)
-        .chain(path.windows(2).scan(0.0, |s, w| {
-            *s += (w[1].x - w[0].x).hypot(w[1].y - w[0].y);
-            Some(*s)
-        }))
-        .collect();
-    let mut remaining = nav.remaining_route().len();
-    let mut reached_goal = false;
-    let (mut carrots, mut full_lead) = (0, 0);
-    // The machine driven exactly along the path, one pose per tick.
+    let r = nav.settings().following.subgoal_radius;
+    assert!(route.len() >= 3, "{route:?}");
+    let mut left = route.len();
+    // Driven exactly along the path, one pose per tick: the remaining route
+    // only shrinks, a subgoal is passed once the machine is within the
+    // radius of it or past it on the path, and the goal is never passed.
     for (i, p) in path.iter().enumerate() {
-        let x = State::new(p.x, p.y, p.theta, p.beta, 0.5, 0.0);
-        let NavStep::Drive {
-            target,
-            final_target,
-        } = nav.update(&x, 0.2 * i as f64)
-        else {
-            panic!("aborted at pose {i}");
-        };
-        assert!(
-            nav.remaining_route().len() <= remaining,
-            "a passed subgoal came back"
-        );
-        remaining = nav.remaining_route().len();
-        if final_target {
-            assert_eq!(target, goal);
-            reached_goal = true;
-            continue;
-        }
-        assert!(
-            !reached_goal,
-            "the goal handed back to a carrot at pose {i}"
-        );
-        // A pose of the path, ahead of the machine by at most the lead.
-        let k = path
-            .iter()
-            .position(|q| Goal::new(q.x, q.y, q.theta) == target)
-            .expect("the carrot is a pose of the path");
-        let ahead = arc[k] - arc[i];
-        assert!(
-            ahead > 0.0 && ahead <= lead + 0.7,
-            "pose {i}: carrot {ahead:.2} m ahead"
-        );
-        // Never nearer than the subgoal radius (but before the path's end),
-        // mostly the full lead (cut short only where the line to it is blocked).
-        if arc[k] < arc[path.len() - 1] - 0.7 {
-            assert!(ahead >= r - 0.7, "pose {i}: carrot {ahead:.2} m ahead");
-        }
-        carrots += 1;
-        full_lead += usize::from(ahead >= lead - 0.6);
-        // Every subgoal the machine has passed along the path is gone.
-        assert!(nav.remaining_route().iter().all(|g| {
-            let j = path
+        let x = State::new(p.x, p.y, p.theta, p.beta, 0.0, 0.5);
+        assert!(matches!(nav.update(&x, 0.2 * i as f64), NavStep::Drive { .. }));
+        let remaining = nav.remaining_route();
+        assert!(remaining.len() <= left);
+        for passed in &route[route.len() - left..route.len() - remaining.len()] {
+            let index = route.iter().position(|g| g == passed).unwrap();
+            let near = (p.x - passed.x).hypot(p.y - passed.y) < r;
+            let behind = path
                 .iter()
-                .position(|q| Goal::new(q.x, q.y, q.theta) == *g)
-                .unwrap_or(path.len());
-            j + 1 >= i
-        }));
+                .take(i + 1)
+                .any(|q| (q.x - passed.x).hypot(q.y - passed.y) < 1e-9);
+            assert!(near || behind, "subgoal {index} passed at pose {i}");
+        }
+        left = remaining.len();
+        assert_eq!(*remaining.last().unwrap(), goal);
     }
-    assert!(reached_goal, "the last targets are the goal");
-    assert!(
-        2 * full_lead > carrots,
-        "{full_lead} of {carrots} carrots at the full lead"
-    );
+    assert_eq!(left, 1, "every subgoal passed: {:?}", nav.remaining_route());
 }
 
 #[test]
 fn standing_still_aborts_after_the_timeout_but_holding_the_goal_does_not() {
-    let mut nav = navigator(PlannerKind::HybridAStar, false);
+    let mut nav = navigator(false);
     let goal = Goal::new(5.0, 0.0, 0.0);
     let x = at_rest(0.0, 0.0, 0.0);
-    nav.set_goal(&x, goal, &[]).unwrap();
-    let timeout = nav.settings().progress.timeout;
+    nav.set_goal(&x, goal, &[], 0.0).unwrap();
+    let timeout = nav.settings().stall.progress.timeout;
     let mut k = 0;
     let aborted_at = loop {
         let t = 100.0 + k as f64 * 0.2;
@@ -568,7 +429,7 @@ fn standing_still_aborts_after_the_timeout_but_holding_the_goal_does_not() {
     assert_eq!(nav.plans(), 1);
 
     // At the goal, at rest: holding it for a minute is no stall.
-    nav.set_goal(&x, goal, &[]).unwrap();
+    nav.set_goal(&x, goal, &[], 0.0).unwrap();
     let at_goal = at_rest(5.0, 0.02, 0.0);
     for k in 0..300 {
         assert!(matches!(
@@ -580,11 +441,11 @@ fn standing_still_aborts_after_the_timeout_but_holding_the_goal_does_not() {
 
 #[test]
 fn a_stall_replans_from_the_current_state_then_aborts() {
-    let mut nav = navigator(PlannerKind::HybridAStar, false);
+    let mut nav = navigator(false);
     let s = nav.settings().clone();
     let goal = Goal::new(8.0, 0.0, 0.0);
     // Behind the wall with a route, the machine stuck at some pose off the route.
-    nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &wall())
+    nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &wall(), 0.0)
         .unwrap();
     assert_eq!(nav.plans(), 1);
     let stuck = at_rest(2.0, -1.0, 0.5);
@@ -609,69 +470,26 @@ fn a_stall_replans_from_the_current_state_then_aborts() {
     }
     let first = first_replan.expect("a replan");
     assert!(
-        (first - s.replan_after).abs() < 0.2 + 1e-9,
+        (first - s.stall.replan_after).abs() < 0.2 + 1e-9,
         "replan at {first}"
     );
     let (t, r) = aborted.expect("an abort");
     assert_eq!(r, AbortReason::NoProgress);
     // Replans do not extend the window.
     assert!(
-        (t - s.progress.timeout).abs() < 0.2 + 1e-9,
+        (t - s.stall.progress.timeout).abs() < 0.2 + 1e-9,
         "aborted at {t}"
     );
-    assert!(nav.plans() as usize <= 1 + s.max_replans);
-}
-
-#[test]
-fn the_field_drives_to_the_goal_around_the_wall_and_gives_way_to_subgoals_after_a_stall() {
-    let settings = NavigatorSettings {
-        tracking: Tracking::Field,
-        ..NavigatorSettings::default()
-    };
-    let replan_after = settings.replan_after;
-    let mut nav = Navigator::new(params(), settings, None).unwrap();
-    let goal = Goal::new(8.0, 0.0, 0.0);
-    nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &wall())
-        .unwrap();
-    assert!(nav.route().len() > 1, "a route around the wall");
-    let stuck = at_rest(2.0, -0.3, 0.0);
-    assert_eq!(nav.update(&stuck, 0.0), drive(goal, true));
-    let field = nav.cost_to_go().expect("a field on a route");
-    // The field's weight: the fallback cost of a metre (no critic) × gain 1.
-    // In front of the wall the excess is positive and falls towards the
-    // nearer end (−y); beyond the wall it is zero.
-    let (v, g) = field.eval(2.0, -0.3);
-    assert!(v > 1.0 && g[1] > 0.0, "{v} {g:?}");
-    assert_eq!(field.eval(6.0, 0.0).0, 0.0);
-    let version = nav.cost_version();
-    // Stalled there: the replan hands the MPC the route's subgoals and no field.
-    let mut t = 0.0;
-    while t < replan_after + 0.5 {
-        t += 0.2;
-        let step = nav.update(&stuck, t);
-        if nav.plans() == 2 {
-            let NavStep::Drive { target, .. } = step else {
-                panic!("{step:?}");
-            };
-            assert_ne!(target, goal);
-            assert!(nav.cost_to_go().is_none());
-            assert!(nav.cost_version() > version);
-            return;
-        }
-    }
-    panic!("no replan by {t} s");
+    assert!(nav.plans() as usize <= 1 + s.stall.max_replans);
 }
 
 #[test]
 fn the_path_cost_leads_forward_along_the_route_and_the_critic_takes_the_goal() {
-    let settings = NavigatorSettings {
-        tracking: Tracking::Path,
-        ..NavigatorSettings::default()
-    };
-    let handover = settings.path_handover;
+    let settings = NavigatorSettings::default();
+    let handover = settings.following.handover;
     let mut nav = Navigator::new(params(), settings, None).unwrap();
     let goal = Goal::new(8.0, 0.0, 0.0);
-    nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &wall())
+    nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &wall(), 0.0)
         .unwrap();
     let path = nav.path().to_vec();
     assert!(path.len() > 10 && path.iter().all(|p| p.direction >= 0));
@@ -704,7 +522,7 @@ fn the_path_cost_leads_forward_along_the_route_and_the_critic_takes_the_goal() {
                 hint = term.segment;
                 let here = term.value;
                 assert!(
-                    (here - FALLBACK_COST_PER_METRE * left).abs() < 1e-6,
+                    (here - 3.0 * left).abs() < 1e-6,
                     "pose {i}: {here} vs {left}"
                 );
             }
@@ -726,15 +544,12 @@ fn the_path_cost_leads_forward_along_the_route_and_the_critic_takes_the_goal() {
 
 #[test]
 fn a_path_that_ends_with_a_goal_shot_is_continued_by_it() {
-    let settings = NavigatorSettings {
-        tracking: Tracking::Path,
-        ..NavigatorSettings::default()
-    };
-    let tolerance = settings.shot_tolerance;
+    let settings = NavigatorSettings::default();
+    let tolerance = settings.search.shot_tolerance;
     let mut nav = Navigator::new(params(), settings, Some(trained())).unwrap();
     let goal = Goal::new(8.0, 0.0, 0.0);
     let start = at_rest(0.0, 0.0, 0.0);
-    nav.set_goal(&start, goal, &wall()).unwrap();
+    nav.set_goal(&start, goal, &wall(), 0.0).unwrap();
     let end = *nav.path().last().expect("a route around the wall");
     let path_arc: f64 = nav
         .path()
@@ -766,10 +581,10 @@ fn the_critics_cost_of_a_metre_is_its_slope_in_the_goal_distance() {
     let (_, critic) = trained();
     let mut ws = CriticWorkspace::new(&critic);
     let per_metre = critic_cost_per_metre(&critic, &mut ws).unwrap();
-    // Measured on the published critic: 3.0 (FALLBACK_COST_PER_METRE), and
+    // Measured on the published critic: 3.0 (3.0), and
     // about the time to go at cruising speed / 0.22 s per unit (waypoint graph).
     assert!(
-        (per_metre - FALLBACK_COST_PER_METRE).abs() < 0.5,
+        (per_metre - 3.0).abs() < 0.5,
         "{per_metre}"
     );
     // Independently: the slope straight ahead, 4 to 9 m, is of the same size.
@@ -788,130 +603,6 @@ fn the_critics_cost_of_a_metre_is_its_slope_in_the_goal_distance() {
     );
 }
 
-/// Hybrid A* without networks, the stall ladder's back-up on (off by default).
-fn backing_up_navigator() -> Navigator {
-    let settings = NavigatorSettings {
-        back_up_distance: 2.5,
-        ..NavigatorSettings::default()
-    };
-    Navigator::new(params(), settings, None).unwrap()
-}
-
-#[test]
-fn a_second_stall_backs_up_along_the_track_then_replans_from_there() {
-    let mut nav = backing_up_navigator();
-    let s = nav.settings().clone();
-    let goal = Goal::new(8.0, 0.0, 0.0);
-    let start = at_rest(-3.0, -1.0, 0.0);
-    nav.set_goal(&start, goal, &wall()).unwrap();
-    // Drive 5 m straight along y = -1 (the track), 0.25 m per tick, then stand.
-    let mut t = 0.0;
-    for k in 0..=20 {
-        let x = State::new(-3.0 + 0.25 * k as f64, -1.0, 0.0, 0.0, 1.0, 0.0);
-        assert!(matches!(nav.update(&x, t), NavStep::Drive { .. }));
-        t += 0.2;
-    }
-    let stuck = at_rest(2.0, -1.0, 0.0);
-    let mut outcomes = Vec::new();
-    let mut back_up_target = None;
-    while t < 30.0 && back_up_target.is_none() {
-        let step = nav.update(&stuck, t);
-        if let Some(r) = nav.last_plan().filter(|r| r.replan) {
-            if outcomes.last() != Some(&(r.outcome, nav.plans())) {
-                outcomes.push((r.outcome, nav.plans()));
-            }
-            if r.outcome == PlanOutcome::BackUp {
-                let NavStep::Drive {
-                    target,
-                    final_target,
-                } = step
-                else {
-                    panic!("{step:?}")
-                };
-                assert!(!final_target);
-                back_up_target = Some(target);
-            }
-        }
-        t += 0.2;
-    }
-    // First a replan, then (the next stall) the back-up.
-    let kinds: Vec<PlanOutcome> = outcomes.iter().map(|o| o.0).collect();
-    assert_eq!(kinds, vec![PlanOutcome::Route, PlanOutcome::BackUp]);
-    // The pose back_up_distance behind along the track, with the track's heading.
-    let b = back_up_target.unwrap();
-    // (the first track pose at least that far: within one tick's travel of it)
-    let behind = 2.0 - b.x;
-    assert!(
-        behind >= s.back_up_distance && behind < s.back_up_distance + 0.25 + 1e-9,
-        "{b:?}"
-    );
-    assert!((b.y + 1.0).abs() < 1e-9 && b.theta == 0.0, "{b:?}");
-    assert_eq!(nav.route(), &[b, goal]);
-    // The back-up opens its own abort window: standing there longer than the
-    // replan delay but less than the timeout does not abort.
-    let plans = nav.plans();
-    let moved = State::new(b.x + 0.3, b.y, 0.0, 0.0, -0.5, 0.0);
-    assert!(matches!(nav.update(&moved, t + 0.2), NavStep::Drive { .. }));
-    // Within the arrival distance: a replan from there.
-    assert_eq!(nav.plans(), plans + 1);
-    let r = nav.last_plan().unwrap();
-    assert!(r.replan && r.outcome == PlanOutcome::Route, "{r:?}");
-    let p0 = nav.path()[0];
-    assert_eq!((p0.x, p0.y), (moved[ix::X], moved[ix::Y]));
-    // That replan kept out of the stall point (both axle points of every
-    // pose), and the keep-out circle was only for it.
-    let keep_out = [Obstacle::new(stuck[ix::X], stuck[ix::Y], 0.5)];
-    for q in nav.path() {
-        let pose = State::new(q.x, q.y, q.theta, q.beta, 0.0, 0.0);
-        let c = footprint_clearance(&params(), &pose, &keep_out);
-        assert!(c >= s.clearance_margin - 1e-9, "{q:?} {c}");
-    }
-    assert_eq!(nav.world.obstacles(), &wall()[..]);
-    // No second back-up for this goal (max_back_ups 1).
-    let mut later = Vec::new();
-    for k in 0..100 {
-        if let NavStep::Abort(_) = nav.update(&moved, t + 0.4 + 0.2 * k as f64) {
-            break;
-        }
-        later.extend(nav.last_plan().map(|r| r.outcome));
-    }
-    assert!(!later.contains(&PlanOutcome::BackUp));
-}
-
-#[test]
-fn no_back_up_without_a_track() {
-    // Stuck where it started: nothing driven to back up along, so the ladder
-    // goes on with replans (a_stall_replans_from_the_current_state_then_aborts).
-    let mut nav = backing_up_navigator();
-    let stuck = at_rest(2.0, -1.0, 0.5);
-    nav.set_goal(&stuck, Goal::new(8.0, 0.0, 0.0), &wall())
-        .unwrap();
-    for k in 0..100 {
-        if let NavStep::Abort(_) = nav.update(&stuck, 0.2 * k as f64) {
-            break;
-        }
-        assert_ne!(nav.last_plan().unwrap().outcome, PlanOutcome::BackUp);
-    }
-}
-
-#[test]
-fn the_waypoint_graph_needs_the_networks_and_its_cost_scale_is_fitted() {
-    let s = NavigatorSettings {
-        planner: PlannerKind::WaypointGraph,
-        ..NavigatorSettings::default()
-    };
-    let e = Navigator::new(params(), s, None).err().unwrap();
-    assert!(e.to_string().contains("planner"), "{e}");
-    // The published critic's cost-to-go is close to proportional to the
-    // actor's time to the goal: the fit lands near the measured 0.22 s.
-    let (actor, critic) = trained();
-    let mut aws = ActorWorkspace::new(&actor);
-    let mut cws = CriticWorkspace::new(&critic);
-    let k = waypoint_graph::calibrate(&params(), &actor, &mut aws, &critic, &mut cws, 0.2, 0.2)
-        .unwrap();
-    assert!((0.15..0.3).contains(&k), "{k} s per unit of cost");
-}
-
 /// A plan may run off the tick thread: the navigator moves between threads.
 #[test]
 fn the_navigator_is_send() {
@@ -921,22 +612,16 @@ fn the_navigator_is_send() {
 
 #[test]
 fn settings_are_validated_by_name() {
-    let s = NavigatorSettings {
-        replan_after: 12.0,
-        ..NavigatorSettings::default()
-    };
+    let mut s = NavigatorSettings::default();
+    s.stall.replan_after = 12.0;
     let e = Navigator::new(params(), s, None).err().unwrap();
     assert!(e.to_string().contains("replan_after"), "{e}");
-    let s = NavigatorSettings {
-        grid_resolution: 0.5,
-        ..NavigatorSettings::default()
-    };
+    let mut s = NavigatorSettings::default();
+    s.search.grid_resolution = 0.5;
     let e = Navigator::new(params(), s, None).err().unwrap();
     assert!(e.to_string().contains("primitive_length"), "{e}");
-    let s = NavigatorSettings {
-        approach_distance: 0.8,
-        ..NavigatorSettings::default()
-    };
+    let mut s = NavigatorSettings::default();
+    s.stall.approach_distance = 0.8;
     let e = Navigator::new(params(), s, None).err().unwrap();
     assert!(e.to_string().contains("approach_distance"), "{e}");
 }
@@ -963,17 +648,17 @@ fn drive(target: Goal, final_target: bool) -> NavStep {
 
 #[test]
 fn a_stop_beside_the_goal_is_retried_from_the_approach_pose_behind_it() {
-    let mut nav = navigator(PlannerKind::HybridAStar, false);
+    let mut nav = navigator(false);
     let s = nav.settings().clone();
     let goal = Goal::new(5.0, 0.0, 0.0);
-    let behind = Goal::new(5.0 - s.approach_distance, 0.0, 0.0);
-    nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &[]).unwrap();
+    let behind = Goal::new(5.0 - s.stall.approach_distance, 0.0, 0.0);
+    nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &[], 0.0).unwrap();
     let stuck = stopped_beside(&goal);
-    assert!(goal_distance(&stuck, &goal) > s.reached_tolerance);
+    assert!(goal_distance(&stuck, &goal) > s.stall.reached_tolerance);
     let dt = 0.2;
     let mut t = 0.0;
     // Stopped there: the goal until `replan_after`, then the approach pose.
-    while t < s.replan_after - 1e-9 {
+    while t < s.stall.replan_after - 1e-9 {
         assert_eq!(nav.update(&stuck, t), drive(goal, true), "t {t}");
         t += dt;
     }
@@ -983,7 +668,7 @@ fn a_stop_beside_the_goal_is_retried_from_the_approach_pose_behind_it() {
     assert_eq!(nav.route(), &[behind, goal]);
     // Within the subgoal radius of it (driving back): the goal again.
     t += dt;
-    let passing = State::new(behind.x + 0.9 * s.subgoal_radius, 0.0, 0.0, 0.0, 0.0, -0.5);
+    let passing = State::new(behind.x + 0.9 * s.following.subgoal_radius, 0.0, 0.0, 0.0, 0.0, -0.5);
     assert_eq!(nav.update(&passing, t), drive(goal, true));
     // Stopped beside it once more: the second and last retry; the third
     // stall waits for the abort window.
@@ -1004,15 +689,16 @@ fn a_stop_beside_the_goal_is_retried_from_the_approach_pose_behind_it() {
                 nav.update(&passing, t);
             }
             NavStep::Drive { .. } => {}
+            NavStep::Hold => panic!("open ground never holds"),
         }
         assert!(t < 100.0);
     };
-    assert_eq!(retries_at.len(), s.max_retries - 1, "{retries_at:?}");
-    assert_eq!(nav.plans() as usize, 1 + s.max_retries);
+    assert_eq!(retries_at.len(), s.stall.max_retries - 1, "{retries_at:?}");
+    assert_eq!(nav.plans() as usize, 1 + s.stall.max_retries);
     // Stopped after the last pass, the window runs out: retries are no progress.
     let last_progress = retries_at[0] + 2.0 * dt;
     assert!(
-        (aborted_at - last_progress - s.progress.timeout).abs() < dt + 1e-9,
+        (aborted_at - last_progress - s.stall.progress.timeout).abs() < dt + 1e-9,
         "aborted at {aborted_at}, last progress {last_progress}"
     );
 }
@@ -1025,20 +711,20 @@ fn a_stop_beside_the_goal_is_retried_from_the_approach_pose_behind_it() {
 fn a_crawl_beside_the_goal_in_sight_among_circles_is_retried() {
     let goal = Goal::new(5.0, 0.0, 0.0);
     let s = NavigatorSettings::default();
-    let behind = Goal::new(5.0 - s.approach_distance, 0.0, 0.0);
+    let behind = Goal::new(5.0 - s.stall.approach_distance, 0.0, 0.0);
     // Away from the straight way and the goal: the start is direct.
     let aside = [Obstacle::new(2.5, 4.0, 0.5)];
     // Between the crawling machine (0.6 m to the goal's left) and the goal.
     let between = [Obstacle::new(5.1, 0.45, 0.12)];
     for (obstacles, retried) in [(&aside, true), (&between, false)] {
-        let mut nav = navigator(PlannerKind::HybridAStar, false);
-        nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, obstacles)
+        let mut nav = navigator(false);
+        nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, obstacles, 0.0)
             .unwrap();
         let plans = nav.plans();
         let dt = 0.2;
         let mut t = 0.0;
         let mut first_new_plan = None;
-        while t < s.replan_after + 2.0 * dt && first_new_plan.is_none() {
+        while t < s.stall.replan_after + 2.0 * dt && first_new_plan.is_none() {
             // 0.1 m/s one way, then the other, 0.6 m beside the goal.
             let v = if (t / dt) as i64 % 2 == 0 { 0.1 } else { -0.1 };
             let crawl = State::new(5.0, 0.6, 0.0, 0.7, 0.0, v);
@@ -1064,10 +750,10 @@ fn no_retry_while_moving_or_far_from_the_goal() {
     let mut moving = stopped_beside(&goal);
     moving[ix::V] = 0.3;
     let s = NavigatorSettings::default();
-    let far = at_rest(goal.x - s.approach_distance - 0.1, 0.0, 0.0);
+    let far = at_rest(goal.x - s.stall.approach_distance - 0.1, 0.0, 0.0);
     for x in [moving, far] {
-        let mut nav = navigator(PlannerKind::HybridAStar, false);
-        nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &[]).unwrap();
+        let mut nav = navigator(false);
+        nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &[], 0.0).unwrap();
         for k in 0..45 {
             assert_eq!(nav.update(&x, k as f64 * 0.2), drive(goal, true));
         }
@@ -1079,23 +765,23 @@ fn no_retry_while_moving_or_far_from_the_goal() {
 fn a_retry_approaches_from_ahead_when_behind_is_blocked_and_not_at_all_when_both_are() {
     let s = NavigatorSettings::default();
     let goal = Goal::new(5.0, 0.0, 0.0);
-    let behind = Obstacle::new(goal.x - s.approach_distance, 0.0, 0.5);
-    let ahead = Obstacle::new(goal.x + s.approach_distance, 0.0, 0.5);
+    let behind = Obstacle::new(goal.x - s.stall.approach_distance, 0.0, 0.5);
+    let ahead = Obstacle::new(goal.x + s.stall.approach_distance, 0.0, 0.5);
     let stuck = stopped_beside(&goal);
     for (obstacles, expected) in [
         (
             vec![behind],
-            Some(Goal::new(goal.x + s.approach_distance, 0.0, 0.0)),
+            Some(Goal::new(goal.x + s.stall.approach_distance, 0.0, 0.0)),
         ),
         (vec![behind, ahead], None),
     ] {
-        let mut nav = navigator(PlannerKind::HybridAStar, false);
-        nav.set_goal(&stuck, goal, &obstacles).unwrap();
+        let mut nav = navigator(false);
+        nav.set_goal(&stuck, goal, &obstacles, 0.0).unwrap();
         let mut t = 0.0;
         while nav.plans() == 1 {
             nav.update(&stuck, t);
             t += 0.2;
-            assert!(t < s.progress.timeout);
+            assert!(t < s.stall.progress.timeout);
         }
         let r = nav.last_plan().unwrap();
         match expected {
@@ -1117,10 +803,10 @@ fn a_retry_opens_its_own_abort_window() {
     // `replan_after`, the abort a whole window after it (the way to the
     // approach pose may first lead away), no second retry (the approach pose
     // is the target, not the goal).
-    let mut nav = navigator(PlannerKind::HybridAStar, false);
+    let mut nav = navigator(false);
     let s = nav.settings().clone();
     let goal = Goal::new(5.0, 0.0, 0.0);
-    nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &[]).unwrap();
+    nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &[], 0.0).unwrap();
     let stuck = stopped_beside(&goal);
     let dt = 0.2;
     let (mut retry_at, mut k) = (None, 0);
@@ -1138,9 +824,9 @@ fn a_retry_opens_its_own_abort_window() {
         assert!(k < 1000);
     };
     let retry_at = retry_at.expect("a retry");
-    assert!((retry_at - s.replan_after).abs() < dt + 1e-9, "{retry_at}");
+    assert!((retry_at - s.stall.replan_after).abs() < dt + 1e-9, "{retry_at}");
     assert!(
-        (aborted_at - retry_at - s.progress.timeout).abs() < dt + 1e-9,
+        (aborted_at - retry_at - s.stall.progress.timeout).abs() < dt + 1e-9,
         "retry at {retry_at}, aborted at {aborted_at}"
     );
     assert_eq!(nav.plans(), 2);

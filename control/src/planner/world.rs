@@ -17,19 +17,16 @@ pub struct World {
     obstacles: Vec<Obstacle>,
     capacity: usize,
     margin: f64,
-    /// The last circle is a keep-out circle ([`Self::push_keep_out`]).
-    keep_out: bool,
 }
 
 impl World {
-    /// Room for `capacity` circles and one keep-out circle, allocated once.
+    /// Room for `capacity` circles, allocated once.
     pub fn new(params: MachineParams, capacity: usize, margin: f64) -> Self {
         Self {
             params,
-            obstacles: Vec::with_capacity(capacity + 1),
+            obstacles: Vec::with_capacity(capacity),
             capacity,
             margin,
-            keep_out: false,
         }
     }
 
@@ -46,33 +43,11 @@ impl World {
         }
         self.obstacles.clear();
         self.obstacles.extend_from_slice(obstacles);
-        self.keep_out = false;
         Ok(())
     }
 
     pub fn clear(&mut self) {
         self.obstacles.clear();
-        self.keep_out = false;
-    }
-
-    /// Adds a circle that is no obstacle but a place a plan must avoid (the
-    /// stall ladder's stall pose), in the one slot reserved for it; false if
-    /// one is there already. Undone by [`Self::pop_keep_out`].
-    pub fn push_keep_out(&mut self, keep_out: Obstacle) -> bool {
-        if self.keep_out {
-            return false;
-        }
-        self.obstacles.push(keep_out);
-        self.keep_out = true;
-        true
-    }
-
-    /// Removes the keep-out circle of [`Self::push_keep_out`], if any.
-    pub fn pop_keep_out(&mut self) {
-        if self.keep_out {
-            self.obstacles.pop();
-            self.keep_out = false;
-        }
     }
 
     pub fn obstacles(&self) -> &[Obstacle] {

@@ -18,7 +18,7 @@ use control::{Goal, State, VelocityCommand};
 use shm_ipc::{fault_flags, Mode, Telemetry};
 use wlnavd::can::DriveMode;
 use wlnavd::controller::{
-    quadratic_cost, Controller, ControllerError, ControllerFactory, MpcController, Plan, Step,
+    quadratic_cost, Controller, ControllerError, ControllerFactory, PilotController, Plan, Step,
 };
 
 fn mode(t: &Telemetry) -> Mode {
@@ -216,7 +216,7 @@ fn frozen_alive_counter_stops_the_machine() {
 /// The quadratic MPC, failing on demand: alternately an error and a non-finite
 /// command.
 struct Failing {
-    inner: MpcController<control::mpc::QuadraticCost>,
+    inner: PilotController<control::mpc::QuadraticCost>,
     fail: Arc<AtomicBool>,
     calls: u64,
     nan_states: Vec<State>,
@@ -228,13 +228,19 @@ impl Controller for Failing {
         start: &State,
         goal: Goal,
         obstacles: &[Obstacle],
+        now: f64,
     ) -> Result<(), ControllerError> {
-        self.inner.set_goal(start, goal, obstacles)
+        self.inner.set_goal(start, goal, obstacles, now)
     }
     fn reset(&mut self) {
         self.inner.reset()
     }
-    fn step(&mut self, state: &State, now: f64) -> Result<Step<'_>, ControllerError> {
+    fn step(
+        &mut self,
+        state: &State,
+        now: f64,
+        tick_start: std::time::Instant,
+    ) -> Result<Step<'_>, ControllerError> {
         if self.fail.load(Ordering::SeqCst) {
             self.calls += 1;
             if self.calls % 2 == 1 {
@@ -245,6 +251,11 @@ impl Controller for Failing {
                     beta_dot: f64::NAN,
                     v: f64::NAN,
                 },
+                proposed: VelocityCommand {
+                    beta_dot: f64::NAN,
+                    v: f64::NAN,
+                },
+                guarded: None,
                 status: wlnavd::controller::PlanStatus::Solved,
                 states: &self.nan_states,
                 cost: f64::NAN,
@@ -253,9 +264,11 @@ impl Controller for Failing {
                 solve_time: Duration::ZERO,
                 subgoal: None,
                 route: &[],
+                plan_time: Duration::ZERO,
+                route_age: 0.0,
             }));
         }
-        self.inner.step(state, now)
+        self.inner.step(state, now, tick_start)
     }
     fn sent(&mut self, now: f64, command: VelocityCommand) {
         self.inner.sent(now, command)
@@ -270,11 +283,12 @@ fn solver_failure_falls_back_then_stops() {
     let (period, params) = (config.period(), config.machine);
     let fail = Arc::new(AtomicBool::new(false));
     let f = fail.clone();
+    let pilot_config = config.clone();
     let factory: ControllerFactory = Box::new(move || {
         let mpc = Mpc::new(machine, quadratic_cost(), None, settings)
             .map_err(|e| ControllerError(e.to_string()))?;
         Ok(Box::new(Failing {
-            inner: MpcController::new(mpc),
+            inner: PilotController::without_navigator(mpc, &pilot_config)?,
             fail: f,
             calls: 0,
             nan_states: vec![State::from_element(f64::NAN); settings.horizon + 1],

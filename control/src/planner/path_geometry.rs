@@ -1,10 +1,7 @@
-//! Following a planned path with a carrot (issue 27): instead of handing the
-//! MPC a point subgoal every few metres, which the goal-conditioned critic
-//! treats as a pose to converge to (it slows down for each), the target is a
-//! pose on the path a fixed arc length ahead of the machine's projection onto
-//! it (Nav2's "carrot", pure pursuit's look-ahead point). It moves every
-//! tick, so the critic never sees an intermediate goal close enough to brake
-//! for, except where the machine must stop: a cusp (forward ↔ reverse).
+//! Geometry of a planned path that path following uses: its directions of
+//! travel (cusps, where the machine must stop and change gear), arc lengths,
+//! and the machine's projection onto it, which only moves forward and never
+//! past the next cusp.
 //!
 //! Pure functions over the path; the navigator keeps the projection index.
 
@@ -82,35 +79,6 @@ pub fn project(
     }
 }
 
-/// The carrot: the index of the pose `distance` metres of arc ahead of
-/// `from`, stopping at the next cusp and at the path's end, then moved back
-/// towards `from` while `visible` refuses it (a straight line from the
-/// machine to a carrot behind a corner would cut through the obstacle the
-/// path goes around), but never closer than `min_distance` of arc.
-pub fn carrot(
-    path: &[PathPose],
-    from: usize,
-    distance: f64,
-    min_distance: f64,
-    mut visible: impl FnMut(&PathPose) -> bool,
-) -> usize {
-    if path.is_empty() {
-        return 0;
-    }
-    let from = from.min(path.len() - 1);
-    let mut arc = 0.0;
-    let mut k = from;
-    while k + 1 < path.len() && !is_cusp(path, k) && arc < distance {
-        arc += step(path, k);
-        k += 1;
-    }
-    while k > from && arc > min_distance && !visible(&path[k]) {
-        k -= 1;
-        arc -= step(path, k);
-    }
-    k
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -184,20 +152,5 @@ mod tests {
         assert_eq!(project(&path, 9, 5.9, 0.2, 10.0, 1.0), 13);
         // Then it follows the reverse leg.
         assert_eq!(project(&path, 13, 4.0, 0.0, 10.0, 1.0), 16);
-    }
-
-    #[test]
-    fn the_carrot_looks_ahead_stops_at_cusps_and_ends_and_backs_off_behind_corners() {
-        let path = with_cusp();
-        // 2 m ahead of index 2 (x = 1): x = 3 (index 6).
-        assert_eq!(carrot(&path, 2, 2.0, 0.5, |_| true), 6);
-        // Not past the cusp at index 12.
-        assert_eq!(carrot(&path, 10, 3.0, 0.5, |_| true), 12);
-        // On the reverse leg, not past the end.
-        assert_eq!(carrot(&path, 14, 5.0, 0.5, |_| true), path.len() - 1);
-        // Poses beyond x = 2 hidden: the carrot comes back to x = 2.
-        assert_eq!(carrot(&path, 0, 3.0, 0.5, |p| p.x <= 2.0), 4);
-        // Everything hidden: no closer than the minimum (1 m: x = 1).
-        assert_eq!(carrot(&path, 0, 3.0, 1.0, |_| false), 2);
     }
 }

@@ -1,0 +1,244 @@
+//! The pilot: the one composition of the global layer ([`Navigator`]), the
+//! MPC and the safety envelope (DESIGN §10, §14) that the daemon and
+//! `wlnav-sim` both drive, so the evaluation runs the wiring that ships.
+//!
+//! Per tick ([`Pilot::step`]): the navigator picks the target (or holds
+//! while the first route is planned, or ends the goal), the MPC drives to it
+//! (following the navigator's path cost where there is one), and the
+//! envelope checks whatever is proposed — the MPC's command, or the stop of a
+//! hold — against every circle before it is returned. The caller sends the
+//! command (or what it sends instead) back through [`Pilot::sent`], which
+//! both the MPC's delay compensation and the envelope's record use.
+
+use std::time::{Duration, Instant};
+
+use crate::delay::DelayCompensator;
+use crate::envelope::{self, EnvelopeInput, EnvelopeSettings, Guarded};
+use crate::model::{Goal, MachineParams, State, VelocityCommand};
+use crate::mpc::{Mpc, MpcError, Solution, StageCost};
+use crate::obstacle::Obstacle;
+use crate::planner::{AbortReason, NavError, NavStep, Navigator};
+
+/// Errors of [`Pilot`]'s calls: each names the part that refused.
+#[derive(Debug, thiserror::Error)]
+pub enum PilotError {
+    #[error("MPC: {0}")]
+    Mpc(#[from] MpcError),
+    #[error("global layer: {0}")]
+    Navigator(#[from] NavError),
+    #[error("envelope: {0}")]
+    Envelope(String),
+}
+
+/// What the pilot proposes this tick, already checked by the envelope.
+#[derive(Debug, Clone, Copy)]
+pub struct PilotStep<'a> {
+    /// The command to send: the envelope's choice.
+    pub command: VelocityCommand,
+    /// What the MPC (or the hold) proposed.
+    pub proposed: VelocityCommand,
+    /// The envelope's verdict on the proposal.
+    pub guarded: Guarded,
+    /// The MPC's solution (`None` while holding for the first route).
+    pub solution: Option<&'a Solution>,
+    /// The subgoal driven to, when it is not the goal itself.
+    pub subgoal: Option<Goal>,
+    /// The route not yet passed, ending with the goal (empty without a global
+    /// layer, or while holding).
+    pub route: &'a [Goal],
+    /// How old the route followed was when it arrived [s].
+    pub route_age: f64,
+    /// The last plan's wall time (0 without one).
+    pub plan_time: Duration,
+}
+
+/// One tick's decision.
+#[derive(Debug, Clone, Copy)]
+pub enum PilotDecision<'a> {
+    Drive(PilotStep<'a>),
+    /// The global layer ended the goal (no route, no progress): bring the
+    /// machine to rest.
+    Abort(AbortReason),
+}
+
+/// Navigator + MPC + envelope, built once.
+pub struct Pilot<C: StageCost> {
+    params: MachineParams,
+    mpc: Mpc<C>,
+    navigator: Option<Navigator>,
+    envelope: EnvelopeSettings,
+    /// The commands sent, as the envelope replays them (after the longer of
+    /// the configured and the estimated delay).
+    sent: DelayCompensator,
+    configured_delay: f64,
+    dt: f64,
+    last: VelocityCommand,
+    /// The goal's circles (the envelope's world, the MPC's rows).
+    obstacles: Vec<Obstacle>,
+    /// The navigator's path cost version the MPC has.
+    costs_seen: Option<u64>,
+}
+
+impl<C: StageCost> Pilot<C> {
+    /// The MPC under `navigator` (none: it drives straight to the goal),
+    /// checked by the envelope with `envelope`'s tolerances.
+    pub fn new(
+        params: MachineParams,
+        mpc: Mpc<C>,
+        navigator: Option<Navigator>,
+        envelope: EnvelopeSettings,
+    ) -> Result<Self, PilotError> {
+        envelope
+            .validate()
+            .map_err(|e| PilotError::Envelope(e.to_string()))?;
+        let s = *mpc.settings();
+        let sent = envelope::command_record(params, &envelope, s.delay, s.dt)
+            .map_err(|e| PilotError::Envelope(e.to_string()))?;
+        Ok(Self {
+            params,
+            navigator,
+            envelope,
+            sent,
+            configured_delay: s.delay,
+            dt: s.dt,
+            last: VelocityCommand::ZERO,
+            obstacles: Vec::with_capacity(s.max_obstacles),
+            costs_seen: None,
+            mpc,
+        })
+    }
+
+    /// A new goal seen from the state `start` measured at `now` (the global
+    /// layer validates it against the circles; its route is planned off the
+    /// tick, from `start`).
+    pub fn set_goal(
+        &mut self,
+        start: &State,
+        goal: Goal,
+        obstacles: &[Obstacle],
+        now: f64,
+    ) -> Result<(), PilotError> {
+        self.reset();
+        if obstacles.len() > self.obstacles.capacity() {
+            return Err(PilotError::Mpc(MpcError::TooManyObstacles {
+                given: obstacles.len(),
+                max: self.obstacles.capacity(),
+            }));
+        }
+        match &mut self.navigator {
+            Some(nav) => nav.set_goal(start, goal, obstacles, now)?,
+            None => self.mpc.set_goal(goal, obstacles)?,
+        }
+        self.obstacles.extend_from_slice(obstacles);
+        Ok(())
+    }
+
+    /// Forgets goal and plan (not the commands sent: they still act).
+    pub fn reset(&mut self) {
+        self.mpc.clear_goal();
+        self.obstacles.clear();
+        self.costs_seen = None;
+        if let Some(nav) = &mut self.navigator {
+            nav.clear();
+        }
+    }
+
+    /// One tick from the state `x` measured at `now` [s]; `tick_start` is
+    /// when the tick began (the MPC's time budget counts from there).
+    pub fn step(
+        &mut self,
+        x: &State,
+        now: f64,
+        tick_start: Instant,
+    ) -> Result<PilotDecision<'_>, PilotError> {
+        let mut subgoal = None;
+        let mut holding = false;
+        if let Some(nav) = &mut self.navigator {
+            match nav.update(x, now) {
+                NavStep::Drive {
+                    target,
+                    final_target,
+                } => {
+                    // The first target starts from an actor roll-out; later
+                    // ones (subgoal switches, replans) keep the plan.
+                    match self.mpc.goal() {
+                        None => self.mpc.set_goal(target, &self.obstacles)?,
+                        Some(g) if g != target => self.mpc.retarget(target)?,
+                        Some(_) => {}
+                    }
+                    if self.costs_seen != Some(nav.cost_version()) {
+                        self.costs_seen = Some(nav.cost_version());
+                        self.mpc.set_path_cost(nav.path_cost());
+                    }
+                    subgoal = (!final_target).then_some(target);
+                }
+                NavStep::Hold => holding = true,
+                NavStep::Abort(reason) => return Ok(PilotDecision::Abort(reason)),
+            }
+        }
+        let (route, route_age, plan_time) = match &self.navigator {
+            Some(nav) => (
+                nav.remaining_route(),
+                nav.route_age(),
+                nav.last_plan().map_or(Duration::ZERO, |p| p.duration),
+            ),
+            None => (&[][..], 0.0, Duration::ZERO),
+        };
+        let proposed = if holding {
+            // Holding for the first route: a stop at the limits (at rest, rest).
+            envelope::stop_command(self.last, Some(x), &self.params, self.dt)
+        } else {
+            self.mpc.step_within(x, now, tick_start)?.command
+        };
+        self.sent
+            .set_delay(self.configured_delay.max(self.mpc.compensated_delay()));
+        let guarded = envelope::guard(
+            &EnvelopeInput {
+                params: &self.params,
+                settings: &self.envelope,
+                sent: &self.sent,
+                now,
+                state: x,
+                obstacles: &self.obstacles,
+                dt: self.dt,
+                last: self.last,
+            },
+            proposed,
+        );
+        Ok(PilotDecision::Drive(PilotStep {
+            command: guarded.command,
+            proposed,
+            guarded,
+            solution: (!holding).then(|| self.mpc.solution()),
+            subgoal,
+            route: if holding { &[] } else { route },
+            route_age,
+            plan_time,
+        }))
+    }
+
+    /// The command sent to the machine at `now`, whoever decided it (the
+    /// pilot's, a stop ramp, a hold): every tick, in time order.
+    pub fn sent(&mut self, now: f64, command: VelocityCommand) {
+        self.mpc.sent(now, command);
+        self.sent.record(now, command);
+        self.last = command;
+    }
+
+    /// The delay the MPC compensates now [s] (its online estimate, if on).
+    pub fn compensated_delay(&self) -> f64 {
+        self.mpc.compensated_delay()
+    }
+
+    pub fn mpc(&self) -> &Mpc<C> {
+        &self.mpc
+    }
+
+    pub fn navigator(&self) -> Option<&Navigator> {
+        self.navigator.as_ref()
+    }
+
+    pub fn params(&self) -> &MachineParams {
+        &self.params
+    }
+}

@@ -1,0 +1,641 @@
+//! The global layer's tick side: it holds the route, passes its subgoals,
+//! sets the path cost the MPC follows, watches progress and asks for a
+//! replan or a retry when it stalls. Routes come from a [`RouteService`]
+//! (the planner thread); this side never searches.
+
+use crate::critic::{Critic, CriticWorkspace};
+use crate::model::{goal_distance, ix, wrap_angle, Control, Goal, MachineParams, State, REACH_SPEED};
+use crate::mpc::{PathCost, PathWeights};
+use crate::obstacle::Obstacle;
+use crate::progress::ProgressChecker;
+use crate::Actor;
+
+use super::path_geometry;
+use super::route_planner::{retry_approach, PlanJob, PlanKind, Route, RoutePlanner};
+use super::service::{InlineRoutes, PlanDelay, RouteService};
+use super::world::World;
+use super::{AbortReason, NavError, NavStep, NavigatorSettings, PathPose, PlanOutcome, PlanReport};
+
+/// The critic's cost of a metre when there is no critic or its fit fails
+/// (measured on the published critic: 3.0).
+const FALLBACK_COST_PER_METRE: f64 = 3.0;
+
+/// Arc length the projection onto the path looks ahead each tick [m]: twice
+/// the 3 m the machine covers in about a horizon at top speed.
+const PROJECTION_WINDOW: f64 = 6.0;
+
+/// Below this speed, within `approach_distance` of the goal and without
+/// approach for `replan_after`, the machine is stuck near the goal [m/s]: not
+/// only at rest, as the critic may also crawl back and forth beside it
+/// (`wall038` of obstacles200: measured, 0.05 m/s missed it, 0.2 and 0.3 reach
+/// it and change no other run; a machine turning towards the goal at speed is
+/// not stuck).
+const STUCK_SPEED: f64 = 0.2;
+
+/// The critic's cost of a metre of way to the goal: its mean slope in the
+/// goal distance between 3 and 10 m (the range it was trained on), over goals
+/// on every side of the machine at rest and every relative heading. The
+/// critic is close to proportional to the time to go (`docs/global-layer.md`),
+/// so this is its price of a metre at cruising speed.
+pub fn critic_cost_per_metre(critic: &Critic, ws: &mut CriticWorkspace) -> Option<f64> {
+    let (near, far) = (3.0, 10.0);
+    let (mut sum, mut count) = (0.0, 0.0);
+    for bearing in [0.0f64, 45.0, 90.0, 135.0, 180.0, 225.0, 270.0, 315.0] {
+        for heading in [0.0f64, 90.0, 180.0, 270.0] {
+            let (b, h) = (bearing.to_radians(), heading.to_radians());
+            let mut value = |d: f64| {
+                let g = Goal::new(d * b.cos(), d * b.sin(), h);
+                critic.value(ws, &State::zeros(), &Control::zeros(), &g)
+            };
+            sum += (value(far) - value(near)) / (far - near);
+            count += 1.0;
+        }
+    }
+    let slope = sum / count;
+    (slope.is_finite() && slope > 0.0).then_some(slope)
+}
+
+/// The global layer: built once, then `set_goal` per goal and `update` per tick.
+pub struct Navigator {
+    params: MachineParams,
+    settings: NavigatorSettings,
+    /// The goal's circles: the tick's own geometric tests (line of sight,
+    /// open ground).
+    world: World,
+    routes: Box<dyn RouteService>,
+    /// The job buffers when no plan is out (`None`: one is being planned).
+    spare: Option<Box<PlanJob>>,
+    /// A plan to ask for as soon as the planner is free.
+    wanted: Option<PlanKind>,
+    /// Counts goals: answers for an older one are dropped.
+    goal_seq: u64,
+    route: Route,
+    route_index: usize,
+    /// The machine's projection onto the route's path.
+    path_index: usize,
+    goal: Option<Goal>,
+    obstacles_len: usize,
+    checker: ProgressChecker,
+    /// The target of the checker's window on the last tick: an approach only
+    /// counts on a window that was already running (a replan's new target
+    /// restarts the window, which is no progress).
+    window_target: Option<Goal>,
+    /// Set by `set_goal`: the first `update` starts the clocks.
+    clocks_pending: bool,
+    last_progress: f64,
+    last_replan: f64,
+    replans: usize,
+    retries: usize,
+    aborted: Option<AbortReason>,
+    last_plan: Option<PlanReport>,
+    plans: u64,
+    /// Answers dropped for their age ([`NavigatorSettings::max_route_age`]).
+    stale_routes: u64,
+    /// The age of the route followed when it arrived [s].
+    route_age: f64,
+    /// Counts the changes of the MPC's path cost.
+    cost_version: u64,
+    /// The critic's cost of a metre (calibrated at construction).
+    cost_per_metre: f64,
+    /// The current forward part of the path, and what it was made for (plan
+    /// count, index of its last pose).
+    path_cost: PathCost,
+    path_key: Option<(u64, usize)>,
+    /// Within the handover distance of its end: the critic drives.
+    path_handed: bool,
+    /// The path cost's segment the machine was last projected onto.
+    path_hint: usize,
+}
+
+impl Navigator {
+    /// A navigator whose routes are planned at once on the calling thread
+    /// (tests, tools; the daemon plans on a [`super::PlannerThread`] and
+    /// `wlnav-sim` charges the plan time: [`Self::with_routes`]).
+    pub fn new(
+        params: MachineParams,
+        settings: NavigatorSettings,
+        networks: Option<(Actor, Critic)>,
+    ) -> Result<Self, NavError> {
+        let (actor, critic) = match networks {
+            Some((a, c)) => (Some(a), Some(c)),
+            None => (None, None),
+        };
+        let planner = RoutePlanner::new(params, &settings, actor)?;
+        let routes = Box::new(InlineRoutes::new(planner, PlanDelay::Fixed(0.0)));
+        Self::with_routes(params, settings, critic.as_ref(), routes)
+    }
+
+    /// A navigator whose routes come from `routes`; `critic` prices the path
+    /// cost (its cost of a metre).
+    pub fn with_routes(
+        params: MachineParams,
+        settings: NavigatorSettings,
+        critic: Option<&Critic>,
+        routes: Box<dyn RouteService>,
+    ) -> Result<Self, NavError> {
+        params
+            .validate()
+            .map_err(|_| NavError::BadSettings {
+                name: "params",
+                requirement: "machine parameters must be valid",
+                value: f64::NAN,
+            })?;
+        settings.validate()?;
+        let cost_per_metre = critic
+            .and_then(|c| critic_cost_per_metre(c, &mut CriticWorkspace::new(c)))
+            .unwrap_or(FALLBACK_COST_PER_METRE);
+        let s = &settings.search;
+        Ok(Self {
+            params,
+            world: World::new(params, s.max_obstacles, s.clearance_margin),
+            routes,
+            spare: Some(Box::new(PlanJob::new(s))),
+            wanted: None,
+            goal_seq: 0,
+            route: Route::with_capacity(s),
+            route_index: 0,
+            path_index: 0,
+            goal: None,
+            obstacles_len: 0,
+            checker: ProgressChecker::new(settings.stall.progress),
+            window_target: None,
+            clocks_pending: false,
+            last_progress: 0.0,
+            last_replan: 0.0,
+            replans: 0,
+            retries: 0,
+            aborted: None,
+            last_plan: None,
+            plans: 0,
+            stale_routes: 0,
+            route_age: 0.0,
+            cost_version: 0,
+            cost_per_metre,
+            path_cost: PathCost::new(),
+            path_key: None,
+            path_handed: false,
+            path_hint: 0,
+            settings,
+        })
+    }
+
+    pub fn settings(&self) -> &NavigatorSettings {
+        &self.settings
+    }
+
+    /// New goal. Errors: `Collision` (the goal pose's footprint, β = 0,
+    /// inside a circle, or a circle containing the machine's current
+    /// footprint: [`crate::goal_check::check_goal`]), and malformed input
+    /// (`BadGoal`, `TooManyObstacles`, `BadObstacle`). In open ground the
+    /// route is the goal at once; among circles the planner is asked from
+    /// `start`, measured at `now`, and `update` holds until the route is there.
+    pub fn set_goal(
+        &mut self,
+        start: &State,
+        goal: Goal,
+        obstacles: &[Obstacle],
+        now: f64,
+    ) -> Result<(), NavError> {
+        if !(goal.x.is_finite() && goal.y.is_finite() && goal.theta.is_finite()) {
+            return Err(NavError::BadGoal {
+                x: goal.x,
+                y: goal.y,
+                theta: goal.theta,
+            });
+        }
+        self.clear();
+        self.world.set(obstacles)?;
+        if let Err(conflict) =
+            crate::goal_check::check_goal(&self.params, Some(start), &goal, obstacles)
+        {
+            self.world.clear();
+            return Err(conflict.into());
+        }
+        self.obstacles_len = obstacles.len();
+        self.goal = Some(goal);
+        self.clocks_pending = true;
+        if self.world.is_empty() {
+            // Nothing to plan: the critic drives to the goal.
+            self.route.clear();
+            self.route.targets.push(goal);
+            self.route.target_path_index.push(0);
+            self.route.report.outcome = PlanOutcome::Direct;
+            self.last_plan = Some(self.route.report);
+            self.plans += 1;
+        } else {
+            self.ask(PlanKind::First, start, now);
+        }
+        Ok(())
+    }
+
+    /// Every tick: what the MPC should drive to now. Allocation-free, and
+    /// no search: plans are asked for and taken when they arrive.
+    pub fn update(&mut self, x: &State, now: f64) -> NavStep {
+        if let Some(r) = self.aborted {
+            return NavStep::Abort(r);
+        }
+        let Some(goal) = self.goal else {
+            return NavStep::Abort(AbortReason::NoRoute);
+        };
+        if self.clocks_pending {
+            self.clocks_pending = false;
+            self.last_progress = now;
+            self.last_replan = now;
+        }
+        self.exchange(x, now);
+        if let Some(r) = self.aborted {
+            return NavStep::Abort(r);
+        }
+        if self.route.targets.is_empty() {
+            // The first route is being planned: hold, within the abort window.
+            if now - self.last_progress >= self.settings.stall.progress.timeout {
+                return self.abort(AbortReason::NoProgress);
+            }
+            return NavStep::Hold;
+        }
+        self.advance(x, now);
+        let target = self.route.targets[self.route_index];
+        self.checker.update(x, &target, now);
+        let stalled_for = self.checker.stalled_for(now);
+        let st = self.settings.stall;
+        let final_target = self.route_index + 1 == self.route.targets.len();
+        let holding = final_target && goal_distance(x, &goal) < st.reached_tolerance;
+        let approached = stalled_for == 0.0 && self.window_target == Some(target);
+        self.window_target = Some(target);
+        if approached || holding {
+            self.last_progress = now;
+        }
+        if now - self.last_progress >= st.progress.timeout {
+            return self.abort(AbortReason::NoProgress);
+        }
+        let stalled = !holding
+            && self.wanted.is_none()
+            && self.spare.is_some()
+            && stalled_for >= st.replan_after
+            && now - self.last_replan >= st.replan_after;
+        if stalled
+            && final_target
+            && self.retries < st.max_retries
+            && self.stuck_near(x, &goal)
+            && (self.world.is_empty()
+                || self.in_search_goal_region(x, &goal)
+                || (st.retry_in_sight && self.goal_in_sight(x, &goal)))
+        {
+            self.retries += 1;
+            self.last_replan = now;
+            // A new manoeuvre that may first lead away (to straighten the
+            // machine out): its own window, bounded by `max_retries`.
+            self.last_progress = now;
+            if self.world.is_empty() {
+                // Open ground: the approach behind the goal, nothing to check.
+                self.retry_in_open_ground(&goal);
+            } else {
+                self.ask(PlanKind::Retry, x, now);
+            }
+        } else if stalled && !self.world.is_empty() && self.replans < st.max_replans {
+            self.replans += 1;
+            self.last_replan = now;
+            self.ask(PlanKind::Replan, x, now);
+            self.advance(x, now);
+        }
+        let (target, final_target) = self.drive_target();
+        self.refresh_path(x);
+        NavStep::Drive {
+            target,
+            final_target,
+        }
+    }
+
+    fn abort(&mut self, reason: AbortReason) -> NavStep {
+        self.aborted = Some(reason);
+        NavStep::Abort(reason)
+    }
+
+    /// Takes an answer if one arrived, then sends what is wanted.
+    fn exchange(&mut self, x: &State, now: f64) {
+        if let Some(wanted) = self.wanted {
+            if self.spare.is_some() {
+                self.wanted = None;
+                self.ask(wanted, x, now);
+            }
+        }
+        if let Some(job) = self.routes.poll(now) {
+            self.receive(job, x, now);
+        }
+    }
+
+    /// Sends a plan request from `x` (or remembers it until the planner is free).
+    fn ask(&mut self, kind: PlanKind, x: &State, now: f64) {
+        let (Some(goal), Some(mut job)) = (self.goal, self.spare.take()) else {
+            self.wanted = Some(kind);
+            return;
+        };
+        let r = &mut job.request;
+        r.goal_seq = self.goal_seq;
+        r.kind = kind;
+        r.stamp = now;
+        r.start = *x;
+        r.goal = goal;
+        r.obstacles.clear();
+        r.obstacles
+            .extend_from_slice(&self.world.obstacles()[..self.obstacles_len]);
+        self.routes.submit(job);
+        // An inline planner answers in the same tick when its delay is 0.
+        if let Some(job) = self.routes.poll(now) {
+            self.receive(job, x, now);
+        }
+    }
+
+    /// An answer: followed if it is for this goal, fresh and a route.
+    fn receive(&mut self, mut job: Box<PlanJob>, x: &State, now: f64) {
+        let current = job.request.goal_seq == self.goal_seq && self.goal.is_some();
+        let age = now - job.request.stamp;
+        let kind = job.request.kind;
+        if current && age > self.settings.max_route_age {
+            // The machine has moved on: ask again from where it is.
+            self.stale_routes += 1;
+            self.spare = Some(job);
+            self.ask(kind, x, now);
+            return;
+        }
+        if current {
+            let report = job.route.report;
+            self.last_plan = Some(report);
+            self.plans += 1;
+            match report.outcome {
+                PlanOutcome::NoRoute if kind == PlanKind::First => {
+                    self.aborted = Some(AbortReason::NoRoute);
+                }
+                // A failed replan or retry keeps the route: the abort window decides.
+                PlanOutcome::NoRoute => {}
+                _ => {
+                    std::mem::swap(&mut self.route, &mut job.route);
+                    self.route_index = 0;
+                    self.path_index = 0;
+                    self.route_age = age;
+                }
+            }
+        }
+        self.spare = Some(job);
+    }
+
+    /// The retry in open ground: [approach pose behind the goal, goal].
+    fn retry_in_open_ground(&mut self, goal: &Goal) {
+        let d = self.settings.stall.approach_distance;
+        if let Some(a) = retry_approach(d, goal, |_| true) {
+            self.route.clear();
+            self.route.targets.extend([a, *goal]);
+            self.route.target_path_index.extend([0, 0]);
+            self.route.report.outcome = PlanOutcome::Retry;
+            self.route.report.replan = true;
+            self.route_index = 0;
+            self.path_index = 0;
+            self.last_plan = Some(self.route.report);
+            self.plans += 1;
+        }
+    }
+
+    /// The current subgoal sequence ending with the goal ([goal] when direct;
+    /// empty without a goal or before the first route).
+    pub fn route(&self) -> &[Goal] {
+        &self.route.targets
+    }
+
+    /// The subgoals not yet passed, ending with the goal.
+    pub fn remaining_route(&self) -> &[Goal] {
+        let t = &self.route.targets;
+        &t[self.route_index.min(t.len())..]
+    }
+
+    /// The last planned path (empty when direct).
+    pub fn path(&self) -> &[PathPose] {
+        &self.route.path
+    }
+
+    pub fn goal(&self) -> Option<Goal> {
+        self.goal
+    }
+
+    /// The last plan's report.
+    pub fn last_plan(&self) -> Option<PlanReport> {
+        self.last_plan
+    }
+
+    /// Plans taken since construction (a new report each time it grows).
+    pub fn plans(&self) -> u64 {
+        self.plans
+    }
+
+    /// How old the route followed was when it arrived [s] (0 in open ground).
+    pub fn route_age(&self) -> f64 {
+        self.route_age
+    }
+
+    /// Answers dropped for their age since construction.
+    pub fn stale_routes(&self) -> u64 {
+        self.stale_routes
+    }
+
+    /// Whether a plan is out (asked for, not answered).
+    pub fn planning(&self) -> bool {
+        self.spare.is_none() || self.wanted.is_some()
+    }
+
+    /// Forgets the goal and the route (an answer still out is dropped when it
+    /// comes back).
+    pub fn clear(&mut self) {
+        self.goal = None;
+        self.goal_seq += 1;
+        self.wanted = None;
+        self.route.clear();
+        self.route_index = 0;
+        self.path_index = 0;
+        self.obstacles_len = 0;
+        self.checker = ProgressChecker::new(self.settings.stall.progress);
+        self.window_target = None;
+        self.clocks_pending = false;
+        self.replans = 0;
+        self.retries = 0;
+        self.aborted = None;
+        self.route_age = 0.0;
+        self.path_cost.clear();
+        self.path_key = None;
+        self.path_handed = false;
+        self.cost_version += 1;
+    }
+
+    /// Passes every subgoal within `subgoal_radius` (never the goal) and every
+    /// subgoal the projection onto the path has passed.
+    fn advance(&mut self, x: &State, now: f64) {
+        let f = self.settings.following;
+        let following = !self.route.path.is_empty();
+        if following {
+            self.path_index = path_geometry::project(
+                &self.route.path,
+                self.path_index,
+                x[ix::X],
+                x[ix::Y],
+                PROJECTION_WINDOW,
+                f.subgoal_radius,
+            );
+        }
+        while self.route_index + 1 < self.route.targets.len() {
+            let t = &self.route.targets[self.route_index];
+            let near = (x[ix::X] - t.x).hypot(x[ix::Y] - t.y) < f.subgoal_radius;
+            let behind = following
+                && self
+                    .route
+                    .target_path_index
+                    .get(self.route_index)
+                    .is_some_and(|&i| i < self.path_index);
+            if !(near || behind) {
+                break;
+            }
+            self.route_index += 1;
+            self.last_progress = now;
+        }
+    }
+
+    /// What the MPC drives to: on a forward part of the path, the end of that
+    /// part (a cusp, or the goal); otherwise the current route entry.
+    fn drive_target(&self) -> (Goal, bool) {
+        let last = self.route.targets.len() - 1;
+        if let Some(end) = self.forward_end().filter(|_| self.route_index < last) {
+            // The path cost drives there; the critic, with this target, does
+            // the last part.
+            if end + 1 < self.route.path.len() {
+                let p = &self.route.path[end];
+                return (Goal::new(p.x, p.y, p.theta), false);
+            }
+            return (self.route.targets[last], true);
+        }
+        (
+            self.route.targets[self.route_index],
+            self.route_index == last,
+        )
+    }
+
+    /// The path cost while following a forward part of the route's path: that
+    /// part (from the machine's projection to the next cusp or the path's
+    /// end, continued by the goal shot a path may end with), set once per plan
+    /// and part; empty once the machine is within `handover` of its end (the
+    /// critic's part), and without a path.
+    fn refresh_path(&mut self, x: &State) {
+        let goal = self.goal;
+        let key = self
+            .forward_end()
+            .zip(goal)
+            .map(|(end, _)| (self.plans, end));
+        if key != self.path_key {
+            self.path_key = key;
+            self.path_handed = false;
+            self.path_hint = 0;
+            self.cost_version += 1;
+            match (key, goal) {
+                (Some((_, end)), Some(g)) => self.set_path_cost(end, &g),
+                _ => self.path_cost.clear(),
+            }
+        }
+        if self.path_handed || self.path_cost.is_empty() {
+            return;
+        }
+        let (left, segment) = self.path_cost.arc_left(x[ix::X], x[ix::Y], self.path_hint);
+        self.path_hint = segment;
+        // An open end is where the search's goal shot started: the critic
+        // takes over there, where the shot showed the way is open.
+        let handover = if self.path_cost.open_end() {
+            0.0
+        } else {
+            self.settings.following.handover
+        };
+        if left <= handover {
+            self.path_handed = true;
+            self.path_cost.clear();
+            self.cost_version += 1;
+        }
+    }
+
+    /// The path cost for the forward part ending at pose `end`. A path that
+    /// ends where a goal shot starts is continued by the shot (the actor's
+    /// way to the goal, driven again by the planner); a shot that reverses or
+    /// did not reach leaves the path's end open (the critic takes over there).
+    fn set_path_cost(&mut self, end: usize, goal: &Goal) {
+        let path = &self.route.path;
+        let shot = self.shot_ends_path(goal, end);
+        let f = &self.settings.following;
+        let start = path_geometry::direction_start(path, self.path_index)
+            .max(self.path_index.saturating_sub(1));
+        let c = self.cost_per_metre;
+        let weights = PathWeights {
+            per_metre: c,
+            lateral: f.lateral * c,
+            heading: f.heading * c,
+            control: f.control * c,
+        };
+        let poses = path[start..=end].iter().map(|p| [p.x, p.y, p.theta]);
+        // A shot that reverses on the way is a manoeuvre for the critic.
+        let traced = &self.route.shot;
+        let drivable = shot && !traced.is_empty() && !traced.iter().any(|x| x[ix::V] < -REACH_SPEED);
+        let tail: &[State] = if drivable { traced } else { &[] };
+        let tail = tail.iter().map(|x| [x[ix::X], x[ix::Y], x[ix::THETA]]);
+        let open_end = shot && !drivable;
+        self.path_cost
+            .set(poses.chain(tail), weights, &self.params, open_end);
+    }
+
+    /// On a forward part of the route's path: the index of its last pose.
+    /// Reversing parts go by the route's subgoals, the critic's targets:
+    /// measured, the path cost reversing (the front axle trailing the rear)
+    /// can lock the articulation and stall.
+    fn forward_end(&self) -> Option<usize> {
+        let path = &self.route.path;
+        if path.is_empty() {
+            return None;
+        }
+        let end = path_geometry::direction_end(path, self.path_index);
+        (path[end].direction >= 0).then_some(end)
+    }
+
+    /// Whether pose `end` of the path is its last and a goal shot starts
+    /// there (it is outside the search's goal region).
+    fn shot_ends_path(&self, goal: &Goal, end: usize) -> bool {
+        let p = &self.route.path[end];
+        end + 1 == self.route.path.len()
+            && (p.x - goal.x).hypot(p.y - goal.y) > self.settings.search.goal_position_tolerance
+    }
+
+    /// The path whose progress is the MPC's cost now (`None`: the critic).
+    /// It changes only when [`Self::cost_version`] does.
+    pub fn path_cost(&self) -> Option<&PathCost> {
+        (!self.path_cost.is_empty()).then_some(&self.path_cost)
+    }
+
+    /// Counts the changes of [`Self::path_cost`].
+    pub fn cost_version(&self) -> u64 {
+        self.cost_version
+    }
+
+    /// Slower than [`STUCK_SPEED`] within `approach_distance` of the goal:
+    /// stopped (or crawling) short of it, not manoeuvring towards it (a turn
+    /// that first raises the pose error moves faster).
+    fn stuck_near(&self, x: &State, goal: &Goal) -> bool {
+        x[ix::V].abs() < STUCK_SPEED
+            && (x[ix::X] - goal.x).hypot(x[ix::Y] - goal.y) <= self.settings.stall.approach_distance
+    }
+
+    /// Whether the straight line from the front axle to the goal keeps the
+    /// route's margin: a replan from there shoots straight at the goal and
+    /// hands back the route that stalled.
+    fn goal_in_sight(&self, x: &State, goal: &Goal) -> bool {
+        self.world
+            .segment_clear([x[ix::X], x[ix::Y]], [goal.x, goal.y], self.world.margin())
+    }
+
+    /// Whether `x` is inside the goal region of the search, where a replan
+    /// has nothing left to plan.
+    fn in_search_goal_region(&self, x: &State, goal: &Goal) -> bool {
+        let s = &self.settings.search;
+        (x[ix::X] - goal.x).hypot(x[ix::Y] - goal.y) <= s.goal_position_tolerance
+            && wrap_angle(x[ix::THETA] - goal.theta).abs() <= s.goal_heading_tolerance
+    }
+}

@@ -1,0 +1,369 @@
+//! Planning a route: everything the global layer computes that takes longer
+//! than a tick's share (the actor's "is anything in the way?" roll-out, the
+//! Hybrid A* search, its goal shot driven again, the retry's approach
+//! checks). It runs where a [`super::RouteService`] puts it: on the planner
+//! thread in the daemon, charged as simulated delay in `wlnav-sim`; never on
+//! the tick thread.
+//!
+//! A [`PlanJob`] carries the request and the buffers of its answer, and goes
+//! back and forth between the navigator and the planner: nothing is allocated
+//! after start-up.
+
+use std::time::{Duration, Instant};
+
+use crate::actor::{Actor, ActorWorkspace};
+use crate::model::{ix, Goal, MachineParams, State};
+use crate::obstacle::Obstacle;
+
+use super::hybrid_astar::{self, HybridAStar, SearchStats};
+use super::rollout::{roll_out, Arrival};
+use super::route::subgoals_from_path;
+use super::world::World;
+use super::{FollowingSettings, NavError, PathPose, PlanOutcome, PlanReport, SearchSettings};
+
+/// What is asked of the planner.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PlanKind {
+    /// A new goal: the open way if nothing is in the way, else a search.
+    First,
+    /// A replan after a stall: always a search.
+    Replan,
+    /// A stall on the goal: the approach pose, then the goal.
+    Retry,
+}
+
+/// The request: where from, where to, among what.
+#[derive(Debug, Clone)]
+pub struct PlanRequest {
+    /// Counts the navigator's goals: an answer to an older goal is dropped.
+    pub goal_seq: u64,
+    pub kind: PlanKind,
+    /// When `start` was measured [s, the navigator's clock]: the route's age
+    /// counts from here.
+    pub stamp: f64,
+    pub start: State,
+    pub goal: Goal,
+    /// The circles (within `SearchSettings::max_obstacles`).
+    pub obstacles: Vec<Obstacle>,
+}
+
+/// A planned route: the path (empty when direct or a retry) and the targets
+/// along it, ending with the goal.
+#[derive(Debug, Clone)]
+pub struct Route {
+    pub report: PlanReport,
+    pub path: Vec<PathPose>,
+    /// Subgoals along the path, ending with the goal (empty: no route).
+    pub targets: Vec<Goal>,
+    /// Each target's index in `path` (the goal's is `path.len()`).
+    pub target_path_index: Vec<usize>,
+    /// The goal shot the path ends with, driven again by the actor (empty
+    /// when the path does not end with one, or it does not reach the goal).
+    pub shot: Vec<State>,
+}
+
+impl Route {
+    /// Buffers for paths of up to `max_nodes` poses and shots of up to
+    /// `shot_range`.
+    pub fn with_capacity(s: &SearchSettings) -> Self {
+        Self {
+            report: PlanReport::default(),
+            path: Vec::with_capacity(s.max_nodes),
+            targets: Vec::with_capacity(s.max_nodes + 1),
+            target_path_index: Vec::with_capacity(s.max_nodes + 1),
+            shot: Vec::with_capacity(hybrid_astar::shot_steps(s.shot_range, s.rollout_dt) + 1),
+        }
+    }
+
+    pub fn clear(&mut self) {
+        self.report = PlanReport::default();
+        self.path.clear();
+        self.targets.clear();
+        self.target_path_index.clear();
+        self.shot.clear();
+    }
+
+    /// A route that is the goal alone (the open way).
+    fn direct(&mut self, goal: Goal) {
+        self.clear();
+        self.targets.push(goal);
+        self.target_path_index.push(0);
+    }
+}
+
+/// A request and the buffers of its answer.
+#[derive(Debug, Clone)]
+pub struct PlanJob {
+    pub request: PlanRequest,
+    pub route: Route,
+}
+
+impl PlanJob {
+    pub fn new(s: &SearchSettings) -> Self {
+        Self {
+            request: PlanRequest {
+                goal_seq: 0,
+                kind: PlanKind::First,
+                stamp: 0.0,
+                start: State::zeros(),
+                goal: Goal::new(0.0, 0.0, 0.0),
+                obstacles: Vec::with_capacity(s.max_obstacles),
+            },
+            route: Route::with_capacity(s),
+        }
+    }
+}
+
+/// The planner: its own world, the search and the actor's roll-outs.
+pub struct RoutePlanner {
+    params: MachineParams,
+    search_settings: SearchSettings,
+    following: FollowingSettings,
+    approach_distance: f64,
+    world: World,
+    search: HybridAStar,
+    actor: Option<(Actor, ActorWorkspace)>,
+}
+
+impl RoutePlanner {
+    /// Everything allocated here, once. `actor`: the roll-outs that decide
+    /// "is anything in the way?" and the search's goal shots (without it, a
+    /// straight corridor and no shots).
+    pub fn new(
+        params: MachineParams,
+        settings: &super::NavigatorSettings,
+        actor: Option<Actor>,
+    ) -> Result<Self, NavError> {
+        settings.validate()?;
+        let s = &settings.search;
+        Ok(Self {
+            params,
+            search: HybridAStar::new(params, s),
+            world: World::new(params, s.max_obstacles, s.clearance_margin),
+            actor: actor.map(|a| {
+                let ws = ActorWorkspace::new(&a);
+                (a, ws)
+            }),
+            search_settings: s.clone(),
+            following: settings.following,
+            approach_distance: settings.stall.approach_distance,
+        })
+    }
+
+    /// Answers `job.request` into `job.route`. Allocation-free.
+    pub fn plan(&mut self, job: &mut PlanJob) {
+        debug_assert!(
+            !super::on_tick_thread(),
+            "a route was planned on the tick thread (issue 44: plans run on the planner thread)"
+        );
+        let t0 = Instant::now();
+        let PlanJob { request, route } = job;
+        route.clear();
+        let mut report = PlanReport {
+            outcome: PlanOutcome::NoRoute,
+            duration: Duration::ZERO,
+            search: SearchStats::default(),
+            replan: request.kind != PlanKind::First,
+        };
+        // The navigator validated the circles when the goal was set.
+        if self.world.set(&request.obstacles).is_ok() {
+            report.outcome = match request.kind {
+                PlanKind::First | PlanKind::Replan => self.route(request, route, &mut report),
+                PlanKind::Retry => self.retry(&request.start, &request.goal, route),
+            };
+        }
+        report.duration = t0.elapsed();
+        route.report = report;
+    }
+
+    /// Decides direct or not (a replan always searches), searches, writes the
+    /// route.
+    fn route(&mut self, req: &PlanRequest, route: &mut Route, report: &mut PlanReport) -> PlanOutcome {
+        let (start, goal) = (&req.start, req.goal);
+        let s = &self.search_settings;
+        // Near a pile the start or goal may already be inside the margin: the
+        // plan keeps what the endpoints have (half of it), never more than asked.
+        let goal_pose = State::new(goal.x, goal.y, goal.theta, 0.0, 0.0, 0.0);
+        let endpoints = 0.5
+            * self
+                .world
+                .state_clearance(start)
+                .min(self.world.state_clearance(&goal_pose));
+        let margin = s.clearance_margin.min(endpoints).max(0.0);
+        let direct_margin = s.direct_margin.min(endpoints).max(margin);
+        let plan_every_goal = s.plan_every_goal;
+        self.world.set_margin(direct_margin);
+        let open_cost = if self.world.is_empty() {
+            Some(0.0)
+        } else if req.kind == PlanKind::Replan {
+            None
+        } else {
+            self.open_way_cost(start, &goal)
+        };
+        self.world.set_margin(margin);
+        // Planning every goal, an open way is searched too, and kept (the
+        // critic alone) unless the search finds a cheaper one.
+        if self.world.is_empty() || (open_cost.is_some() && !plan_every_goal) {
+            route.direct(goal);
+            return PlanOutcome::Direct;
+        }
+        let actor = self.actor.as_mut().map(|(a, ws)| (&*a, ws));
+        let (result, stats) = self
+            .search
+            .search(&self.world, start, &goal, actor, &mut route.path);
+        report.search = stats;
+        match result {
+            Ok(()) if open_cost.is_some_and(|c| stats.cost >= c) => {
+                // Planning every goal: the open way is as cheap.
+                route.direct(goal);
+                PlanOutcome::Direct
+            }
+            Ok(()) => {
+                // The search's nodes are 0.6 m apart: thinned to the spacing.
+                let f = &self.following;
+                subgoals_from_path(
+                    &route.path,
+                    goal,
+                    f.subgoal_spacing,
+                    f.subgoal_radius,
+                    &mut route.targets,
+                    &mut route.target_path_index,
+                );
+                self.trace_shot(&goal, route);
+                PlanOutcome::Route
+            }
+            // Planning every goal: a search that fails (its budget) where the
+            // roll-out finds the way open goes direct, as without the search.
+            Err(_) if open_cost.is_some() => {
+                route.direct(goal);
+                PlanOutcome::Direct
+            }
+            Err(_) => {
+                route.clear();
+                PlanOutcome::NoRoute
+            }
+        }
+    }
+
+    /// The goal shot a path may end with (its last pose outside the search's
+    /// goal region), driven again by the actor from the path's end: the
+    /// search keeps only where it starts. Empty when it does not reach.
+    fn trace_shot(&mut self, goal: &Goal, route: &mut Route) {
+        route.shot.clear();
+        let s = &self.search_settings;
+        let (Some((actor, ws)), Some(p)) = (self.actor.as_mut(), route.path.last()) else {
+            return;
+        };
+        let dist = (p.x - goal.x).hypot(p.y - goal.y);
+        if dist <= s.goal_position_tolerance {
+            return;
+        }
+        let start = State::new(p.x, p.y, p.theta, p.beta, 0.0, 0.0);
+        let r = roll_out(
+            &self.params,
+            actor,
+            ws,
+            &self.world,
+            &start,
+            goal,
+            Arrival::Pose(s.shot_tolerance),
+            s.rollout_dt,
+            hybrid_astar::shot_steps(dist, s.rollout_dt),
+            Some(&mut route.shot),
+        );
+        if !r.reached {
+            route.shot.clear();
+        }
+    }
+
+    /// The retry after a stall on the goal: route [approach pose, goal], the
+    /// approach pose `approach_distance` behind the goal on its heading (a
+    /// forward final approach), or ahead of it (a reversing one) when the one
+    /// behind or the way to it is blocked. With both blocked: no route (the
+    /// navigator keeps its own; the abort window decides).
+    fn retry(&mut self, x: &State, goal: &Goal, route: &mut Route) -> PlanOutcome {
+        self.world.set_margin(self.search_settings.clearance_margin);
+        match retry_approach(self.approach_distance, goal, |a| {
+            self.world.is_empty()
+                || (self.world.pose_free(a.x, a.y, a.theta, 0.0)
+                    && self.open_way_cost(x, a).is_some())
+        }) {
+            Some(a) => {
+                route.clear();
+                route.targets.extend([a, *goal]);
+                route.target_path_index.extend([0, 0]);
+                PlanOutcome::Retry
+            }
+            None => PlanOutcome::NoRoute,
+        }
+    }
+
+    /// "Is anything in the way?", by measurement: the actor rolled out from
+    /// the start (what the MPC's warm start does) keeps the margin all the way,
+    /// or, without an actor, a straight corridor of both axle points does.
+    /// `None` when something is in the way, else the open way's cost in the
+    /// search's units (the roll-out's duration at top speed, ∞ when it keeps
+    /// the margin without arriving; without an actor the straight distance).
+    fn open_way_cost(&mut self, start: &State, goal: &Goal) -> Option<f64> {
+        let s = &self.search_settings;
+        match self.actor.as_mut() {
+            Some((actor, ws)) => {
+                let steps = (s.direct_horizon / s.rollout_dt).ceil() as usize;
+                let r = roll_out(
+                    &self.params,
+                    actor,
+                    ws,
+                    &self.world,
+                    start,
+                    goal,
+                    Arrival::Pose(s.shot_tolerance),
+                    s.rollout_dt,
+                    steps,
+                    None,
+                );
+                match (r.collided, r.reached) {
+                    (true, _) => None,
+                    (false, true) => Some(r.duration(s.rollout_dt) * self.params.v_max),
+                    (false, false) => Some(f64::INFINITY),
+                }
+            }
+            None => straight_corridor_free(&self.world, start, goal, s.sample_spacing)
+                .then(|| (start[ix::X] - goal.x).hypot(start[ix::Y] - goal.y)),
+        }
+    }
+}
+
+/// The retry's approach pose: `distance` behind the goal on its heading, else
+/// ahead of it, the first that `usable` accepts.
+pub(super) fn retry_approach(
+    distance: f64,
+    goal: &Goal,
+    mut usable: impl FnMut(&Goal) -> bool,
+) -> Option<Goal> {
+    let (sin, cos) = goal.theta.sin_cos();
+    [-1.0, 1.0]
+        .into_iter()
+        .map(|side| {
+            Goal::new(
+                goal.x + side * distance * cos,
+                goal.y + side * distance * sin,
+                goal.theta,
+            )
+        })
+        .find(|a| usable(a))
+}
+
+/// Both axle points keep the margin at the poses along the straight line
+/// from `from` to `to`, `spacing` apart, heading along the line and
+/// unarticulated, plus both end poses.
+fn straight_corridor_free(world: &World, start: &State, goal: &Goal, spacing: f64) -> bool {
+    let from = [start[ix::X], start[ix::Y]];
+    let (dx, dy) = (goal.x - from[0], goal.y - from[1]);
+    let heading = dy.atan2(dx);
+    let n = (dx.hypot(dy) / spacing).ceil().max(1.0) as usize;
+    (0..=n).all(|k| {
+        let f = k as f64 / n as f64;
+        world.pose_free(from[0] + f * dx, from[1] + f * dy, heading, 0.0)
+    }) && world.state_free(start)
+        && world.pose_free(goal.x, goal.y, goal.theta, 0.0)
+}
