@@ -3,6 +3,8 @@
 # need, then `cargo test` over all crates. Used by CI (.ci/run) and by people.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+# Every "§" reference resolves to a heading of docs/design.md, every docs link to a file (1 s, no build).
+bash scripts/check-design-refs.sh
 
 # Each phase's wall time and CPU time (user + sys of its processes, which a loaded machine
 # does not inflate), listed at the end: what the command costs on two free cores follows
