@@ -3,10 +3,12 @@
 # need, then `cargo test` over all crates. Used by CI (.ci/run) and by people.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+# Every "§" reference resolves to a heading of docs/design.md, every docs link to a file (1 s, no build).
+bash scripts/check-design-refs.sh
 
 # Each phase's wall time and CPU time (user + sys of its processes, which a loaded machine
 # does not inflate), listed at the end: what the command costs on two free cores follows
-# from them (README, "The Jetson").
+# from them (docs/guide/testing.md, "What a full run costs").
 phase_times=()
 cpu_now() {
   times >target/.test-times
@@ -44,7 +46,7 @@ on_exit() {
 trap on_exit EXIT
 
 need_apt=()
-# Packages some crates' tests need (kept in one place; see README).
+# Packages some crates' tests need (kept in one place; see docs/guide/testing.md).
 for pkg in $(cat scripts/apt-packages.txt 2>/dev/null | grep -v '^#'); do
   dpkg -s "$pkg" >/dev/null 2>&1 || need_apt+=("$pkg")
 done
@@ -127,7 +129,7 @@ else
   echo "test.sh: package check skipped (cargo test was given arguments: $*)"
 fi
 
-# The cross check's tests (README, "The Jetson"), once its build is done.
+# The cross check's tests (docs/guide/deployment.md, "The Jetson"), once its build is done.
 wait_for_cross_build() {
   # The native part is done: what is left of the arm64 build runs at normal priority (at
   # idle priority it would wait for anything else on the machine; the rustc processes

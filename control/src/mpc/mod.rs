@@ -7,8 +7,9 @@
 //! model of the critic cost, eq. 20–21, Hessian blocks made positive
 //! semidefinite; linearised RK4 dynamics; hard control bounds; soft state and
 //! obstacle constraints with exact L1 slacks, so the QP is always feasible),
-//! solve it (the Riccati interior point by default, Clarabel as the
-//! reference; `MpcSettings::qp_solver`), and return (β̇, v_f) of the planned x₁ (the caller
+//! solve it (by default with the Riccati interior point over the stages,
+//! [`RiccatiBackend`]; Clarabel is the reference it is tested against), and
+//! return (β̇, v_f) of the planned x₁ (the caller
 //! reports what it actually sent through [`Mpc::sent`], which the delay
 //! compensation and the online estimates use). Optionally a few more SQP
 //! iterations run within the time budget.
@@ -31,8 +32,8 @@
 //! factored, open ground pays nothing for obstacles, and a change of the set
 //! needs no symbolic factorisation in the tick.
 //!
-//! Allocation: nothing in a tick allocates (with Clarabel, except inside its
-//! `solve`: its timers; counted in `tests/mpc_alloc.rs`).
+//! Allocation: nothing in a tick allocates, except inside Clarabel's `solve`
+//! when Clarabel is the QP solver (its timers; counted in `tests/mpc_alloc.rs`).
 
 // Index loops over small fixed-size blocks read like the math.
 #![allow(clippy::needless_range_loop)]
