@@ -12,7 +12,9 @@
 //!   deterministic.
 
 use std::cell::Cell;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{sync_channel, Receiver, SyncSender, TryRecvError};
+use std::sync::Arc;
 use std::thread::JoinHandle;
 
 use super::route_planner::{PlanJob, RoutePlanner};
@@ -24,6 +26,10 @@ pub trait RouteService: Send {
     fn submit(&mut self, job: Box<PlanJob>);
     /// The answered job, once it is there at `now` [s, the navigator's clock].
     fn poll(&mut self, now: f64) -> Option<Box<PlanJob>>;
+    /// Whether a job is being planned right now (not yet answered).
+    fn working(&self) -> bool {
+        false
+    }
 }
 
 /// How [`InlineRoutes`] charges a plan's time.
@@ -79,6 +85,10 @@ pub struct PlannerThread {
     jobs: Option<SyncSender<Box<PlanJob>>>,
     answers: Receiver<Box<PlanJob>>,
     thread: Option<JoinHandle<()>>,
+    /// Set from a submit until the answer is sent back.
+    working: Arc<AtomicBool>,
+    /// An answer that came back in the tick that asked for it.
+    held: Option<Box<PlanJob>>,
 }
 
 impl PlannerThread {
@@ -87,12 +97,16 @@ impl PlannerThread {
         // One job at a time; room for one more so a send never blocks.
         let (job_tx, job_rx) = sync_channel::<Box<PlanJob>>(2);
         let (answer_tx, answer_rx) = sync_channel::<Box<PlanJob>>(2);
+        let working = Arc::new(AtomicBool::new(false));
+        let flag = working.clone();
         let thread = std::thread::Builder::new()
             .name("wlnav-planner".into())
             .spawn(move || {
                 while let Ok(mut job) = job_rx.recv() {
                     planner.plan(&mut job);
-                    if answer_tx.send(job).is_err() {
+                    let sent = answer_tx.send(job);
+                    flag.store(false, Ordering::Release);
+                    if sent.is_err() {
                         break;
                     }
                 }
@@ -101,6 +115,8 @@ impl PlannerThread {
             jobs: Some(job_tx),
             answers: answer_rx,
             thread: Some(thread),
+            working,
+            held: None,
         })
     }
 }
@@ -108,16 +124,32 @@ impl PlannerThread {
 impl RouteService for PlannerThread {
     fn submit(&mut self, job: Box<PlanJob>) {
         if let Some(tx) = &self.jobs {
+            self.working.store(true, Ordering::Release);
             // Full or gone: the job is lost with the thread, and the
             // navigator's progress window ends the goal.
-            let _ = tx.try_send(job);
+            if tx.try_send(job).is_err() {
+                self.working.store(false, Ordering::Release);
+            }
         }
     }
 
-    fn poll(&mut self, _now: f64) -> Option<Box<PlanJob>> {
-        match self.answers.try_recv() {
-            Ok(job) => Some(job),
-            Err(TryRecvError::Empty | TryRecvError::Disconnected) => None,
+    fn working(&self) -> bool {
+        self.working.load(Ordering::Acquire)
+    }
+
+    /// An answer is taken from the tick after the one that asked for it on:
+    /// what a plan costs does not depend on how fast it was (the simulator's
+    /// one-tick charge is then exactly the daemon's behaviour).
+    fn poll(&mut self, now: f64) -> Option<Box<PlanJob>> {
+        if self.held.is_none() {
+            match self.answers.try_recv() {
+                Ok(job) => self.held = Some(job),
+                Err(TryRecvError::Empty | TryRecvError::Disconnected) => return None,
+            }
+        }
+        match &self.held {
+            Some(job) if now > job.request.stamp + 1e-9 => self.held.take(),
+            _ => None,
         }
     }
 }
