@@ -21,6 +21,7 @@ pub mod planner;
 pub mod plant;
 pub mod progress;
 pub mod scenario;
+pub mod site;
 pub mod weights;
 
 pub use actor::{Actor, ActorWorkspace};
