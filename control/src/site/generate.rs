@@ -2,8 +2,8 @@
 //! (DESIGN §17, issue 40: ≥ 500 features) and random sites for tests and
 //! benchmarks.
 //!
-//! `cargo run -p control --example site_gen -- large-pit 40 > sim/sites/large-pit.json`
-//! writes the committed file; a test checks the two agree.
+//! `cargo run -p control --example site_gen -- large-pit 40 520 > sim/sites/large-pit-40.json`
+//! writes the committed file; a test (`control/tests/sites.rs`) checks the two agree.
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;

@@ -483,7 +483,7 @@ mod tests {
         let g = Polygon::new(ring.clone());
         let mut rng = ChaCha8Rng::seed_from_u64(7);
         let step = 1e-3;
-        let mut inside_seen = 0;
+        let (mut inside_seen, mut gradient_ok) = (0, 0);
         for _ in 0..2000 {
             let p = [rng.gen_range(-1.5..5.5), rng.gen_range(-1.5..5.5)];
             let n = g.nearest(p);
@@ -503,13 +503,16 @@ mod tests {
             // The nearest point is on the outline at the stated distance.
             assert!((norm(sub(p, n.point)) - n.distance.abs()).abs() < 1e-12);
             // The normal is the gradient: a small step along it raises the
-            // signed distance by the step (away from the medial axis).
+            // signed distance by the step (by less only on the medial axis,
+            // where the distance has no gradient).
             let h = 1e-6;
             let q = [p[0] + h * n.normal[0], p[1] + h * n.normal[1]];
             let rise = g.signed_distance(q) - n.distance;
             assert!(rise <= h * (1.0 + 1e-6), "{p:?}");
+            gradient_ok += ((rise - h).abs() <= 1e-3 * h) as usize;
         }
         assert!(inside_seen > 200, "the test must see inside points");
+        assert!(gradient_ok >= 1950, "{gradient_ok} of 2000");
     }
 
     #[test]

@@ -163,6 +163,14 @@ impl SiteIndex {
         &self.site
     }
 
+    /// What a hit names: the feature's id, or `bounds`.
+    pub fn name(&self, t: Target) -> &str {
+        match t {
+            Target::Feature(f) => self.site.features().get(f).map_or("?", |x| x.id.as_str()),
+            Target::Bounds => "bounds",
+        }
+    }
+
     /// Bytes held by the grid (offsets, entries, boxes), not the site.
     pub fn memory_bytes(&self) -> usize {
         4 * (self.start.len() + self.items.len()) + std::mem::size_of::<Aabb>() * self.boxes.len()

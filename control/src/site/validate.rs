@@ -326,4 +326,25 @@ mod tests {
         let wall = Polyline::new(vec![[3.0, 3.0], [9.0, 3.0]], 2.5);
         assert!(polyline_inside(&bounds, &wall).is_err());
     }
+
+    #[test]
+    fn a_feature_holding_a_bounds_vertex_is_outside() {
+        let bounds = Polygon::new(vec![[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]]);
+        let over = Shape::Polygon(Polygon::new(vec![
+            [8.0, 8.0],
+            [12.0, 8.0],
+            [12.0, 12.0],
+            [8.0, 12.0],
+        ]));
+        assert!(no_bounds_vertex_inside(&bounds, &over).is_err());
+        let corner = Shape::Polygon(Polygon::new(vec![
+            [8.0, 8.0],
+            [10.0, 8.0],
+            [10.0, 10.0],
+            [8.0, 10.0],
+        ]));
+        assert_eq!(no_bounds_vertex_inside(&bounds, &corner), Ok(()));
+        let wall = Shape::Polyline(Polyline::new(vec![[9.0, 9.0], [9.9, 9.9]], 0.5));
+        assert!(no_bounds_vertex_inside(&bounds, &wall).is_err());
+    }
 }

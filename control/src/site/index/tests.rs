@@ -133,11 +133,7 @@ fn outline_meets_sees_obstacles_keepouts_and_the_bounds() {
     let idx = SiteIndex::new(Site::parse(text.as_bytes()).unwrap());
     let p = MachineParams::default();
     let o = Outline::avant635();
-    let name = |h: Option<Hit>| match h.map(|h| h.target) {
-        Some(Target::Feature(f)) => idx.site().features()[f].id.clone(),
-        Some(Target::Bounds) => "bounds".into(),
-        None => "none".into(),
-    };
+    let name = |h: Option<Hit>| h.map_or("none", |h| idx.name(h.target)).to_string();
     // At the origin heading +x: the bucket (front circle at 0.9 m, r 0.72)
     // reaches 1.62 m; the pile starts at 3 m.
     let x = State::zeros();
