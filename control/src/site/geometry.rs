@@ -415,6 +415,71 @@ impl Shape {
         }
     }
 
+    /// A disc inside the shape, as large as a search finds: the shape
+    /// itself for a circle; for a polygon the best of a 32 × 32 grid over its
+    /// box, refined by a shrinking pattern search (the pole of
+    /// inaccessibility, to about 1e-4 of the box); for a polyline a disc of
+    /// its half-width on its centre line. Every point of the disc is in the
+    /// shape, so a problem with each shape replaced by its disc is a
+    /// relaxation (e.g. a valid lower bound on a minimum time).
+    pub fn inscribed_circle(&self) -> Circle {
+        match self {
+            Shape::Circle(c) => *c,
+            Shape::Polyline(l) => Circle {
+                center: l.vertices()[0],
+                radius: l.half_width(),
+            },
+            Shape::Polygon(g) => {
+                let b = g.aabb();
+                let depth = |q: P2| -g.signed_distance(q);
+                let n = 32;
+                let mut step = [
+                    (b.max[0] - b.min[0]) / n as f64,
+                    (b.max[1] - b.min[1]) / n as f64,
+                ];
+                let mut best = (f64::NEG_INFINITY, g.vertices()[0]);
+                for i in 0..n {
+                    for j in 0..n {
+                        let q = [
+                            b.min[0] + (i as f64 + 0.5) * step[0],
+                            b.min[1] + (j as f64 + 0.5) * step[1],
+                        ];
+                        let d = depth(q);
+                        if d > best.0 {
+                            best = (d, q);
+                        }
+                    }
+                }
+                for _ in 0..40 {
+                    let c = best.1;
+                    for (dx, dy) in [
+                        (1.0, 0.0),
+                        (-1.0, 0.0),
+                        (0.0, 1.0),
+                        (0.0, -1.0),
+                        (1.0, 1.0),
+                        (-1.0, -1.0),
+                        (1.0, -1.0),
+                        (-1.0, 1.0),
+                    ] {
+                        let q = [c[0] + dx * step[0], c[1] + dy * step[1]];
+                        let d = depth(q);
+                        if d > best.0 {
+                            best = (d, q);
+                        }
+                    }
+                    if best.1 == c {
+                        step = [step[0] * 0.5, step[1] * 0.5];
+                    }
+                }
+                Circle {
+                    center: best.1,
+                    radius: best.0.max(0.0),
+                }
+            }
+        }
+    }
+
     /// Vertex count (1 for a circle), what the loader's limits count.
     pub fn vertex_count(&self) -> usize {
         match self {
@@ -585,6 +650,37 @@ mod tests {
             meets |= winding_number(c, &ring).abs() > 0.5;
             assert_eq!(cl < 0.0, meets, "{c:?} r {r}: clearance {cl}");
         }
+    }
+
+    #[test]
+    fn inscribed_circles_lie_inside_and_are_large() {
+        // A 4 × 2 rectangle: the largest inscribed disc has radius 1.
+        let rect = Shape::Polygon(Polygon::new(vec![
+            [0.0, 0.0],
+            [4.0, 0.0],
+            [4.0, 2.0],
+            [0.0, 2.0],
+        ]));
+        let c = rect.inscribed_circle();
+        assert!((c.radius - 1.0).abs() < 1e-3, "{c:?}");
+        // The C shape: bars 1 wide; the largest disc sits in a corner where
+        // two bars meet, touching both outer edges and the inner corner
+        // (1, 1): centre (t, t) with t = √2 (1 − t), r = t = 2 − √2.
+        let cs = Shape::Polygon(Polygon::new(c_shape()));
+        let c = cs.inscribed_circle();
+        assert!((c.radius - (2.0 - 2f64.sqrt())).abs() < 1e-3, "{c:?}");
+        // Inside: samples of the disc are all in the shape.
+        for k in 0..64 {
+            let a = k as f64 / 64.0 * std::f64::consts::TAU;
+            let q = [
+                c.center[0] + 0.999 * c.radius * a.cos(),
+                c.center[1] + 0.999 * c.radius * a.sin(),
+            ];
+            assert!(winding_number(q, &c_shape()).abs() > 0.5);
+        }
+        let wall = Shape::Polyline(Polyline::new(vec![[0.0, 0.0], [3.0, 0.0]], 0.4));
+        let c = wall.inscribed_circle();
+        assert!(wall.signed_distance(c.center) <= -0.2 + 1e-12 && (c.radius - 0.2).abs() < 1e-12);
     }
 
     #[test]

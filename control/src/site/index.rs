@@ -6,8 +6,8 @@
 //! Memory, bounded whatever the site: at most [`MAX_CELLS`] + 1 cell offsets
 //! and [`MAX_ENTRIES`] entries of 4 bytes (≤ 9 MiB), plus one box (32 bytes)
 //! per feature; [`SiteIndex::memory_bytes`] says what one index holds. The
-//! cell size starts at about one feature per cell and doubles until both
-//! limits hold.
+//! cell size starts at the median feature extent (at most 16 cells per feature)
+//! and doubles until both limits hold.
 //!
 //! Queries visit cells in rings of growing Chebyshev distance around the
 //! query point and stop when the nearest cell not yet visited is farther
@@ -97,8 +97,17 @@ impl SiteIndex {
             (b.max[0] - b.min[0]).max(1e-6),
             (b.max[1] - b.min[1]).max(1e-6),
         );
+        // Cells about a typical feature's size (the median box extent), so
+        // a query near a feature reads few cells, but no more than 16 per
+        // feature: a site of tiny features keeps a small grid.
         let n = boxes.len().max(1) as f64;
-        let mut cell = (w * h / n).sqrt().max(1e-3);
+        let mut extents: Vec<f64> = boxes
+            .iter()
+            .map(|bx| (bx.max[0] - bx.min[0]).max(bx.max[1] - bx.min[1]))
+            .collect();
+        extents.sort_by(f64::total_cmp);
+        let median = extents.get(extents.len() / 2).copied().unwrap_or(0.0);
+        let mut cell = median.max((w * h / (16.0 * n)).sqrt()).max(1e-3);
         let dims = |cell: f64| {
             (
                 ((w / cell).ceil() as usize).max(1),

@@ -127,12 +127,18 @@ pub fn circle(c: [f64; 3]) -> Result<(), FeatureProblem> {
 }
 
 /// The signed distance of `p` to the bounds must be ≤ `limit` (+ tolerance).
-fn point_within(bounds: &Polygon, p: P2, limit: f64, what: &str) -> Result<(), FeatureProblem> {
+fn point_within(
+    bounds: &Polygon,
+    p: P2,
+    limit: f64,
+    what: impl FnOnce() -> String,
+) -> Result<(), FeatureProblem> {
     let d = bounds.signed_distance(p);
     if d > limit + BOUNDS_TOLERANCE {
         return Err(FeatureProblem::OutsideBounds {
             detail: format!(
-                "{what} ({:.3}, {:.3}) is {:.3} m beyond the allowed extent",
+                "{} ({:.3}, {:.3}) is {:.3} m beyond the allowed extent",
+                what(),
                 p[0],
                 p[1],
                 d - limit
@@ -144,7 +150,7 @@ fn point_within(bounds: &Polygon, p: P2, limit: f64, what: &str) -> Result<(), F
 
 /// A circle lies inside the bounds (touching allowed).
 pub fn circle_inside(bounds: &Polygon, c: P2, r: f64) -> Result<(), FeatureProblem> {
-    point_within(bounds, c, -r, "its edge at centre")
+    point_within(bounds, c, -r, || "its edge at centre".into())
 }
 
 /// A polygon lies inside the bounds: every vertex and edge midpoint inside
@@ -153,9 +159,9 @@ pub fn polygon_inside(bounds: &Polygon, ring: &[P2]) -> Result<(), FeatureProble
     let n = ring.len();
     for i in 0..n {
         let (a, b) = (ring[i], ring[(i + 1) % n]);
-        point_within(bounds, a, 0.0, &format!("vertex {i}"))?;
+        point_within(bounds, a, 0.0, || format!("vertex {i}"))?;
         let m = [(a[0] + b[0]) / 2.0, (a[1] + b[1]) / 2.0];
-        point_within(bounds, m, 0.0, &format!("the middle of edge {i}"))?;
+        point_within(bounds, m, 0.0, || format!("the middle of edge {i}"))?;
         crossing(bounds, a, b, i)?;
     }
     no_bounds_vertex_inside(bounds, &Shape::Polygon(Polygon::new(ring.to_vec())))
@@ -215,12 +221,9 @@ pub fn polyline_inside(bounds: &Polygon, l: &Polyline) -> Result<(), FeatureProb
     let hw = l.half_width();
     let v = l.vertices();
     for (i, &p) in v.iter().enumerate() {
-        point_within(
-            bounds,
-            p,
-            -hw,
-            &format!("the edge of its width at vertex {i}"),
-        )?;
+        point_within(bounds, p, -hw, || {
+            format!("the edge of its width at vertex {i}")
+        })?;
     }
     let nb = bounds.vertices().len();
     for i in 0..v.len() - 1 {
