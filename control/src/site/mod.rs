@@ -252,15 +252,10 @@ pub struct Site {
     features: Vec<Feature>,
 }
 
-/// The file as first parsed: entries kept as JSON values so that an entry's
-/// error can name its id.
+/// The file parsed loosely, entries kept as JSON values, so that an entry's
+/// error can name its id ([`attribute`]).
 #[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
 struct RawSiteFile {
-    format: String,
-    id: String,
-    version: u64,
-    bounds: Vec<P2>,
     #[serde(default)]
     obstacles: Vec<serde_json::Value>,
     #[serde(default)]
@@ -296,15 +291,18 @@ fn json_error(e: &serde_json::Error) -> SiteError {
 
 /// Reads one entry (an obstacle or keep-out) out of its JSON value; errors
 /// name its id when it has a readable one, else its place in the list.
+/// `position` (from the strict parse) is appended to the message.
 fn entry<T: serde::de::DeserializeOwned>(
     v: serde_json::Value,
     list: &'static str,
     index: usize,
     kind: FeatureKind,
+    position: (usize, usize),
 ) -> Result<T, SiteError> {
     let id = v.get("id").and_then(|x| x.as_str()).map(str::to_string);
     serde_json::from_value(v).map_err(|e| {
-        let problem = FeatureProblem::Entry(e.to_string());
+        let problem =
+            FeatureProblem::Entry(format!("{e} (line {} column {})", position.0, position.1));
         match id {
             Some(id) if check_id(&id).is_ok() => SiteError::Feature { kind, id, problem },
             _ => SiteError::Entry {
@@ -314,6 +312,27 @@ fn entry<T: serde::de::DeserializeOwned>(
             },
         }
     })
+}
+
+/// Names the entry a strict parse's data error is in (an unknown or missing
+/// field, a wrong type): the loose parse keeps entries as JSON values, and
+/// the first that does not read names itself. `None` when no entry fails
+/// that way (a top-level field, or a repeated key, which a JSON value
+/// silently merges): the strict error then stands as it is.
+fn attribute(bytes: &[u8], strict: &serde_json::Error) -> Option<SiteError> {
+    let raw: RawSiteFile = serde_json::from_slice(bytes).ok()?;
+    let at = (strict.line(), strict.column());
+    for (i, v) in raw.obstacles.into_iter().enumerate() {
+        if let Err(e) = entry::<ObstacleEntry>(v, "obstacles", i, FeatureKind::Obstacle, at) {
+            return Some(e);
+        }
+    }
+    for (i, v) in raw.keepout.into_iter().enumerate() {
+        if let Err(e) = entry::<KeepoutEntry>(v, "keepout", i, FeatureKind::KeepOut, at) {
+            return Some(e);
+        }
+    }
+    None
 }
 
 impl Site {
@@ -326,33 +345,15 @@ impl Site {
                 limit: MAX_FILE_BYTES,
             });
         }
-        let raw: RawSiteFile = serde_json::from_slice(bytes).map_err(|e| json_error(&e))?;
-        if raw.format != FORMAT {
-            return Err(SiteError::Format { found: raw.format });
-        }
-        let count = raw.obstacles.len() + raw.keepout.len();
-        if count > MAX_FEATURES {
-            return Err(SiteError::Limit {
-                what: "features",
-                found: count,
-                limit: MAX_FEATURES,
-            });
-        }
-        let mut obstacles = Vec::with_capacity(raw.obstacles.len());
-        for (i, v) in raw.obstacles.into_iter().enumerate() {
-            obstacles.push(entry(v, "obstacles", i, FeatureKind::Obstacle)?);
-        }
-        let mut keepout = Vec::with_capacity(raw.keepout.len());
-        for (i, v) in raw.keepout.into_iter().enumerate() {
-            keepout.push(entry(v, "keepout", i, FeatureKind::KeepOut)?);
-        }
-        let file = SiteFile {
-            format: raw.format,
-            id: raw.id,
-            version: raw.version,
-            bounds: raw.bounds,
-            obstacles,
-            keepout,
+        // Strict first: unknown fields and repeated keys anywhere are errors
+        // with a line and column. A data error inside an entry is then
+        // attributed to the entry's id by a second, loose parse.
+        let file: SiteFile = match serde_json::from_slice(bytes) {
+            Ok(f) => f,
+            Err(e) if e.is_data() => {
+                return Err(attribute(bytes, &e).unwrap_or_else(|| json_error(&e)))
+            }
+            Err(e) => return Err(json_error(&e)),
         };
         Site::from_file(file, content_hash(bytes))
     }

@@ -102,6 +102,7 @@ fn a_typo_in_a_feature_names_its_id() {
         } => {
             assert_eq!((*kind, id.as_str()), (FeatureKind::Obstacle, "pile-1"));
             assert!(m.contains("unknown field `circel`"), "{m}");
+            assert!(m.ends_with("(line 4 column 30)"), "{m}");
         }
         _ => panic!("{e}"),
     }
@@ -115,6 +116,24 @@ fn a_typo_in_a_feature_names_its_id() {
         e.to_string().starts_with("keepout[0]: missing field `id`"),
         "{e}"
     );
+}
+
+#[test]
+fn a_repeated_key_is_an_error_not_a_silent_choice() {
+    let e = err(with(
+        "\"circle\": [10, 10, 2]",
+        "\"circle\": [10, 10, 2], \"circle\": [30, 30, 2]",
+    ));
+    match &e {
+        SiteError::Json {
+            line: 4, message, ..
+        } => {
+            assert!(message.contains("duplicate field `circle`"), "{message}")
+        }
+        _ => panic!("{e}"),
+    }
+    let e = err(with("\"version\": 3,", "\"version\": 3, \"version\": 4,"));
+    assert!(e.to_string().contains("duplicate field `version`"), "{e}");
 }
 
 #[test]
