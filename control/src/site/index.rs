@@ -190,13 +190,17 @@ impl SiteIndex {
         (self.cell, self.nx, self.ny)
     }
 
-    fn cell_of(&self, p: P2) -> (usize, usize) {
+    /// The cell holding `p`, as grid indices that may lie outside the grid
+    /// (clamped to within nx + ny cells of it, so ring arithmetic cannot
+    /// overflow; a point farther out only loses pruning, not exactness).
+    fn cell_of(&self, p: P2) -> (isize, isize) {
+        let reach = (self.nx + self.ny) as f64;
         let f = |v: f64, o: f64, n: usize| {
             let k = ((v - o) / self.cell).floor();
-            if k.is_nan() || k < 0.0 {
+            if k.is_nan() {
                 0
             } else {
-                (k as usize).min(n - 1)
+                k.clamp(-reach, n as f64 - 1.0 + reach) as isize
             }
         };
         (
@@ -216,10 +220,11 @@ impl SiteIndex {
     /// cells left are all farther than that, or none are left.
     fn rings(&self, p: P2, mut visit: impl FnMut(&[u32]) -> f64) {
         let (ci, cj) = self.cell_of(p);
-        let (ci, cj) = (ci as isize, cj as isize);
         let (nx, ny) = (self.nx as isize, self.ny as isize);
         let mut limit = f64::INFINITY;
-        let mut k: isize = 0;
+        // Rings nearer than the grid hold no cells: start at the first that
+        // reaches it.
+        let mut k: isize = 0.max(-ci).max(ci - (nx - 1)).max(-cj).max(cj - (ny - 1));
         loop {
             if k > 0 {
                 // Every cell not yet visited lies outside the box of rings
@@ -246,6 +251,7 @@ impl SiteIndex {
                 }
             }
             if k == 0 {
+                // Inside the grid (k starts above 0 otherwise).
                 limit = visit(self.cell_items(ci as usize, cj as usize));
             } else {
                 for i in (ci - k).max(0)..=(ci + k).min(nx - 1) {

@@ -91,6 +91,28 @@ fn clearance_is_identical_to_a_linear_scan() {
     }
     // Every kind of answer was exercised.
     assert!(hits.iter().all(|&h| h > 50), "{hits:?}");
+    // Far outside the grid (rings start where the grid begins), and absurdly far.
+    for idx in sites() {
+        for center in [[-700.0, 35.0], [2e3, -3e3], [1e12, -1e12], [35.0, 900.0]] {
+            let c = [WorldCircle {
+                center,
+                radius: 0.5,
+            }];
+            for cutoff in [f64::INFINITY, -1e3] {
+                assert_eq!(
+                    idx.clearance(&c, cutoff),
+                    scan_clearance(idx.site(), &c, cutoff)
+                );
+            }
+            let mut buf = [Near::default(); 3];
+            let n = idx.nearest(center, f64::INFINITY, &mut buf);
+            let got: Vec<(usize, f64)> = buf[..n]
+                .iter()
+                .map(|q| (q.feature, q.nearest.distance))
+                .collect();
+            assert_eq!(got, scan_nearest(idx.site(), center, f64::INFINITY, 3));
+        }
+    }
 }
 
 #[test]
