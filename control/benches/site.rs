@@ -41,6 +41,9 @@ fn site(c: &mut Criterion) {
         .collect();
 
     let mut group = c.benchmark_group("site");
+    // Short runs: the machine is shared; 20 queries' spread is in the output.
+    group.warm_up_time(std::time::Duration::from_secs(1));
+    group.measurement_time(std::time::Duration::from_secs(3));
     group.bench_function("load+index (large pit)", |b| {
         b.iter(|| SiteIndex::new(Site::parse(black_box(bytes)).expect("valid")))
     });
@@ -73,6 +76,23 @@ fn site(c: &mut Criterion) {
             idx.nearest(black_box([poses[k][0], poses[k][1]]), 10.0, &mut near)
         })
     });
+    // Cell sizes side by side (same process, same load): what `new`'s
+    // choice (the median feature extent) is measured against.
+    for cell in [2.0, 4.7, 8.0, 16.0, 32.0] {
+        let other = SiteIndex::with_cell(site.clone(), cell);
+        group.bench_function(format!("outline meets, margin 0.3 m, cell {cell} m"), |b| {
+            b.iter(|| {
+                k = (k + 1) % poses.len();
+                other.outline_meets(&outline, &p, black_box(&poses[k]), 0.3)
+            })
+        });
+        group.bench_function(format!("8 nearest within 10 m, cell {cell} m"), |b| {
+            b.iter(|| {
+                k = (k + 1) % poses.len();
+                other.nearest(black_box([poses[k][0], poses[k][1]]), 10.0, &mut near)
+            })
+        });
+    }
     // The linear scan the index replaces, for scale.
     group.bench_function("outline clearance, linear scan", |b| {
         b.iter(|| {

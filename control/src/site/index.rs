@@ -89,14 +89,15 @@ pub struct SiteIndex {
 }
 
 impl SiteIndex {
-    /// Builds the grid over a validated site.
+    /// Builds the grid over a validated site, cells about a typical
+    /// feature's size (see [`SiteIndex::with_cell`]).
     pub fn new(site: Site) -> SiteIndex {
-        let boxes: Vec<Aabb> = site.features().iter().map(|f| f.shape.aabb()).collect();
         let b = site.bounds().aabb();
         let (w, h) = (
             (b.max[0] - b.min[0]).max(1e-6),
             (b.max[1] - b.min[1]).max(1e-6),
         );
+        let boxes: Vec<Aabb> = site.features().iter().map(|f| f.shape.aabb()).collect();
         // Cells about a typical feature's size (the median box extent), so
         // a query near a feature reads few cells, but no more than 16 per
         // feature: a site of tiny features keeps a small grid.
@@ -107,7 +108,24 @@ impl SiteIndex {
             .collect();
         extents.sort_by(f64::total_cmp);
         let median = extents.get(extents.len() / 2).copied().unwrap_or(0.0);
-        let mut cell = median.max((w * h / (16.0 * n)).sqrt()).max(1e-3);
+        let cell = median.max((w * h / (16.0 * n)).sqrt()).max(1e-3);
+        Self::with_cell(site, cell)
+    }
+
+    /// Builds the grid with cells of about `cell` metres (doubled until the
+    /// memory limits hold; what the benchmark compares cell sizes with).
+    pub fn with_cell(site: Site, cell: f64) -> SiteIndex {
+        let boxes: Vec<Aabb> = site.features().iter().map(|f| f.shape.aabb()).collect();
+        let b = site.bounds().aabb();
+        let (w, h) = (
+            (b.max[0] - b.min[0]).max(1e-6),
+            (b.max[1] - b.min[1]).max(1e-6),
+        );
+        let mut cell = if cell.is_finite() {
+            cell.max(1e-3)
+        } else {
+            w.max(h)
+        };
         let dims = |cell: f64| {
             (
                 ((w / cell).ceil() as usize).max(1),
