@@ -35,8 +35,12 @@ fn every_site_file_loads() {
         assert!(idx.site().features().len() >= 10, "{}", path.display());
         names.push(stem);
     }
-    names.sort();
-    assert_eq!(names, ["lane", "large-pit-40", "quarry", "yard"]);
+    for name in ["lane", "large-pit-40", "quarry", "yard"] {
+        assert!(
+            names.iter().any(|n| n == name),
+            "{name} is missing from sim/sites"
+        );
+    }
 }
 
 #[test]

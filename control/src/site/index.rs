@@ -7,7 +7,9 @@
 //! and [`MAX_ENTRIES`] entries of 4 bytes (≤ 9 MiB), plus one box (32 bytes)
 //! per feature; [`SiteIndex::memory_bytes`] says what one index holds. The
 //! cell size starts at the median feature extent (at most 16 cells per feature)
-//! and doubles until both limits hold.
+//! and doubles until both limits hold. On the large pit (520 features, 4.7 m
+//! cells) an outline test took the same time with cells of 2 to 16 m, and
+//! 1.7 × as long with 32 m (`cargo bench -p control --bench site`).
 //!
 //! Queries visit cells in rings of growing Chebyshev distance around the
 //! query point and stop when the nearest cell not yet visited is farther
