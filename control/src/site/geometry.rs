@@ -231,8 +231,9 @@ pub struct Polygon {
 }
 
 impl Polygon {
-    /// A polygon of these vertices, not checked for simplicity (see
-    /// [`super::validate`]); the winding is taken from the signed area.
+    /// A polygon of these vertices, not checked for simplicity (the site
+    /// loader checks; a caller building one must); the winding is taken from
+    /// the signed area.
     pub fn new(vertices: Vec<P2>) -> Self {
         let winding = if signed_area2(&vertices) >= 0.0 {
             1.0
