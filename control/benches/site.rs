@@ -6,7 +6,7 @@
 use std::hint::black_box;
 
 use control::model::{MachineParams, State};
-use control::site::generate::large_pit;
+use control::site::generate::{large_pit, random_site};
 use control::site::{Near, Outline, Site, SiteIndex, WorldCircle, MAX_OUTLINE_CIRCLES};
 use criterion::{criterion_group, criterion_main, Criterion};
 use rand::{Rng, SeedableRng};
@@ -50,6 +50,22 @@ fn site(c: &mut Criterion) {
     group.bench_function("parse+validate (large pit)", |b| {
         b.iter(|| Site::parse(black_box(bytes)).expect("valid"))
     });
+    // Near the loader's limits: 20 000 features (MAX_FEATURES), ~85 000
+    // vertices, overlapping at random over 1 km².
+    let big = random_site(7, 20_000, 1000.0).to_json();
+    let big_idx = SiteIndex::new(Site::parse(big.as_bytes()).expect("valid random site"));
+    println!(
+        "random site: {} features, {} bytes of JSON, grid {:?}, index {} bytes",
+        big_idx.site().features().len(),
+        big.len(),
+        big_idx.grid(),
+        big_idx.memory_bytes()
+    );
+    group.sample_size(10);
+    group.bench_function("load+index (20 000 random features)", |b| {
+        b.iter(|| SiteIndex::new(Site::parse(black_box(big.as_bytes())).expect("valid")))
+    });
+    group.sample_size(100);
     let site = Site::parse(bytes).expect("valid");
     group.bench_function("index build (large pit)", |b| {
         b.iter(|| SiteIndex::new(black_box(site.clone())))
