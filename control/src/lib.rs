@@ -22,6 +22,7 @@ pub mod pilot;
 pub mod plant;
 pub mod progress;
 pub mod scenario;
+pub mod site;
 pub mod weights;
 
 pub use actor::{Actor, ActorWorkspace};
