@@ -50,6 +50,8 @@ pub struct PilotStep<'a> {
     pub route_age: f64,
     /// The last plan's wall time (0 without one).
     pub plan_time: Duration,
+    /// A plan was taken this step (its time is `plan_time`).
+    pub new_plan: bool,
 }
 
 /// One tick's decision.
@@ -77,6 +79,8 @@ pub struct Pilot<C: StageCost> {
     obstacles: Vec<Obstacle>,
     /// The navigator's path cost version the MPC has.
     costs_seen: Option<u64>,
+    /// The navigator's plan count at the last step.
+    plans_seen: u64,
 }
 
 impl<C: StageCost> Pilot<C> {
@@ -104,6 +108,7 @@ impl<C: StageCost> Pilot<C> {
             last: VelocityCommand::ZERO,
             obstacles: Vec::with_capacity(s.max_obstacles),
             costs_seen: None,
+            plans_seen: 0,
             mpc,
         })
     }
@@ -176,6 +181,9 @@ impl<C: StageCost> Pilot<C> {
                 NavStep::Abort(reason) => return Ok(PilotDecision::Abort(reason)),
             }
         }
+        let plans = self.navigator.as_ref().map_or(0, |n| n.plans());
+        let new_plan = plans != self.plans_seen;
+        self.plans_seen = plans;
         let (route, route_age, plan_time) = match &self.navigator {
             Some(nav) => (
                 nav.remaining_route(),
@@ -214,6 +222,7 @@ impl<C: StageCost> Pilot<C> {
             route: if holding { &[] } else { route },
             route_age,
             plan_time,
+            new_plan,
         }))
     }
 

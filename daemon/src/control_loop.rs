@@ -146,6 +146,22 @@ struct Solve {
     solve_time: Option<f64>,
     /// The safety envelope replaced the proposed command.
     envelope_override: bool,
+    /// The wall time of a route plan taken this step [s].
+    new_plan_time: Option<f64>,
+}
+
+impl Solve {
+    /// The telemetry flags the step raises: a fallback plan, an envelope override.
+    fn flags(&self) -> u32 {
+        let mut flags = 0;
+        if matches!(self.result, SolveResult::Fallback | SolveResult::Failed) {
+            flags |= fault_flags::FALLBACK_PLAN;
+        }
+        if self.envelope_override {
+            flags |= fault_flags::ENVELOPE_OVERRIDE;
+        }
+        flags
+    }
 }
 
 impl ControlLoop {
@@ -187,14 +203,22 @@ impl ControlLoop {
             let deadline = t0 + k as f64 * period;
             clock.sleep_until(deadline);
             let start = clock.now();
+            let compute = Instant::now();
             let outcome = self.tick(start);
+            let tick_time = compute.elapsed().as_secs_f64();
             let end = clock.now();
             let late_start = start - deadline;
             let overrun = end - deadline > period;
             let healthy = !overrun && late_start < period && outcome.sent;
             {
                 let mut s = self.ctx.stats.lock().unwrap_or_else(|p| p.into_inner());
-                s.record(late_start, outcome.solve_time, overrun);
+                s.record_tick(
+                    late_start,
+                    outcome.solve_time,
+                    overrun,
+                    Some(tick_time),
+                    outcome.plan_time,
+                );
             }
             if healthy {
                 self.notifier.watchdog();
@@ -252,12 +276,7 @@ impl ControlLoop {
         let mut solve = None;
         if let (Decision::Track, TickPlan::Track(g), Some(x)) = (decision, &plan, &inputs.x) {
             let s = self.solve(x, g, start, tick_start, &mut t);
-            if matches!(s.result, SolveResult::Fallback | SolveResult::Failed) {
-                flags |= fault_flags::FALLBACK_PLAN;
-            }
-            if s.envelope_override {
-                flags |= fault_flags::ENVELOPE_OVERRIDE;
-            }
+            flags |= s.flags();
             decision = safety::after_solve(s.result, self.solve_failures, self.fallback_ticks());
             if let Decision::Stop(cause) = decision {
                 flags = self.goal_ended_while_tracking(cause, flags);
@@ -269,27 +288,7 @@ impl ControlLoop {
             self.disengage();
         }
 
-        // A stop at the limits from the machine's own velocity where it is
-        // trusted (never faster than it goes).
-        let ramp = envelope::stop_command(
-            self.last_command,
-            inputs.x.as_ref(),
-            &self.params,
-            self.period,
-        );
-        let (mode, drive, command) = match (decision, &plan, &inputs.x) {
-            (Decision::Track, TickPlan::Track(_), Some(_)) => {
-                // The controller's command has passed its envelope (the pilot's);
-                // without one, the stop at the limits.
-                let c = solve.as_ref().and_then(|s| s.command).unwrap_or(ramp);
-                (Mode::Tracking, DriveMode::Drive, c)
-            }
-            (Decision::Track, _, _) => (Mode::Tracking, DriveMode::Drive, ramp),
-            (Decision::Stop(cause), _, _) => {
-                let (mode, drive) = cause.modes(ramp == VelocityCommand::ZERO);
-                (mode, drive, ramp)
-            }
-        };
+        let (mode, drive, command) = self.command_for(decision, &plan, &inputs, solve.as_ref());
         if let Decision::Stop(StopCause::Fault(_)) = decision {
             flags |= self.latched;
             if inputs.faults.stop == 0 && command == VelocityCommand::ZERO {
@@ -304,7 +303,8 @@ impl ControlLoop {
         self.publish(t, mode, flags, command, shown.as_ref(), inputs.x.as_ref());
         TickOutcome {
             sent,
-            solve_time: solve.and_then(|s| s.solve_time),
+            solve_time: solve.as_ref().and_then(|s| s.solve_time),
+            plan_time: solve.and_then(|s| s.new_plan_time),
             exit,
         }
     }
@@ -333,6 +333,35 @@ impl ControlLoop {
                     String::new()
                 }
             );
+        }
+    }
+
+    /// The tick's mode and command: the controller's while tracking (it has
+    /// passed the pilot's envelope), else a stop at the limits from the
+    /// machine's own velocity where it is trusted (never faster than it goes).
+    fn command_for(
+        &self,
+        decision: Decision,
+        plan: &TickPlan,
+        inputs: &Inputs,
+        solve: Option<&Solve>,
+    ) -> (Mode, DriveMode, VelocityCommand) {
+        let ramp = envelope::stop_command(
+            self.last_command,
+            inputs.x.as_ref(),
+            &self.params,
+            self.period,
+        );
+        match (decision, plan, &inputs.x) {
+            (Decision::Track, TickPlan::Track(_), Some(_)) => {
+                let c = solve.and_then(|s| s.command).unwrap_or(ramp);
+                (Mode::Tracking, DriveMode::Drive, c)
+            }
+            (Decision::Track, _, _) => (Mode::Tracking, DriveMode::Drive, ramp),
+            (Decision::Stop(cause), _, _) => {
+                let (mode, drive) = cause.modes(ramp == VelocityCommand::ZERO);
+                (mode, drive, ramp)
+            }
         }
     }
 
@@ -636,6 +665,7 @@ impl ControlLoop {
             command: None,
             solve_time,
             envelope_override: false,
+            new_plan_time: None,
         };
         if self.engaged_generation != Some(g.generation) {
             tracing::info!(
@@ -675,6 +705,7 @@ impl ControlLoop {
                     command: None,
                     solve_time: None,
                     envelope_override: false,
+                    new_plan_time: None,
                 };
             }
             Ok(Step::Drive(plan)) => {
@@ -698,6 +729,7 @@ impl ControlLoop {
                         command: Some(plan.command),
                         solve_time,
                         envelope_override: overridden.is_some(),
+                        new_plan_time: plan.new_plan.then(|| plan.plan_time.as_secs_f64()),
                     },
                 };
                 if let Some((proposed, g)) = overridden {
@@ -733,6 +765,8 @@ fn mode_detail(shown: Option<&AcceptedGoal>, mode: Mode, flags: u32) -> String {
 struct TickOutcome {
     sent: bool,
     solve_time: Option<f64>,
+    /// The wall time of a route plan taken this tick [s].
+    plan_time: Option<f64>,
     exit: Option<ExitReason>,
 }
 

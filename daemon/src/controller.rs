@@ -67,6 +67,8 @@ pub struct Plan<'a> {
     pub route: &'a [Goal],
     /// The last route plan's wall time, on the planner thread.
     pub plan_time: Duration,
+    /// A route plan was taken this step (its time is `plan_time`).
+    pub new_plan: bool,
     /// How old the route followed was when it arrived [s].
     pub route_age: f64,
 }
@@ -219,6 +221,7 @@ impl<C: StageCost> Controller for PilotController<C> {
             subgoal: p.subgoal,
             route: p.route,
             plan_time: p.plan_time,
+            new_plan: p.new_plan,
             route_age: p.route_age,
         }))
     }

@@ -120,6 +120,8 @@ impl RunReport {
             "ticks {}, overruns {}, missed deadlines {}, envelope overrides {}\n\
              tick start jitter: {}\n\
              solve time: {}\n\
+             tick time: {}\n\
+             plan time (planner thread): {}\n\
              commands sent {}, clamped by the guard {}\n\
              goal requests {} ({} rejected)\n\
              resident memory: after warm-up {}, at the end {}",
@@ -129,6 +131,8 @@ impl RunReport {
             self.stats.envelope_overrides,
             self.stats.jitter(),
             self.stats.solve(),
+            self.stats.tick(),
+            self.stats.plan(),
             self.commands_sent,
             self.commands_clamped,
             self.goal_requests.0,

@@ -87,6 +87,8 @@ pub struct LoopStats {
     pub rss_warm: Option<u64>,
     jitter: Ring,
     solve: Ring,
+    tick: Ring,
+    plan: Ring,
 }
 
 impl Default for LoopStats {
@@ -112,11 +114,33 @@ impl LoopStats {
             rss_warm: None,
             jitter: Ring::new(Self::WINDOW),
             solve: Ring::new(Self::WINDOW),
+            tick: Ring::new(Self::WINDOW),
+            plan: Ring::new(Self::WINDOW),
         }
     }
 
     /// One tick: lateness of its start [s], solve time if the MPC ran [s], overrun.
     pub fn record(&mut self, late_start: f64, solve_time: Option<f64>, overrun: bool) {
+        self.record_tick(late_start, solve_time, overrun, None, None);
+    }
+
+    /// [`Self::record`] with the tick's own compute time [s] and the wall time of
+    /// a route plan that arrived in it [s] (planned on the planner thread, not in
+    /// the tick).
+    pub fn record_tick(
+        &mut self,
+        late_start: f64,
+        solve_time: Option<f64>,
+        overrun: bool,
+        tick_time: Option<f64>,
+        plan_time: Option<f64>,
+    ) {
+        if let Some(t) = tick_time {
+            self.tick.push(t);
+        }
+        if let Some(p) = plan_time {
+            self.plan.push(p);
+        }
         self.ticks += 1;
         if self.ticks == Self::WARM_TICK {
             self.rss_warm = resident_memory();
@@ -136,6 +160,16 @@ impl LoopStats {
     /// Solve time (wall time of the MPC step, not scaled).
     pub fn solve(&self) -> Summary {
         self.solve.summary()
+    }
+
+    /// The tick's compute time (inputs to telemetry, no sleep).
+    pub fn tick(&self) -> Summary {
+        self.tick.summary()
+    }
+
+    /// Route plan times (on the planner thread), one per plan taken.
+    pub fn plan(&self) -> Summary {
+        self.plan.summary()
     }
 }
 

@@ -265,6 +265,7 @@ impl Controller for Failing {
                 subgoal: None,
                 route: &[],
                 plan_time: Duration::ZERO,
+                new_plan: false,
                 route_age: 0.0,
             }));
         }
