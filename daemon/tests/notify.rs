@@ -12,44 +12,36 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use common::*;
-use control::mpc::{Mpc, Obstacle, QuadraticCost};
-use control::{Goal, State};
+use control::mpc::Mpc;
+use control::State;
 use shm_ipc::Mode;
+use wlnav_test_kit::controller::{Forwarding, Hooks};
 use wlnavd::controller::{
     quadratic_cost, Controller, ControllerError, ControllerFactory, MpcController, Step,
 };
 
-/// Stalls (sleeps in `step`) once when asked, recording when.
+/// Hooks that stall (sleep in `step`) once when asked, recording when; every other call
+/// reaches the MPC (the kit's wrapper forwards it).
 struct Stalling {
-    inner: MpcController<QuadraticCost>,
     stall: Arc<AtomicBool>,
     window: Arc<Mutex<Option<(Instant, Instant)>>>,
 }
 
 const STALL: Duration = Duration::from_millis(1500);
 
-impl Controller for Stalling {
-    fn set_goal(
-        &mut self,
-        start: &State,
-        goal: Goal,
-        obstacles: &[Obstacle],
-    ) -> Result<(), ControllerError> {
-        self.inner.set_goal(start, goal, obstacles)
-    }
-    fn reset(&mut self) {
-        self.inner.reset()
-    }
-    fn step(&mut self, state: &State, now: f64) -> Result<Step<'_>, ControllerError> {
+impl Hooks for Stalling {
+    fn step<'a>(
+        &'a mut self,
+        inner: &'a mut dyn Controller,
+        state: &State,
+        now: f64,
+    ) -> Result<Step<'a>, ControllerError> {
         if self.stall.swap(false, Ordering::SeqCst) {
             let start = Instant::now();
             std::thread::sleep(STALL);
             *self.window.lock().unwrap() = Some((start, Instant::now()));
         }
-        self.inner.step(state, now)
-    }
-    fn sent(&mut self, now: f64, command: control::VelocityCommand) {
-        self.inner.sent(now, command)
+        inner.step(state, now)
     }
 }
 
@@ -86,11 +78,13 @@ fn ready_then_watchdog_on_healthy_ticks_only() {
     let factory: ControllerFactory = Box::new(move || {
         let mpc = Mpc::new(machine, quadratic_cost(), None, settings)
             .map_err(|e| ControllerError(e.to_string()))?;
-        Ok(Box::new(Stalling {
-            inner: MpcController::new(mpc),
-            stall: s,
-            window: w,
-        }) as Box<dyn Controller>)
+        Ok(Box::new(Forwarding::new(
+            Box::new(MpcController::new(mpc)),
+            Stalling {
+                stall: s,
+                window: w,
+            },
+        )) as Box<dyn Controller>)
     });
     let d = start(config, Some(factory));
     d.goal(10.0, 0.0, 0.0);
