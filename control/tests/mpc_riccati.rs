@@ -10,10 +10,10 @@ use control::mpc::{
 };
 use control::{Critic, HessianMode, Plant, PlantConfig};
 
-#[path = "../benches/workload/mod.rs"]
-mod workload;
 #[path = "../../tests/timing_scale.rs"]
 mod timing_scale;
+#[path = "../benches/workload/mod.rs"]
+mod workload;
 use workload::{CIRCLES, GOAL};
 
 fn networks() -> (Critic, control::Actor) {

@@ -818,7 +818,10 @@ mod tests {
         use control::mpc::QpSolver;
         let default = control::mpc::MpcSettings::default().qp_solver;
         let mut differs = false;
-        for (name, solver) in [("riccati", QpSolver::Riccati), ("clarabel", QpSolver::Clarabel)] {
+        for (name, solver) in [
+            ("riccati", QpSolver::Riccati),
+            ("clarabel", QpSolver::Clarabel),
+        ] {
             let c = Config::from_toml(&format!("[mpc]\nqp_solver = \"{name}\"\n"), "t").unwrap();
             assert_eq!(c.mpc_settings().qp_solver, solver, "{name}");
             differs |= solver != default;

@@ -440,7 +440,9 @@ fn a_stop_falls_back_to_the_goal_service_when_every_stop_slot_is_taken() {
         .collect();
     assert_eq!(held.len(), shm_ipc::qos::STOP_MAX_CLIENTS);
     let stop = shm_ipc::StopClient::new(&config).expect("stop client");
-    let report = stop.stop_report(7, timeout()).expect("the stop gets through");
+    let report = stop
+        .stop_report(7, timeout())
+        .expect("the stop gets through");
     assert!(report.reply.is_accepted(), "{report:?}");
     assert_eq!(report.reply.request_id, 7);
     assert_eq!(report.path, shm_ipc::StopPath::GoalService);
@@ -454,7 +456,9 @@ fn a_stop_falls_back_to_the_goal_service_when_every_stop_slot_is_taken() {
     }
     // `Client::stop` falls back onto its own goal port.
     let client = Client::new(&config).expect("client");
-    let report = client.stop_report(timeout()).expect("the stop gets through");
+    let report = client
+        .stop_report(timeout())
+        .expect("the stop gets through");
     assert!(report.reply.is_accepted());
     assert_eq!(report.path, shm_ipc::StopPath::GoalService);
     // Slots free again: the reserved path.
@@ -491,7 +495,9 @@ fn a_stop_goes_without_notifier_and_listener_when_none_is_free() {
     assert_eq!(listeners.len(), 2 * (shm_ipc::qos::EVENT_MAX_PORTS - 1));
     let stop = shm_ipc::StopClient::new(&config).expect("stop client");
     let start = Instant::now();
-    let report = stop.stop_report(9, timeout()).expect("the stop gets through");
+    let report = stop
+        .stop_report(9, timeout())
+        .expect("the stop gets through");
     let took = start.elapsed();
     assert!(report.reply.is_accepted(), "{report:?}");
     assert_eq!(report.path, shm_ipc::StopPath::StopService);

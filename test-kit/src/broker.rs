@@ -40,10 +40,8 @@ impl Broker {
     /// Starts mosquitto on a free port and waits until it listens.
     pub fn start() -> Self {
         let port = free_port();
-        let dir = std::env::temp_dir().join(format!(
-            "wlnav-test-broker-{}-{port}",
-            std::process::id()
-        ));
+        let dir =
+            std::env::temp_dir().join(format!("wlnav-test-broker-{}-{port}", std::process::id()));
         std::fs::create_dir_all(&dir).expect("broker directory");
         let mut b = Self {
             port,

@@ -54,7 +54,10 @@ pub fn restarts() -> u32 {
 pub fn emulated(pid: u32) -> bool {
     std::fs::read_link(format!("/proc/{pid}/exe"))
         .ok()
-        .and_then(|p| p.file_name().map(|n| n.to_string_lossy().starts_with("qemu-")))
+        .and_then(|p| {
+            p.file_name()
+                .map(|n| n.to_string_lossy().starts_with("qemu-"))
+        })
         .unwrap_or(false)
 }
 
@@ -215,11 +218,7 @@ impl Daemon {
                 Ok(c) => c,
                 Err(e) => {
                     let pid = process.pid().unwrap_or(0);
-                    panic!(
-                        "{} did not start: {e:#}; {}",
-                        command.what,
-                        describe(pid)
-                    )
+                    panic!("{} did not start: {e:#}; {}", command.what, describe(pid))
                 }
             },
         };
@@ -302,16 +301,18 @@ impl DerefMut for Daemon {
 impl Drop for Daemon {
     fn drop(&mut self) {
         if self.process.pid().is_some() {
-            let _ = self.process.terminate(timing_scale::real(Duration::from_secs(5)));
+            let _ = self
+                .process
+                .terminate(timing_scale::real(Duration::from_secs(5)));
         }
     }
 }
 
 /// Still running, and nothing in its log.
 fn is_silent(process: &mut DaemonProcess) -> bool {
-    let empty = process
-        .log_path()
-        .map_or(true, |p| std::fs::metadata(p).map_or(true, |m| m.len() == 0));
+    let empty = process.log_path().map_or(true, |p| {
+        std::fs::metadata(p).map_or(true, |m| m.len() == 0)
+    });
     empty && matches!(process.try_wait(), Ok(None))
 }
 
@@ -327,7 +328,9 @@ mod tests {
         let pid = child.id();
         // Until exec the child is this test process; the exe settles within moments.
         let deadline = std::time::Instant::now() + timing_scale::real(Duration::from_secs(5));
-        while !describe(pid).contains("exe /usr/bin/sleep") && !describe(pid).contains("exe /bin/sleep") {
+        while !describe(pid).contains("exe /usr/bin/sleep")
+            && !describe(pid).contains("exe /bin/sleep")
+        {
             assert!(std::time::Instant::now() < deadline, "{}", describe(pid));
             std::thread::sleep(Duration::from_millis(5));
         }

@@ -16,8 +16,8 @@ use common::*;
 use control::mpc::Mpc;
 use control::{State, VelocityCommand};
 use shm_ipc::{fault_flags, Mode, Telemetry};
-use wlnavd::can::DriveMode;
 use wlnav_test_kit::controller::{Forwarding, Hooks};
+use wlnavd::can::DriveMode;
 use wlnavd::controller::{
     quadratic_cost, Controller, ControllerError, ControllerFactory, MpcController, Plan, Step,
 };

@@ -205,10 +205,14 @@ impl Drop for Proc {
 /// obstacle counts).
 pub fn start_daemon(prefix: &str) -> Daemon {
     let scale = timing_scale::daemon_time_scale(FAST);
-    let mut command =
-        DaemonCommand::sim(&wlnav_test_kit::binaries().wlnavd, prefix, "fleet-wlnavd", Some(scale))
-            .args(["--cost".to_owned(), wlnav_test_kit::cost()])
-            .env("RUST_LOG", "info");
+    let mut command = DaemonCommand::sim(
+        &wlnav_test_kit::binaries().wlnavd,
+        prefix,
+        "fleet-wlnavd",
+        Some(scale),
+    )
+    .args(["--cost".to_owned(), wlnav_test_kit::cost()])
+    .env("RUST_LOG", "info");
     // On a slower CPU the solver's budget (also the start-up self-test's) is scaled too.
     if timing_scale::factor() > 1.0 {
         let budget = command.log.with_extension("toml");
