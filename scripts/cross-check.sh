@@ -218,11 +218,21 @@ done <"$CARGO_TARGET_DIR/cross-tests.txt"
 total_tests=0
 failed=()
 cpu_total=0
+# Children the test kit restarted (a wlnavd child silent for half its start-up limit under
+# emulation: test-kit/src/daemon.rs prints one `wlnav-test-kit: RESTARTED` line each, past
+# the harness's capture), counted per suite and in all.
+restarted_total=0
 while read -r dir name exe; do
   log=$CARGO_TARGET_DIR/cross-test-$(basename "$dir")-${name//[:\/]/-}.log
   [ -f "$log.status" ] || { failed+=("$(basename "$dir") $name (did not run)"); continue; }
   read -r status wall user sys <"$log.status"
   cpu_total=$(awk -v t="$cpu_total" -v u="$user" -v s="$sys" 'BEGIN { print t + u + s }')
+  restarted=$(grep -c '^wlnav-test-kit: RESTARTED' "$log" || true)
+  restarted_total=$((restarted_total + restarted))
+  if [ "$restarted" -gt 0 ]; then
+    echo "cross-check:   $(basename "$dir") $name: $restarted silent child(ren) restarted:" >&2
+    grep '^wlnav-test-kit: RESTARTED' "$log" >&2
+  fi
   if [ "$status" != 0 ]; then
     echo "cross-check:   $(basename "$dir") $name FAILED (exit $status, $wall s; log: $log):" >&2
     grep -E '^test .*FAILED|^failures:|panicked|^test result' "$log" >&2 || tail -n 40 "$log" >&2
@@ -237,7 +247,7 @@ done <"$CARGO_TARGET_DIR/cross-tests.txt"
 [ ${#failed[@]} -eq 0 ] ||
   fail "under qemu-aarch64 (WLNAV_TIMING_SCALE=$WLNAV_TIMING_SCALE): ${failed[*]}"
 unset WLNAV_E2E_BIN_DIR
-step "$total_tests tests of ${suites[*]} pass under qemu-aarch64 (WLNAV_TIMING_SCALE=$WLNAV_TIMING_SCALE; $jobs at a time; $cpu_total s of CPU)"
+step "$total_tests tests of ${suites[*]} pass under qemu-aarch64 (WLNAV_TIMING_SCALE=$WLNAV_TIMING_SCALE; $jobs at a time; $cpu_total s of CPU; $restarted_total silent children restarted)"
 
 # 5. The examples (the Rust ones arm64 too; the Python one native, over the same shared
 # memory) against an arm64 wlnavd --sim.

@@ -82,7 +82,20 @@ impl DaemonProcess {
         log: Option<&Path>,
     ) -> anyhow::Result<Self> {
         let mut cmd = Command::new(binary);
-        cmd.args(args).stdin(Stdio::null());
+        cmd.args(args);
+        Self::spawn_command(cmd, prefix, log)
+    }
+
+    /// Starts `cmd` (its program, arguments, environment and working directory as the
+    /// caller set them; the arguments must include the prefix the caller will use), like
+    /// [`DaemonProcess::spawn`]: standard input closed, output to `log` if given.
+    pub fn spawn_command(
+        mut cmd: Command,
+        prefix: &str,
+        log: Option<&Path>,
+    ) -> anyhow::Result<Self> {
+        let binary = PathBuf::from(cmd.get_program());
+        cmd.stdin(Stdio::null());
         if let Some(log) = log {
             let out = File::create(log)
                 .with_context(|| format!("cannot create the daemon log {}", log.display()))?;
@@ -97,7 +110,7 @@ impl DaemonProcess {
             child: Some(child),
             prefix: prefix.to_owned(),
             log: log.map(Path::to_path_buf),
-            binary: binary.to_path_buf(),
+            binary,
         })
     }
 

@@ -794,17 +794,26 @@ mod tests {
         assert_eq!(back, c);
     }
 
-    /// `[mpc] qp_solver` picks the MPC's QP solver (issue 30); a name it
-    /// does not know is an error naming the key.
+    /// `[mpc] qp_solver` picks the MPC's QP solver (issue 30): each solver's name gives
+    /// that solver, so one of them is not the default and a key that were ignored would
+    /// fail here; without the key the default stays; a name it does not know is an error
+    /// naming the key.
     #[test]
     fn mpc_qp_solver_is_read() {
-        let c = Config::from_toml("[mpc]\nqp_solver = \"riccati\"\n", "t").unwrap();
-        assert_eq!(c.mpc_settings().qp_solver, control::mpc::QpSolver::Riccati);
+        use control::mpc::QpSolver;
+        let default = control::mpc::MpcSettings::default().qp_solver;
+        let mut differs = false;
+        for (name, solver) in [
+            ("riccati", QpSolver::Riccati),
+            ("clarabel", QpSolver::Clarabel),
+        ] {
+            let c = Config::from_toml(&format!("[mpc]\nqp_solver = \"{name}\"\n"), "t").unwrap();
+            assert_eq!(c.mpc_settings().qp_solver, solver, "{name}");
+            differs |= solver != default;
+        }
+        assert!(differs, "both solvers named: one is not the default");
         let d = Config::from_toml("[mpc]\nhorizon = 20\n", "t").unwrap();
-        assert_eq!(
-            d.mpc_settings().qp_solver,
-            control::mpc::MpcSettings::default().qp_solver
-        );
+        assert_eq!(d.mpc_settings().qp_solver, default);
         assert!(err("[mpc]\nqp_solver = \"qdldl\"\n").contains("qp_solver"));
     }
 

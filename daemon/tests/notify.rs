@@ -12,50 +12,37 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use common::*;
-use control::mpc::{Mpc, Obstacle, QuadraticCost};
-use control::{Goal, State};
+use control::mpc::Mpc;
+use control::State;
 use shm_ipc::Mode;
+use wlnav_test_kit::controller::{Forwarding, Hooks};
 use wlnavd::controller::{
     quadratic_cost, Controller, ControllerError, ControllerFactory, PilotController, Step,
 };
 
-/// Stalls (sleeps in `step`) once when asked, recording when.
+/// Hooks that stall (sleep in `step`) once when asked, recording when; every other call
+/// reaches the MPC (the kit's wrapper forwards it).
 struct Stalling {
-    inner: PilotController<QuadraticCost>,
     stall: Arc<AtomicBool>,
     window: Arc<Mutex<Option<(Instant, Instant)>>>,
 }
 
 const STALL: Duration = Duration::from_millis(1500);
 
-impl Controller for Stalling {
-    fn set_goal(
-        &mut self,
-        start: &State,
-        goal: Goal,
-        obstacles: &[Obstacle],
-        now: f64,
-    ) -> Result<(), ControllerError> {
-        self.inner.set_goal(start, goal, obstacles, now)
-    }
-    fn reset(&mut self) {
-        self.inner.reset()
-    }
-    fn step(
-        &mut self,
+impl Hooks for Stalling {
+    fn step<'a>(
+        &'a mut self,
+        inner: &'a mut dyn Controller,
         state: &State,
         now: f64,
-        tick_start: std::time::Instant,
-    ) -> Result<Step<'_>, ControllerError> {
+        tick_start: Instant,
+    ) -> Result<Step<'a>, ControllerError> {
         if self.stall.swap(false, Ordering::SeqCst) {
             let start = Instant::now();
             std::thread::sleep(STALL);
             *self.window.lock().unwrap() = Some((start, Instant::now()));
         }
-        self.inner.step(state, now, tick_start)
-    }
-    fn sent(&mut self, now: f64, command: control::VelocityCommand) {
-        self.inner.sent(now, command)
+        inner.step(state, now, tick_start)
     }
 }
 
@@ -93,11 +80,13 @@ fn ready_then_watchdog_on_healthy_ticks_only() {
     let factory: ControllerFactory = Box::new(move || {
         let mpc = Mpc::new(machine, quadratic_cost(), None, settings)
             .map_err(|e| ControllerError(e.to_string()))?;
-        Ok(Box::new(Stalling {
-            inner: PilotController::without_navigator(mpc, &pilot_config)?,
-            stall: s,
-            window: w,
-        }) as Box<dyn Controller>)
+        Ok(Box::new(Forwarding::new(
+            Box::new(PilotController::without_navigator(mpc, &pilot_config)?),
+            Stalling {
+                stall: s,
+                window: w,
+            },
+        )) as Box<dyn Controller>)
     });
     let d = start(config, Some(factory));
     d.goal(10.0, 0.0, 0.0);

@@ -26,10 +26,10 @@ use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
 use common::*;
-use control::mpc::Obstacle;
-use control::{Goal, State, VelocityCommand};
+use control::VelocityCommand;
 use shm_ipc::Pose2;
-use wlnavd::controller::{load_controller, Controller, ControllerError, ControllerFactory, Step};
+use wlnav_test_kit::controller::{Forwarding, Hooks};
+use wlnavd::controller::{load_controller, Controller, ControllerFactory};
 use wlnavd::stats::LoopStats;
 
 /// Rust's global allocator with a count of the bytes allocated and not yet freed, by the
@@ -215,40 +215,17 @@ fn soak_10000_ticks() {
     check(10_000, 20.0);
 }
 
-/// The daemon's controller, leaking `bytes` on every tick.
+/// Hooks on the daemon's controller, leaking `bytes` on every tick; every call reaches
+/// the controller (the kit's wrapper forwards it).
 struct Leaking {
-    inner: Box<dyn Controller>,
     bytes: usize,
 }
 
-impl Controller for Leaking {
-    fn set_goal(
-        &mut self,
-        start: &State,
-        goal: Goal,
-        obstacles: &[Obstacle],
-        now: f64,
-    ) -> Result<(), ControllerError> {
-        self.inner.set_goal(start, goal, obstacles, now)
-    }
-    fn reset(&mut self) {
-        self.inner.reset()
-    }
-    fn step(
-        &mut self,
-        state: &State,
-        now: f64,
-        tick_start: std::time::Instant,
-    ) -> Result<Step<'_>, ControllerError> {
-        self.inner.step(state, now, tick_start)
-    }
-    fn sent(&mut self, now: f64, command: VelocityCommand) {
+impl Hooks for Leaking {
+    fn sent(&mut self, inner: &mut dyn Controller, now: f64, command: VelocityCommand) {
         // Written, so that it is resident too.
         std::hint::black_box(Vec::leak(vec![1u8; self.bytes]));
-        self.inner.sent(now, command)
-    }
-    fn compensated_delay(&self) -> Option<f64> {
-        self.inner.compensated_delay()
+        inner.sent(now, command)
     }
 }
 
@@ -259,10 +236,7 @@ fn a_leak_in_the_loop_fails_the_heap_check() {
     const LEAK: usize = 4096;
     let inner = load_controller(&sim_config("soak")).unwrap();
     let factory: ControllerFactory = Box::new(move || {
-        Ok(Box::new(Leaking {
-            inner: inner()?,
-            bytes: LEAK,
-        }) as Box<dyn Controller>)
+        Ok(Box::new(Forwarding::new(inner()?, Leaking { bytes: LEAK })) as Box<dyn Controller>)
     });
     let (report, heap, _) = soak(3 * WINDOW, 10.0, Some(factory));
     assert!(report.stats.ticks >= 3 * WINDOW);

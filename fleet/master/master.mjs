@@ -7,8 +7,10 @@
 // For every vehicle at once: a 3-node order (A -> B passed within 0.5 m -> C, D as horizon)
 // to completion node by node; an order update releasing D; a second order cancelled while
 // driving (cancelOrder); a third order paused and resumed (startPause / stopPause). Every
-// state, visualization, connection and factsheet message received is validated against the
-// official JSON schemas (fleet/schemas/) with Ajv (draft 2020-12). Exit 0 when all holds.
+// state, visualization, connection and factsheet message received is validated here against
+// the official JSON schemas (fleet/schemas/) with Ajv (draft 2020-12), the library's own
+// inbound validation off; each vehicle must send each of them, and every message must reach
+// the master's handlers (none dropped). Exit 0 when all holds.
 //
 // vda-5050-lib 1.4.0 sends instant actions under the key `instantActions` (VDA 5050 1.1's
 // name); the 2.0.0 schema requires `actions`. The bridge refuses such a message (a
@@ -32,15 +34,42 @@ const serials = arg("serials").split(",");
 const schemaDir = arg("schemas");
 
 // ---- schemas --------------------------------------------------------------------------
+// Every message is validated here, against the official schemas. The library's own inbound
+// validation is off (topicObjectValidation.inbound below): it drops an invalid message
+// with a console line before any handler, so the check here would never see it. Counts are
+// per vehicle and topic, of what arrived on the wire (`received`) and of what reached this
+// master's handlers through the library (`delivered`): any difference is a dropped message,
+// and fails the run.
 const { ajv, validators } = compileSchemas(schemaDir);
-const counts = {};
+const received = {};
+const delivered = {};
 const invalid = [];
+const dropped = [];
+const bump = (table, serial, topic) => {
+  table[serial] ??= {};
+  table[serial][topic] = (table[serial][topic] ?? 0) + 1;
+};
 function check(topic, msg, serial) {
-  counts[topic] = (counts[topic] ?? 0) + 1;
   if (!validators[topic](msg)) {
     invalid.push(`${serial} ${topic}: ${ajv.errorsText(validators[topic].errors)}: ${JSON.stringify(msg)}`);
   }
 }
+// Whatever the library still drops (a payload that is not JSON, a handler's error) it
+// reports on console.error: a failure here.
+const consoleError = console.error.bind(console);
+console.error = (...args) => {
+  if (typeof args[0] === "string" && args[0].startsWith("Drop inbound message")) dropped.push(args.map(String).join(" "));
+  consoleError(...args);
+};
+
+// Wall-clock limits scale with WLNAV_TIMING_SCALE (tests/timing_scale.rs: a number >= 1).
+const timingScale = (() => {
+  const v = process.env.WLNAV_TIMING_SCALE;
+  if (v === undefined || v.trim() === "") return 1;
+  const f = Number(v);
+  if (!Number.isFinite(f) || f < 1) throw new Error(`WLNAV_TIMING_SCALE=${v}: must be a number >= 1`);
+  return f;
+})();
 
 // ---- helpers --------------------------------------------------------------------------
 const log = (...a) => console.log(new Date().toISOString(), ...a);
@@ -50,7 +79,8 @@ function fail(msg) {
 }
 const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
 function withTimeout(promise, ms, what) {
-  return Promise.race([promise, sleep(ms).then(() => { throw new Error(`timeout after ${ms} ms: ${what}`); })]);
+  const limit = ms * timingScale;
+  return Promise.race([promise, sleep(limit).then(() => { throw new Error(`timeout after ${limit} ms: ${what}`); })]);
 }
 
 const lastState = new Map();
@@ -120,7 +150,10 @@ function instant(mc, agv, actionType, actionId) {
 
 // ---- the run --------------------------------------------------------------------------
 const mc = new MasterController(
-  { interfaceName: "uagv", transport: { brokerUrl: `mqtt://${broker}` }, vdaVersion: "2.0.0" },
+  {
+    interfaceName: "uagv", transport: { brokerUrl: `mqtt://${broker}` }, vdaVersion: "2.0.0",
+    topicObjectValidation: { inbound: false },
+  },
   { targetAgvs: { manufacturer } },
 );
 await mc.start();
@@ -142,12 +175,31 @@ mqtt.publish = (topic, payload, ...rest) => {
   return rawPublish(topic, payload, ...rest);
 };
 
+// Every inbound message on the wire, before the library: counted and validated. The
+// library's listener was added first (mc.start), so on each message it has run its
+// handlers (counted in `delivered`) before this one counts it as received.
+const inboundTopics = ["state", "visualization", "connection", "factsheet"];
+mqtt.on("message", (topic, payload) => {
+  const [, , m, serial, name] = topic.split("/");
+  if (m !== manufacturer || !serials.includes(serial) || !inboundTopics.includes(name)) return;
+  bump(received, serial, name);
+  let msg;
+  try {
+    msg = JSON.parse(payload.toString());
+  } catch (e) {
+    invalid.push(`${serial} ${name}: not JSON (${e.message}): ${payload.toString().slice(0, 200)}`);
+    return;
+  }
+  check(name, msg, serial);
+});
+
 const agvs = serials.map((serialNumber) => ({ manufacturer, serialNumber }));
 for (const agv of agvs) {
-  await mc.subscribe(Topic.State, agv, (s) => { check("state", s, agv.serialNumber); onState(agv.serialNumber, s); });
-  await mc.subscribe(Topic.Visualization, agv, (m) => check("visualization", m, agv.serialNumber));
-  await mc.subscribe(Topic.Connection, agv, (m) => check("connection", m, agv.serialNumber));
-  await mc.subscribe(Topic.Factsheet, agv, (m) => check("factsheet", m, agv.serialNumber));
+  const s = agv.serialNumber;
+  await mc.subscribe(Topic.State, agv, (st) => { bump(delivered, s, "state"); onState(s, st); });
+  await mc.subscribe(Topic.Visualization, agv, () => bump(delivered, s, "visualization"));
+  await mc.subscribe(Topic.Connection, agv, () => bump(delivered, s, "connection"));
+  await mc.subscribe(Topic.Factsheet, agv, () => bump(delivered, s, "factsheet"));
 }
 
 async function drive(agv) {
@@ -210,8 +262,14 @@ try {
 await sleep(300);
 await mc.stop();
 if (invalid.length > 0) fail(`${invalid.length} messages fail their schema:\n${invalid.slice(0, 5).join("\n")}`);
-for (const t of ["state", "visualization", "connection", "factsheet"]) {
-  if (!counts[t]) fail(`no ${t} message received`);
+if (dropped.length > 0) fail(`the library dropped ${dropped.length} inbound messages:\n${dropped.slice(0, 5).join("\n")}`);
+for (const s of serials) {
+  for (const t of inboundTopics) {
+    const r = received[s]?.[t] ?? 0;
+    const d = delivered[s]?.[t] ?? 0;
+    if (r === 0) fail(`${s}: no ${t} message received`);
+    if (d !== r) fail(`${s}: ${r} ${t} messages received, ${d} reached the master (${r - d} dropped)`);
+  }
 }
-log("master: all steps done; schema-valid messages:", JSON.stringify(counts));
+log("master: all steps done; schema-valid messages per vehicle:", JSON.stringify(received));
 process.exit(0);

@@ -12,7 +12,10 @@ use shm_ipc::{
     MachineState, Mode, Obstacle, Pose2, PoseEstimate, RejectCode, Telemetry,
 };
 
-const TIMEOUT: Duration = Duration::from_secs(5);
+/// The request and wait limit of these tests: 5 s times `WLNAV_TIMING_SCALE`.
+fn timeout() -> Duration {
+    timing_scale::real(Duration::from_secs(5))
+}
 
 /// Wall-clock limits of these tests are timing limits: times `WLNAV_TIMING_SCALE` (the
 /// shared helper; emulation: scripts/cross-check.sh).
@@ -67,7 +70,7 @@ impl TestServer {
             }
             served
         });
-        ready_rx.recv_timeout(TIMEOUT).expect("server ready");
+        ready_rx.recv_timeout(timeout()).expect("server ready");
         Self {
             stop,
             handle: Some(handle),
@@ -92,14 +95,14 @@ fn goal_request_is_answered_by_server_thread() {
 
     let obstacles = [Obstacle::new(2.0, 1.0, 0.5)];
     let reply = client
-        .set_goal(Pose2::new(4.5, 0.0, 0.3), &obstacles, TIMEOUT)
+        .set_goal(Pose2::new(4.5, 0.0, 0.3), &obstacles, timeout())
         .expect("reply");
     assert!(reply.is_accepted(), "{}", reply.reason_text());
     assert_eq!(reply.reject_code(), Ok(RejectCode::None));
 
     // A request with an explicit id: the reply echoes it.
     let req = GoalRequest::set_goal(4242, Pose2::new(f64::NAN, 0.0, 0.0), &[]).expect("req");
-    let reply = client.request(&req, TIMEOUT).expect("reply");
+    let reply = client.request(&req, timeout()).expect("reply");
     assert_eq!(reply.request_id, 4242);
     assert!(!reply.is_accepted());
     assert_eq!(reply.reject_code(), Ok(RejectCode::NonFinite));
@@ -114,22 +117,22 @@ fn goal_request_is_answered_by_server_thread() {
         .set_goal(
             Pose2::new(2.0, 1.0, 0.0),
             &[Obstacle::new(2.0, 1.0, -0.5)],
-            TIMEOUT,
+            timeout(),
         )
         .expect("reply");
     assert_eq!(bad_radius.reject_code(), Ok(RejectCode::BadObstacle));
     let outside = client
-        .set_goal(Pose2::new(1e4, 0.0, 0.0), &[], TIMEOUT)
+        .set_goal(Pose2::new(1e4, 0.0, 0.0), &[], timeout())
         .expect("reply");
     assert_eq!(outside.reject_code(), Ok(RejectCode::OutOfWorkspace));
     assert!(outside.reason_text().contains("workspace"));
     let mut too_many = GoalRequest::set_goal(7, Pose2::new(1.0, 1.0, 0.0), &[]).expect("req");
     too_many.obstacle_count = 9;
-    let reply = client.request(&too_many, TIMEOUT).expect("reply");
+    let reply = client.request(&too_many, timeout()).expect("reply");
     assert_eq!(reply.reject_code(), Ok(RejectCode::TooManyObstacles));
 
-    assert!(client.cancel(TIMEOUT).expect("cancel").is_accepted());
-    assert!(client.stop(TIMEOUT).expect("stop").is_accepted());
+    assert!(client.cancel(timeout()).expect("cancel").is_accepted());
+    assert!(client.stop(timeout()).expect("stop").is_accepted());
 
     // Several requests in flight at once, answered in any order.
     let pending: Vec<_> = (0..8)
@@ -140,13 +143,13 @@ fn goal_request_is_answered_by_server_thread() {
         })
         .collect();
     for (i, p) in pending.into_iter().enumerate() {
-        let reply = p.wait(TIMEOUT).expect("reply");
+        let reply = p.wait(timeout()).expect("reply");
         assert_eq!(reply.request_id, 1000 + i as u64);
         assert!(reply.is_accepted());
     }
 
     assert!(client
-        .set_goal(Pose2::default(), &[Obstacle::default(); 9], TIMEOUT)
+        .set_goal(Pose2::default(), &[Obstacle::default(); 9], timeout())
         .is_err());
     assert_eq!(server.finish(), 5 + 2 + 8);
 }
@@ -169,13 +172,13 @@ fn no_daemon_is_reported_not_hung() {
     let ep = DaemonEndpoint::new(&config).expect("daemon");
     let client = Client::new(&config).expect("client");
     drop(ep);
-    match client.set_goal(Pose2::new(1.0, 0.0, 0.0), &[], TIMEOUT) {
+    match client.set_goal(Pose2::new(1.0, 0.0, 0.0), &[], timeout()) {
         Err(ClientError::NoDaemon { service }) => assert!(service.ends_with("/v2/goal")),
         other => panic!("expected NoDaemon, got {other:?}"),
     }
     // The stop service went with the daemon (no client holds it); the fallback on the
     // goal service finds no server either: both reasons are reported.
-    match client.stop(TIMEOUT) {
+    match client.stop(timeout()) {
         Err(ClientError::StopNotSent { stop, goal }) => {
             match *stop {
                 ClientError::Ipc(shm_ipc::IpcError::NotServed { service })
@@ -215,10 +218,10 @@ fn a_stop_gets_through_when_every_goal_client_slot_is_taken() {
     assert!(Client::new(&config).is_err(), "no goal slot left");
     let stop = shm_ipc::StopClient::new(&config).expect("stop client");
     for _ in 0..3 {
-        assert!(stop.stop(TIMEOUT).expect("stop").is_accepted());
+        assert!(stop.stop(timeout()).expect("stop").is_accepted());
     }
     // Each `Client::stop` also goes the reserved way.
-    assert!(held[0].stop(TIMEOUT).expect("stop").is_accepted());
+    assert!(held[0].stop(timeout()).expect("stop").is_accepted());
     drop(held);
     assert_eq!(server.finish(), 4);
 }
@@ -276,13 +279,13 @@ fn unanswered_requests_time_out_or_report_dropped() {
             };
             drop(g);
         });
-        pending.wait(TIMEOUT)
+        pending.wait(timeout())
     });
     match dropped {
         Err(ClientError::Dropped { request_id: 2 }) => {}
         other => panic!("expected dropped, got {other:?}"),
     }
-    assert!(start.elapsed() < TIMEOUT);
+    assert!(start.elapsed() < timeout());
 }
 
 fn telemetry(tick: u64) -> Telemetry {
@@ -316,7 +319,7 @@ fn telemetry_reaches_two_subscribers_at_once() {
             thread::spawn(move || {
                 let mut ticks = Vec::new();
                 while ticks.len() < 10 {
-                    match sub.recv_timeout(TIMEOUT).expect("recv") {
+                    match sub.recv_timeout(timeout()).expect("recv") {
                         Some(t) => {
                             assert_eq!(t.trajectory().len(), 11);
                             assert_eq!(t.mode(), Ok(Mode::Tracking));
@@ -356,7 +359,7 @@ fn pose_from_client_reaches_daemon_and_wakes_it() {
         );
         client.publish_pose(&p).expect("publish");
     }
-    let woke = ep.wait(Some(TIMEOUT)).expect("wait");
+    let woke = ep.wait(Some(timeout())).expect("wait");
     assert!(woke.pose);
     let latest = ep.latest_pose().expect("pose").expect("some pose");
     assert_eq!(latest.sequence, 2);
@@ -384,12 +387,13 @@ fn two_prefixes_in_parallel_do_not_interfere() {
             let sub = client.subscribe_telemetry().expect("sub");
             for i in 0..goals {
                 let reply = client
-                    .set_goal(Pose2::new(i as f64 * 0.1, 0.0, 0.0), &[], TIMEOUT)
+                    .set_goal(Pose2::new(i as f64 * 0.1, 0.0, 0.0), &[], timeout())
                     .expect("reply");
                 assert!(reply.is_accepted());
             }
             let mut seen = Vec::new();
-            while let Some(t) = sub.recv_timeout(Duration::from_millis(300)).expect("recv") {
+            let quiet = timing_scale::real(Duration::from_millis(300));
+            while let Some(t) = sub.recv_timeout(quiet).expect("recv") {
                 seen.push(t.tick);
             }
             seen
@@ -436,7 +440,9 @@ fn a_stop_falls_back_to_the_goal_service_when_every_stop_slot_is_taken() {
         .collect();
     assert_eq!(held.len(), shm_ipc::qos::STOP_MAX_CLIENTS);
     let stop = shm_ipc::StopClient::new(&config).expect("stop client");
-    let report = stop.stop_report(7, TIMEOUT).expect("the stop gets through");
+    let report = stop
+        .stop_report(7, timeout())
+        .expect("the stop gets through");
     assert!(report.reply.is_accepted(), "{report:?}");
     assert_eq!(report.reply.request_id, 7);
     assert_eq!(report.path, shm_ipc::StopPath::GoalService);
@@ -450,12 +456,14 @@ fn a_stop_falls_back_to_the_goal_service_when_every_stop_slot_is_taken() {
     }
     // `Client::stop` falls back onto its own goal port.
     let client = Client::new(&config).expect("client");
-    let report = client.stop_report(TIMEOUT).expect("the stop gets through");
+    let report = client
+        .stop_report(timeout())
+        .expect("the stop gets through");
     assert!(report.reply.is_accepted());
     assert_eq!(report.path, shm_ipc::StopPath::GoalService);
     // Slots free again: the reserved path.
     drop(held);
-    let report = stop.stop_report(8, TIMEOUT).expect("stop");
+    let report = stop.stop_report(8, timeout()).expect("stop");
     assert_eq!(report.path, shm_ipc::StopPath::StopService);
     assert!(report.detours.is_empty(), "{report:?}");
     drop(client);
@@ -487,7 +495,9 @@ fn a_stop_goes_without_notifier_and_listener_when_none_is_free() {
     assert_eq!(listeners.len(), 2 * (shm_ipc::qos::EVENT_MAX_PORTS - 1));
     let stop = shm_ipc::StopClient::new(&config).expect("stop client");
     let start = Instant::now();
-    let report = stop.stop_report(9, TIMEOUT).expect("the stop gets through");
+    let report = stop
+        .stop_report(9, timeout())
+        .expect("the stop gets through");
     let took = start.elapsed();
     assert!(report.reply.is_accepted(), "{report:?}");
     assert_eq!(report.path, shm_ipc::StopPath::StopService);
@@ -509,7 +519,7 @@ fn a_stop_goes_without_notifier_and_listener_when_none_is_free() {
     // The stop event's notifiers alone: the daemon is woken through the goal event service.
     notifiers.truncate(shm_ipc::qos::EVENT_MAX_PORTS - 1);
     listeners.clear();
-    let report = stop.stop_report(10, TIMEOUT).expect("stop");
+    let report = stop.stop_report(10, timeout()).expect("stop");
     assert!(report.notified && report.listened, "{report:?}");
     assert!(
         report

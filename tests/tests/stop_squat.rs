@@ -30,8 +30,15 @@ const PREFIX_ENV: &str = "WLNAV_SQUAT_PREFIX";
 #[ignore = "helper process for the squatting tests of this file"]
 fn squat_helper() {
     use shm_ipc::iceoryx2::prelude::*;
+    // Run only as the squatter of the tests below, which set both variables: run by hand
+    // (`--ignored`, `--include-ignored`) without them it fails, saying so, rather than
+    // passing without having squatted on anything.
     let (Ok(prefix), Ok(what)) = (std::env::var(PREFIX_ENV), std::env::var(WHAT_ENV)) else {
-        return;
+        panic!(
+            "squat_helper is the squatting process of this file's tests, started by them \
+             with {PREFIX_ENV} and {WHAT_ENV} set; it is not a test of its own (run the \
+             suite without --ignored/--include-ignored, or skip it: --skip squat_helper)"
+        );
     };
     set_log_level(LogLevel::Fatal);
     let names = ServiceNames::new(&prefix).unwrap();
@@ -107,19 +114,32 @@ impl Squatter {
             .stderr(Stdio::null())
             .spawn()
             .expect("spawn the squatter");
+        // Read on a thread of its own, so that a squatter that never reports (a silent
+        // child) fails the test after a limit instead of blocking it.
         let out = child.stdout.take().unwrap();
-        let mut held = None;
-        for line in BufReader::new(out).lines() {
-            let line = line.unwrap();
-            if let Some(n) = line.strip_prefix("held ") {
-                held = Some(n.trim().parse().unwrap());
-                break;
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            for line in BufReader::new(out).lines() {
+                let Ok(line) = line else { break };
+                if let Some(n) = line.strip_prefix("held ") {
+                    let _ = tx.send(n.trim().parse::<usize>().ok());
+                    return;
+                }
             }
-        }
-        let held = held.unwrap_or_else(|| {
-            let _ = child.kill();
-            panic!("the squatter ({what}) did not report")
         });
+        let limit = e2e::timing_scale::real(Duration::from_secs(60));
+        let held = match rx.recv_timeout(limit) {
+            Ok(Some(n)) => n,
+            other => {
+                let what_proc = wlnav_test_kit::daemon::describe(child.id());
+                let _ = child.kill();
+                let _ = child.wait();
+                panic!(
+                    "the squatter ({what}) did not report what it holds within {limit:?} \
+                     ({other:?}); {what_proc}"
+                )
+            }
+        };
         Self { child, held }
     }
 

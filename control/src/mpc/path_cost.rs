@@ -421,11 +421,17 @@ mod tests {
             &MachineParams::default(),
             false,
         );
-        // A point between the two legs near the start belongs to the first leg
-        // from the start's hint, though the return leg is as near.
-        assert_eq!(p.nearest_segment(0.5, 0.5, 0), 0);
-        // From a hint on the return leg, the first leg is behind.
-        assert_eq!(p.nearest_segment(0.5, 0.45, 2), 2);
+        // A point between the legs near the start, nearer the return leg (0.3 m)
+        // than the first (0.7 m): from the start's hint the return leg is beyond
+        // the search's reach (its arc starts 5 m on), so it belongs to the first.
+        let (x, y) = (0.5, 0.7);
+        assert!(p.segment_distance(2, x, y) < p.segment_distance(0, x, y));
+        assert_eq!(p.nearest_segment(x, y, 0), 0);
+        // From a hint on the return leg, the first leg is behind, though nearer
+        // (0.45 m against 0.55 m).
+        let (x, y) = (0.5, 0.45);
+        assert!(p.segment_distance(0, x, y) < p.segment_distance(2, x, y));
+        assert_eq!(p.nearest_segment(x, y, 2), 2);
         // Beyond the end the value stops falling (no pull past the end)...
         let x = State::new(-1.0, 1.0, pi, 0.0, 0.0, 0.0);
         let term = p.eval(&x, &Control::zeros(), 2);

@@ -560,20 +560,21 @@ fn a_path_that_ends_with_a_goal_shot_is_continued_by_it() {
     assert!((end.x - goal.x).hypot(end.y - goal.y) > 1.0, "{end:?}");
     nav.update(&start, 0.0);
     let cost = nav.path_cost().expect("a path cost");
-    if cost.open_end() {
-        // The shot reverses: the path's own length, open beyond its end.
-        assert!((cost.length() - path_arc).abs() < 1e-9);
-    } else {
-        // Driven again, the shot ends at the goal: the cost runs there.
-        // Projected from the last segment (a hint beyond it is clamped).
-        let (left, _) = cost.arc_left(goal.x, goal.y, usize::MAX);
-        assert!(
-            cost.length() > path_arc + 1.0,
-            "{} vs {path_arc}",
-            cost.length()
-        );
-        assert!(left.abs() < tolerance + 0.3, "{left}");
-    }
+    // This shot drives forwards to the goal: driven again, it continues the path (a
+    // shot that reversed would leave the end open instead, for the critic). The
+    // cost runs to the goal, past the path's own end.
+    assert!(
+        !cost.open_end(),
+        "the forward shot was not driven again: the path's end is open"
+    );
+    // Projected from the last segment (a hint beyond it is clamped).
+    let (left, _) = cost.arc_left(goal.x, goal.y, usize::MAX);
+    assert!(
+        cost.length() > path_arc + 1.0,
+        "{} vs {path_arc}",
+        cost.length()
+    );
+    assert!(left.abs() < tolerance + 0.3, "{left}");
 }
 
 #[test]

@@ -3,7 +3,7 @@
 
 #![allow(dead_code)]
 
-use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 use control::MachineParams;
@@ -21,9 +21,9 @@ use wlnavd::{DaemonError, RunOptions, RunReport, ShutdownHandle};
 /// slower CPU divided by `WLNAV_TIMING_SCALE`: [`time_scale`].
 pub const TIME_SCALE: f64 = 4.0;
 
-/// The one factor for wall-clock limits (`WLNAV_TIMING_SCALE`; emulation).
-#[path = "../../../tests/timing_scale.rs"]
-pub mod timing_scale;
+/// The one factor for wall-clock limits (`WLNAV_TIMING_SCALE`; emulation), and a service
+/// prefix no other test (or process) uses: the test kit's.
+pub use wlnav_test_kit::{timing_scale, unique_prefix};
 
 /// The daemon's time scale on this CPU: [`TIME_SCALE`] / `WLNAV_TIMING_SCALE`.
 pub fn time_scale() -> f64 {
@@ -38,16 +38,6 @@ pub fn budget_toml() -> String {
     format!(
         "\n[mpc]\ntime_budget = {:?}\n",
         timing_scale::secs(Config::default().mpc.time_budget)
-    )
-}
-
-/// A service prefix no other test (or process) uses.
-pub fn unique_prefix(name: &str) -> String {
-    static N: AtomicU32 = AtomicU32::new(0);
-    format!(
-        "wlnavd-test-{name}-{}-{}",
-        std::process::id(),
-        N.fetch_add(1, Ordering::Relaxed)
     )
 }
 

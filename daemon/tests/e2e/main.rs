@@ -10,12 +10,13 @@ mod realtime;
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use common::*;
-use control::mpc::{Mpc, Obstacle};
-use control::{Goal, State, VelocityCommand};
+use control::mpc::Mpc;
+use control::{State, VelocityCommand};
 use shm_ipc::{fault_flags, Mode, Telemetry};
+use wlnav_test_kit::controller::{Forwarding, Hooks};
 use wlnavd::can::DriveMode;
 use wlnavd::controller::{
     quadratic_cost, Controller, ControllerError, ControllerFactory, PilotController, Plan, Step,
@@ -213,34 +214,22 @@ fn frozen_alive_counter_stops_the_machine() {
     persistent_can_fault("alive-frozen", false);
 }
 
-/// The quadratic MPC, failing on demand: alternately an error and a non-finite
-/// command.
+/// Hooks on the quadratic MPC, failing on demand: alternately an error and a non-finite
+/// command. Every other call reaches the MPC (the kit's wrapper forwards it).
 struct Failing {
-    inner: PilotController<control::mpc::QuadraticCost>,
     fail: Arc<AtomicBool>,
     calls: u64,
     nan_states: Vec<State>,
 }
 
-impl Controller for Failing {
-    fn set_goal(
-        &mut self,
-        start: &State,
-        goal: Goal,
-        obstacles: &[Obstacle],
-        now: f64,
-    ) -> Result<(), ControllerError> {
-        self.inner.set_goal(start, goal, obstacles, now)
-    }
-    fn reset(&mut self) {
-        self.inner.reset()
-    }
-    fn step(
-        &mut self,
+impl Hooks for Failing {
+    fn step<'a>(
+        &'a mut self,
+        inner: &'a mut dyn Controller,
         state: &State,
         now: f64,
-        tick_start: std::time::Instant,
-    ) -> Result<Step<'_>, ControllerError> {
+        tick_start: Instant,
+    ) -> Result<Step<'a>, ControllerError> {
         if self.fail.load(Ordering::SeqCst) {
             self.calls += 1;
             if self.calls % 2 == 1 {
@@ -269,10 +258,7 @@ impl Controller for Failing {
                 route_age: 0.0,
             }));
         }
-        self.inner.step(state, now, tick_start)
-    }
-    fn sent(&mut self, now: f64, command: VelocityCommand) {
-        self.inner.sent(now, command)
+        inner.step(state, now, tick_start)
     }
 }
 
@@ -288,12 +274,14 @@ fn solver_failure_falls_back_then_stops() {
     let factory: ControllerFactory = Box::new(move || {
         let mpc = Mpc::new(machine, quadratic_cost(), None, settings)
             .map_err(|e| ControllerError(e.to_string()))?;
-        Ok(Box::new(Failing {
-            inner: PilotController::without_navigator(mpc, &pilot_config)?,
-            fail: f,
-            calls: 0,
-            nan_states: vec![State::from_element(f64::NAN); settings.horizon + 1],
-        }) as Box<dyn Controller>)
+        Ok(Box::new(Forwarding::new(
+            Box::new(PilotController::without_navigator(mpc, &pilot_config)?),
+            Failing {
+                fail: f,
+                calls: 0,
+                nan_states: vec![State::from_element(f64::NAN); settings.horizon + 1],
+            },
+        )) as Box<dyn Controller>)
     });
     let d = start(config, Some(factory));
     d.goal(10.0, 0.0, 0.0);

@@ -1,11 +1,12 @@
 //! Tests of the `wlnavd` binary as a process: signals, exit codes, messages,
 //! configuration checks, the systemd unit.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use shm_ipc::{Client, IpcConfig, Mode, Pose2};
+use shm_ipc::{Mode, Pose2};
+use wlnav_test_kit::{repo_root, Daemon, DaemonCommand};
 use wlnavd::can::{CandumpReader, DriveMode, VelocityCommandFrame, VELOCITY_COMMAND_ID};
 
 use crate::common::{
@@ -14,14 +15,9 @@ use crate::common::{
 
 const BIN: &str = env!("CARGO_BIN_EXE_wlnavd");
 
-fn repo_root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .unwrap()
-        .to_path_buf()
-}
-
+/// Waits for `child` to exit, up to `timeout` times `WLNAV_TIMING_SCALE`.
 fn wait_exit(child: &mut Child, timeout: Duration) -> std::process::ExitStatus {
+    let timeout = timing_scale::real(timeout);
     let deadline = Instant::now() + timeout;
     loop {
         if let Some(s) = child.try_wait().unwrap() {
@@ -42,24 +38,20 @@ fn sigterm_stops_the_machine_and_the_stop_is_the_last_frame() {
     let config = dir.path().join("wlnavd.toml");
     std::fs::write(&config, budget_toml()).unwrap();
     let prefix = unique_prefix("sigterm");
-    let mut child = Command::new(BIN)
-        .args(["--sim", "--cost", "quadratic", "--log", "terminal"])
-        .args(["--time-scale", &time_scale().to_string()])
-        .arg("--config")
-        .arg(&config)
-        .args(["--prefix", &prefix])
-        .arg("--can-log")
-        .arg(&log)
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let client = Client::connect(&IpcConfig::new(prefix), Duration::from_secs(30)).unwrap();
+    let command = DaemonCommand::sim(Path::new(BIN), &prefix, "sigterm", Some(time_scale()))
+        .args(["--cost", "quadratic", "--log", "terminal"])
+        .args(["--config".as_ref(), config.as_os_str()])
+        .args(["--can-log".as_ref(), log.as_os_str()]);
+    let (mut daemon, client) = Daemon::start(command);
     let telemetry = client.subscribe_telemetry().unwrap();
     let deadline = Instant::now() + timing_scale::real(Duration::from_secs(30));
     loop {
         assert!(Instant::now() < deadline, "goal never accepted");
-        if let Ok(r) = client.set_goal(Pose2::new(10.0, 0.0, 0.0), &[], Duration::from_secs(1)) {
+        if let Ok(r) = client.set_goal(
+            Pose2::new(10.0, 0.0, 0.0),
+            &[],
+            timing_scale::real(Duration::from_secs(1)),
+        ) {
             if r.is_accepted() {
                 break;
             }
@@ -76,10 +68,14 @@ fn sigterm_stops_the_machine_and_the_stop_is_the_last_frame() {
         }
         std::thread::sleep(Duration::from_millis(5));
     }
-    // SAFETY: kill(2) on our own child's pid.
-    assert_eq!(unsafe { libc::kill(child.id() as i32, libc::SIGTERM) }, 0);
-    let status = wait_exit(&mut child, Duration::from_secs(30));
-    assert!(status.success(), "exit status {status:?}");
+    let (status, killed) = daemon
+        .terminate(timing_scale::real(Duration::from_secs(30)))
+        .unwrap();
+    assert!(
+        !killed && status.success(),
+        "exit status {status:?} (killed: {killed}); log:\n{}",
+        daemon.log_tail(20)
+    );
 
     let commands: Vec<VelocityCommandFrame> = CandumpReader::open(&log)
         .unwrap()
@@ -313,16 +309,12 @@ fn a_flood_of_bad_goals_is_logged_at_a_limited_rate() {
     let dir = tempfile::tempdir().unwrap();
     let config = dir.path().join("wlnavd.toml");
     std::fs::write(&config, budget_toml()).unwrap();
-    let mut child = Command::new(BIN)
-        .args(["--sim", "--cost", "quadratic", "--log", "terminal"])
-        .arg("--config")
-        .arg(&config)
-        .args(["--prefix", &prefix])
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let client = Client::connect(&IpcConfig::new(prefix), Duration::from_secs(30)).unwrap();
+    let command = DaemonCommand::sim(Path::new(BIN), &prefix, "reject-log", None)
+        .args(["--cost", "quadratic", "--log", "terminal"])
+        .args(["--config".as_ref(), config.as_os_str()]);
+    // Ready (idle) before the flood: a daemon still in its start-up (the solver's
+    // self-test) answers no request, and the first would time out on a loaded machine.
+    let (mut daemon, client, _telemetry, _first) = Daemon::start_ready(command);
     const N: usize = 500;
     let mut rejected = 0;
     for i in 0..N {
@@ -333,18 +325,11 @@ fn a_flood_of_bad_goals_is_logged_at_a_limited_rate() {
         rejected += usize::from(!r.is_accepted());
     }
     assert_eq!(rejected, N);
-    // SAFETY: kill(2) on our own child's pid.
-    assert_eq!(unsafe { libc::kill(child.id() as i32, libc::SIGTERM) }, 0);
-    let status = wait_exit(&mut child, Duration::from_secs(30));
-    assert!(status.success());
-    let mut err = String::new();
-    use std::io::Read;
-    child
-        .stderr
-        .take()
-        .unwrap()
-        .read_to_string(&mut err)
+    let (status, killed) = daemon
+        .terminate(timing_scale::real(Duration::from_secs(30)))
         .unwrap();
+    assert!(!killed && status.success(), "{status:?}, killed: {killed}");
+    let err = daemon.log_text();
     let lines = err.lines().filter(|l| l.contains("rejected")).count();
     assert!(
         (1..=12).contains(&lines),

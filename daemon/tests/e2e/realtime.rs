@@ -2,20 +2,14 @@
 //! because the system refuses it, and the unit's real-time drop-in is valid.
 
 use std::os::unix::process::CommandExt;
-use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
+
+use wlnav_test_kit::repo_root;
 
 use crate::common::{assert_systemd_verifies, budget_toml, timing_scale, unique_prefix};
 
 const BIN: &str = env!("CARGO_BIN_EXE_wlnavd");
-
-fn repo_root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .unwrap()
-        .to_path_buf()
-}
 
 /// `wlnavd --sim` with real-time on, in a process that cannot get it: RLIMIT_RTPRIO 0,
 /// RLIMIT_MEMLOCK 64 KiB and, when the test runs as root, CAP_SYS_NICE and CAP_IPC_LOCK

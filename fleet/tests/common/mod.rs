@@ -4,7 +4,6 @@
 
 #![allow(dead_code)]
 
-use std::ffi::OsString;
 use std::io::{BufRead, BufReader, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -13,19 +12,14 @@ use std::time::{Duration, Instant};
 
 use serde_json::{json, Value};
 
-/// The repository root.
-pub fn repo_root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .unwrap()
-        .to_path_buf()
-}
-
-/// One test at a time in this binary: daemons, bridges and a broker per test on 2 cores.
-pub fn serial() -> std::sync::MutexGuard<'static, ()> {
-    static LOCK: Mutex<()> = Mutex::new(());
-    LOCK.lock().unwrap_or_else(|p| p.into_inner())
-}
+// The test kit's: the repository root, one test at a time in this binary (daemons,
+// bridges and a broker per test on 2 cores), mosquitto on a free port, SIGTERM then
+// SIGKILL, the prefixes, the wall-clock factor and the daemon's time scale.
+#[allow(unused_imports)] // not every test binary of fleet uses each
+pub use wlnav_test_kit::broker::{free_port, Broker};
+#[allow(unused_imports)]
+pub use wlnav_test_kit::{repo_root, serial, terminate, timing_scale, unique_prefix, FAST};
+use wlnav_test_kit::{Daemon, DaemonCommand};
 
 // ------------------------------------------------------------------------------------
 // Schemas
@@ -133,191 +127,11 @@ pub fn assert_valid(topic: &str, msg: &Value) {
 }
 
 // ------------------------------------------------------------------------------------
-// Broker
-// ------------------------------------------------------------------------------------
-
-/// A free TCP port on localhost.
-pub fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
-
-/// mosquitto (Debian's) on a free localhost port, with a generated configuration.
-pub struct Broker {
-    pub port: u16,
-    child: Option<Child>,
-    dir: PathBuf,
-}
-
-fn mosquitto_binary() -> PathBuf {
-    for p in ["/usr/sbin/mosquitto", "/usr/bin/mosquitto"] {
-        if Path::new(p).exists() {
-            return p.into();
-        }
-    }
-    panic!("mosquitto not installed (apt-get install mosquitto; scripts/apt-packages.txt)");
-}
-
-impl Broker {
-    pub fn start() -> Self {
-        let port = free_port();
-        let dir =
-            std::env::temp_dir().join(format!("wlnav-fleet-broker-{}-{port}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let mut b = Self {
-            port,
-            child: None,
-            dir,
-        };
-        b.spawn();
-        b
-    }
-
-    fn spawn(&mut self) {
-        let conf = self.dir.join("mosquitto.conf");
-        std::fs::write(
-            &conf,
-            format!(
-                "listener {} 127.0.0.1\nallow_anonymous true\npersistence false\nlog_dest stderr\nlog_type error\nlog_type warning\n",
-                self.port
-            ),
-        )
-        .unwrap();
-        let log = std::fs::File::create(self.dir.join("mosquitto.log")).unwrap();
-        let child = Command::new(mosquitto_binary())
-            .arg("-c")
-            .arg(&conf)
-            .stdin(Stdio::null())
-            .stdout(log.try_clone().unwrap())
-            .stderr(log)
-            .spawn()
-            .expect("start mosquitto");
-        self.child = Some(child);
-        let deadline = Instant::now() + Duration::from_secs(10);
-        while std::net::TcpStream::connect(("127.0.0.1", self.port)).is_err() {
-            assert!(
-                Instant::now() < deadline,
-                "mosquitto did not listen on {}",
-                self.port
-            );
-            std::thread::sleep(Duration::from_millis(20));
-        }
-    }
-
-    pub fn addr(&self) -> String {
-        format!("127.0.0.1:{}", self.port)
-    }
-
-    /// Stops the broker (SIGTERM) and starts it again on the same port.
-    pub fn restart(&mut self, down_for: Duration) {
-        self.stop();
-        std::thread::sleep(down_for);
-        self.spawn();
-    }
-
-    pub fn stop(&mut self) {
-        if let Some(mut c) = self.child.take() {
-            terminate(&mut c, Duration::from_secs(5));
-        }
-    }
-}
-
-impl Drop for Broker {
-    fn drop(&mut self) {
-        self.stop();
-        let _ = std::fs::remove_dir_all(&self.dir);
-    }
-}
-
-/// SIGTERM, then SIGKILL after `grace`; returns whether it exited by itself.
-pub fn terminate(child: &mut Child, grace: Duration) -> bool {
-    if child.try_wait().ok().flatten().is_some() {
-        return true;
-    }
-    // SAFETY: kill(2) on our own unreaped child.
-    unsafe {
-        libc::kill(child.id() as libc::pid_t, libc::SIGTERM);
-    }
-    let deadline = Instant::now() + grace;
-    while Instant::now() < deadline {
-        if child.try_wait().ok().flatten().is_some() {
-            return true;
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    let _ = child.kill();
-    let _ = child.wait();
-    false
-}
-
-// ------------------------------------------------------------------------------------
 // Daemon and bridge processes
 // ------------------------------------------------------------------------------------
 
-fn profile_dir() -> PathBuf {
-    // The test executable is target/<profile>/deps/<name>-<hash>.
-    let exe = std::env::current_exe().unwrap();
-    exe.parent().and_then(Path::parent).unwrap().to_path_buf()
-}
-
-/// `wlnavd`, built by `cargo test --workspace` (the daemon's own tests), or built here.
-pub fn wlnavd() -> &'static Path {
-    static BIN: OnceLock<PathBuf> = OnceLock::new();
-    BIN.get_or_init(|| {
-        if let Some(dir) = std::env::var_os("WLNAV_E2E_BIN_DIR") {
-            return PathBuf::from(dir).join("wlnavd");
-        }
-        let dir = profile_dir();
-        let bin = dir.join("wlnavd");
-        if !bin.exists() {
-            let profile = dir.file_name().unwrap().to_str().unwrap().to_owned();
-            let cargo = std::env::var_os("CARGO").unwrap_or_else(|| OsString::from("cargo"));
-            let mut cmd = Command::new(cargo);
-            cmd.current_dir(repo_root())
-                .args(["build", "-p", "daemon", "--bin", "wlnavd"])
-                .env("CARGO_TARGET_DIR", dir.parent().unwrap());
-            if profile == "release" {
-                cmd.arg("--release");
-            }
-            eprintln!("fleet tests: building wlnavd: {cmd:?}");
-            assert!(
-                cmd.status().unwrap().success(),
-                "cargo build of wlnavd failed"
-            );
-        }
-        bin
-    })
-}
-
-/// The cost the daemon runs with (as the e2e tests choose it).
-fn cost() -> String {
-    if let Ok(c) = std::env::var("WLNAV_E2E_COST") {
-        return c;
-    }
-    let w = repo_root().join("critic-weights/avant635");
-    if w.join("critic.safetensors").is_file() && w.join("actor.safetensors").is_file() {
-        "critic".into()
-    } else {
-        "quadratic".into()
-    }
-}
-
-/// A prefix nobody else uses.
-pub fn unique_prefix(test: &str) -> String {
-    format!(
-        "wlnav-fleet-test/{test}/{}/{}",
-        std::process::id(),
-        shm_ipc::monotonic_now_ns() % 1_000_000_000_000
-    )
-}
-
-/// The simulated daemon's time scale in the tests (as in tests/lib.rs).
-pub const FAST: f64 = 3.0;
-
-/// A child process with its log in a file.
+/// A bridge (`wlnav-fleet`) child process with its log in a file (wlnavd is the kit's
+/// [`Daemon`]).
 pub struct Proc {
     pub child: Option<Child>,
     pub log: PathBuf,
@@ -326,11 +140,7 @@ pub struct Proc {
 
 impl Proc {
     fn spawn(what: &str, bin: &Path, args: &[String]) -> Self {
-        let log = std::env::temp_dir().join(format!(
-            "wlnav-fleet-{what}-{}-{}.log",
-            std::process::id(),
-            shm_ipc::monotonic_now_ns()
-        ));
+        let log = wlnav_test_kit::log_path(&format!("fleet-{what}"));
         let out = std::fs::File::create(&log).unwrap();
         let child = Command::new(bin)
             .args(args)
@@ -353,12 +163,10 @@ impl Proc {
     }
 
     pub fn log_tail(&self, lines: usize) -> String {
-        let text = std::fs::read_to_string(&self.log).unwrap_or_default();
-        let all: Vec<&str> = text.lines().collect();
-        all[all.len().saturating_sub(lines)..].join("\n")
+        wlnav_test_kit::tail(&self.log, lines)
     }
 
-    /// SIGTERM; true if it exited cleanly within `grace`.
+    /// SIGTERM; true if it exited cleanly within `grace` (times `WLNAV_TIMING_SCALE`).
     pub fn terminate(&mut self, grace: Duration) -> bool {
         match self.child.take() {
             Some(mut c) => {
@@ -392,45 +200,31 @@ impl Drop for Proc {
     }
 }
 
-/// Starts `wlnavd --sim` on `prefix` and waits until it is ready (telemetry in idle).
-pub fn start_daemon(prefix: &str) -> Proc {
-    let args: Vec<String> = vec![
-        "--sim".into(),
-        "--prefix".into(),
-        prefix.into(),
-        "--time-scale".into(),
-        FAST.to_string(),
-        "--cost".into(),
-        cost(),
-    ];
-    let mut p = Proc::spawn("wlnavd", wlnavd(), &args);
-    let config = shm_ipc::IpcConfig::new(prefix);
-    let deadline = Instant::now() + Duration::from_secs(60);
-    let client = loop {
-        match shm_ipc::Client::new(&config) {
-            Ok(c) => break c,
-            Err(_) if Instant::now() < deadline && p.is_running() => {
-                std::thread::sleep(Duration::from_millis(50))
-            }
-            Err(e) => panic!("wlnavd did not start: {e}\n{}", p.log_tail(20)),
-        }
-    };
-    let sub = client.subscribe_telemetry().unwrap();
-    loop {
-        assert!(
-            Instant::now() < deadline,
-            "wlnavd not ready:\n{}",
-            p.log_tail(20)
-        );
-        if let Some(t) = sub.recv_timeout(Duration::from_millis(200)).unwrap() {
-            if matches!(
-                t.mode(),
-                Ok(shm_ipc::Mode::Idle | shm_ipc::Mode::Reached | shm_ipc::Mode::Tracking)
-            ) {
-                return p;
-            }
-        }
+/// Starts `wlnavd --sim` on `prefix` (the kit's supervised start) and waits until it is
+/// ready (telemetry in idle). Its log is at `info` (the tests read its goals with their
+/// obstacle counts).
+pub fn start_daemon(prefix: &str) -> Daemon {
+    let scale = timing_scale::daemon_time_scale(FAST);
+    let mut command = DaemonCommand::sim(
+        &wlnav_test_kit::binaries().wlnavd,
+        prefix,
+        "fleet-wlnavd",
+        Some(scale),
+    )
+    .args(["--cost".to_owned(), wlnav_test_kit::cost()])
+    .env("RUST_LOG", "info");
+    // On a slower CPU the solver's budget (also the start-up self-test's) is scaled too.
+    if timing_scale::factor() > 1.0 {
+        let budget = command.log.with_extension("toml");
+        std::fs::write(
+            &budget,
+            format!("[mpc]\ntime_budget = {}\n", timing_scale::secs(0.1)),
+        )
+        .expect("write the budget configuration");
+        command = command.args(["--config".as_ref(), budget.as_os_str()]);
     }
+    let (daemon, _client, _telemetry, _first) = Daemon::start_ready(command);
+    daemon
 }
 
 /// Every telemetry sample of a daemon, read by a thread of its own (the subscriber keeps
@@ -702,6 +496,7 @@ impl Master {
         what: &str,
         pred: impl Fn(&Value) -> bool,
     ) -> Value {
+        let timeout = timing_scale::real(timeout);
         let deadline = Instant::now() + timeout;
         loop {
             if let Some(s) = self
@@ -731,6 +526,7 @@ impl Master {
         timeout: Duration,
         pred: impl Fn(&Received) -> bool,
     ) -> Received {
+        let timeout = timing_scale::real(timeout);
         let deadline = Instant::now() + timeout;
         loop {
             if let Some(r) = self
@@ -798,8 +594,9 @@ pub fn has_error(state: &Value, ty: &str, text: &str) -> bool {
 }
 
 /// Reads a retained message on `topic` with a fresh client (as a master started later
-/// would see it); `None` if none arrives within `timeout`.
+/// would see it); `None` if none arrives within `timeout` (times `WLNAV_TIMING_SCALE`).
 pub fn retained(port: u16, topic: &str, timeout: Duration) -> Option<Value> {
+    let timeout = timing_scale::real(timeout);
     let mut opts = rumqttc::MqttOptions::new(
         format!("retained-{}", shm_ipc::monotonic_now_ns()),
         "127.0.0.1",
