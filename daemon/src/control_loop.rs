@@ -722,8 +722,7 @@ impl ControlLoop {
                     (false, _) => failed(solve_time),
                     (true, status) => Solve {
                         result: match status {
-                            // Holding for the first route is no failure.
-                            PlanStatus::Solved | PlanStatus::Holding => SolveResult::Solved,
+                            PlanStatus::Solved => SolveResult::Solved,
                             PlanStatus::Fallback => SolveResult::Fallback,
                         },
                         command: Some(plan.command),

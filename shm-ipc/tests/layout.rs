@@ -69,6 +69,7 @@ fn sizes_alignments_and_offsets() {
             + 2 * 4
             + 24
             + MAX_ROUTE * 24
+            + 2 * 8
     );
 
     assert_eq!(offset_of!(GoalRequest, obstacles), 40);
@@ -79,6 +80,8 @@ fn sizes_alignments_and_offsets() {
     assert_eq!(offset_of!(Telemetry, outcome_request_id), 2136);
     assert_eq!(offset_of!(Telemetry, outcome_text), 2160);
     assert_eq!(offset_of!(Telemetry, route), 2320);
+    assert_eq!(offset_of!(Telemetry, plan_time_us), 2704);
+    assert_eq!(offset_of!(Telemetry, route_age_s), 2712);
 }
 
 #[test]
