@@ -4,6 +4,7 @@
 //! no async, no global state; functions take buffers and return results.
 
 pub mod actor;
+pub mod assumption_check;
 pub mod cost;
 pub mod critic;
 pub mod delay;
