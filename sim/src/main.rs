@@ -21,6 +21,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand, ValueEnum};
 use control::critic::HessianMode;
+use control::assumption_check::{CheckSettings, OnBroken};
 use control::envelope::EnvelopeSettings;
 use control::mpc::{MpcSettings, ObstacleConstraint, QpSolver};
 use control::planner::{NavigatorSettings, PlannerKind, Tracking};
@@ -166,11 +167,38 @@ struct EnvelopeArgs {
     /// The machine may achieve up to K × the commanded velocities (K in [1, 2]).
     #[arg(long, value_name = "K")]
     actuator_gain_max: Option<f64>,
+    /// State no tolerance at all (the envelope of a machine that is exactly
+    /// its model; the defaults before issue 43); the flags above still apply.
+    #[arg(long)]
+    exact_envelope: bool,
+    /// What a broken assumption does (issue 43; default: the daemon's).
+    #[arg(long, value_name = "ACTION", value_parser = parse_on_broken)]
+    assumption_action: Option<OnBroken>,
+    /// Do not check the envelope's assumptions while driving.
+    #[arg(long)]
+    no_assumption_check: bool,
+}
+
+fn parse_on_broken(s: &str) -> Result<OnBroken, String> {
+    match s {
+        "widen" => Ok(OnBroken::Widen),
+        "stop" => Ok(OnBroken::Stop),
+        other => Err(format!("`{other}`: expected widen or stop")),
+    }
 }
 
 impl EnvelopeArgs {
     fn settings(&self) -> Result<EnvelopeSettings> {
-        let d = EnvelopeSettings::default();
+        let d = if self.exact_envelope {
+            EnvelopeSettings::exact()
+        } else {
+            EnvelopeSettings::default()
+        };
+        let check = CheckSettings {
+            enabled: !self.no_assumption_check,
+            action: self.assumption_action.unwrap_or(d.check.action),
+            ..d.check
+        };
         let (sxy, sth) = self
             .pose_noise_tolerance
             .unwrap_or((d.pose_noise_xy, d.pose_noise_theta));
@@ -183,6 +211,7 @@ impl EnvelopeArgs {
             pose_latency: self.pose_latency_tolerance.unwrap_or(d.pose_latency),
             response_lag: self.response_lag.unwrap_or(d.response_lag),
             actuator_gain_max: self.actuator_gain_max.unwrap_or(d.actuator_gain_max),
+            check,
             ..d
         };
         s.validate()?;

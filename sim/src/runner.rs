@@ -21,6 +21,7 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use control::delay::{compensate_pose_age, DelayCompensator};
+use control::assumption_check::{self, AssumptionMonitor};
 use control::envelope::{self, EnvelopeInput, EnvelopeSettings};
 use control::mlp::PAPER_HIDDEN;
 use control::model::{
@@ -435,6 +436,9 @@ pub fn run_mpc(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run> 
     let mut sent =
         envelope::command_record(cfg.params, &cfg.envelope, settings.delay, settings.dt)?;
     let mut last = VelocityCommand::ZERO;
+    // Issue 43: the envelope's assumptions, checked each tick against what
+    // the machine did (see the call below).
+    let mut assumptions = AssumptionMonitor::new(cfg.params, cfg.envelope, settings.delay);
     let mut overrides = 0;
     let (mut penetrating_plans, mut multiplier_max) = (0, 0.0f64);
     for k in 0..=steps {
@@ -485,10 +489,24 @@ pub fn run_mpc(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run> 
             multiplier_max = multiplier_max.max(sol.obstacle_multiplier);
             let proposed = sol.command;
             sent.set_delay(settings.delay.max(mpc.compensated_delay()));
+            // ---- issue 43: the assumption check (one call site; the pilot
+            // takes it over). A break widens the envelope's tolerances or
+            // ends the run with a controlled stop, and is noted.
+            let check = assumptions.observe(&assumption_check::TickInput {
+                now,
+                measured: &x,
+                delay_estimate: mpc.compensated_delay(),
+                gain_estimate: mpc.actuator_gains(),
+            });
+            if let Some(f) = check.finding {
+                tracing_note(&format!("{} at {now:.1} s: {f}: {:?}", sc.name, check.decision));
+            }
+            aborted |= check.decision == assumption_check::Decision::Stop;
+            // ---- end of issue 43's call site.
             let guarded = envelope::guard(
                 &EnvelopeInput {
                     params: &cfg.params,
-                    settings: &cfg.envelope,
+                    settings: assumptions.effective(),
                     sent: &sent,
                     now,
                     state: &x,
@@ -499,7 +517,11 @@ pub fn run_mpc(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run> 
                 proposed,
             );
             overrides += usize::from(guarded.overridden());
-            guarded.command
+            if aborted {
+                envelope::stop_command(last, Some(&x), &cfg.params, settings.dt)
+            } else {
+                guarded.command
+            }
         };
         plant.command(cmd)?;
         mpc.sent(now, cmd);
