@@ -412,6 +412,10 @@ enum Command {
         /// Base name of the page (NAME.md) and its asset directory.
         #[arg(long, default_value = "robustness")]
         name: String,
+        /// Run every case with the shipped envelope (nothing stated about the
+        /// perturbation; issue 43) instead of the tolerances each case states.
+        #[arg(long)]
+        shipped_envelope: bool,
         #[command(flatten)]
         common: Common,
         #[arg(long, default_value = "docs")]
@@ -755,6 +759,7 @@ fn main() -> Result<()> {
             t_star,
             no_estimation,
             name,
+            shipped_envelope,
             common,
             out,
         } => {
@@ -816,6 +821,7 @@ fn main() -> Result<()> {
                 t_star_source: t_star.display().to_string(),
                 command,
                 commit,
+                shipped_envelope,
             };
             robustness::robustness(&inputs, &robustness::standard_sweeps(), &out)?;
         }

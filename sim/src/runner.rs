@@ -287,6 +287,9 @@ pub struct Run {
     /// Largest per-stage sum of obstacle-row multipliers over the run's QPs
     /// (MPC runs): the obstacle slack weight must exceed it (DESIGN §14).
     pub obstacle_multiplier_max: f64,
+    /// The envelope's assumptions the machine broke (MPC runs, issue 43):
+    /// when, what, and what was done.
+    pub assumption_findings: Vec<(f64, assumption_check::Finding, assumption_check::Decision)>,
 }
 
 /// The global layer's record of one run.
@@ -439,6 +442,7 @@ pub fn run_mpc(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run> 
     // Issue 43: the envelope's assumptions, checked each tick against what
     // the machine did (see the call below).
     let mut assumptions = AssumptionMonitor::new(cfg.params, cfg.envelope, settings.delay);
+    let mut findings = Vec::new();
     let mut overrides = 0;
     let (mut penetrating_plans, mut multiplier_max) = (0, 0.0f64);
     for k in 0..=steps {
@@ -500,6 +504,7 @@ pub fn run_mpc(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run> 
             });
             if let Some(f) = check.finding {
                 tracing_note(&format!("{} at {now:.1} s: {f}: {:?}", sc.name, check.decision));
+                findings.push((now, f, check.decision));
             }
             aborted |= check.decision == assumption_check::Decision::Stop;
             // ---- end of issue 43's call site.
@@ -546,6 +551,7 @@ pub fn run_mpc(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run> 
         wall_s: start.elapsed().as_secs_f64(),
         navigation,
         envelope_overrides: overrides,
+        assumption_findings: findings,
         penetrating_plans,
         obstacle_multiplier_max: multiplier_max,
     })
@@ -603,6 +609,7 @@ pub fn run_actor(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run
         envelope_overrides: 0,
         penetrating_plans: 0,
         obstacle_multiplier_max: 0.0,
+        assumption_findings: Vec::new(),
     })
 }
 
@@ -648,6 +655,7 @@ pub fn run_baseline(cfg: &EvalConfig, sc: &Scenario) -> Result<(Run, ocp::Plan)>
             envelope_overrides: 0,
             penetrating_plans: 0,
             obstacle_multiplier_max: 0.0,
+            assumption_findings: Vec::new(),
         },
         plan,
     ))
@@ -745,6 +753,7 @@ pub fn run_min_time(cfg: &EvalConfig, sc: &Scenario, others: &[(Method, Run)]) -
         envelope_overrides: 0,
         penetrating_plans: 0,
         obstacle_multiplier_max: 0.0,
+        assumption_findings: Vec::new(),
     })
 }
 
