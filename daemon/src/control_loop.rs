@@ -36,6 +36,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 use control::delay::{compensate_pose_age, DelayCompensator};
+use control::assumption_check::{self, AssumptionMonitor};
 use control::envelope::{self, EnvelopeInput};
 use control::model::pose_error;
 use control::{Goal, MachineParams, Obstacle, State, VelocityCommand};
@@ -110,6 +111,9 @@ pub struct ControlLoop {
     sent: DelayCompensator,
     /// Envelope overrides are logged at a limited rate.
     envelope_log: LogLimiter,
+    /// The envelope's assumptions checked each tracking tick (issue 43); its
+    /// effective settings are the envelope's.
+    assumptions: AssumptionMonitor,
     /// Every pose sample passes this gate (age, future stamps, plausibility).
     pose_gate: PoseGate,
     /// Rejected pose samples are logged at a limited rate.
@@ -158,6 +162,8 @@ impl ControlLoop {
         let sent =
             envelope::command_record(params, &ctx.config.envelope, ctx.config.mpc.delay, period)
                 .unwrap_or_else(|e| panic!("validated configuration: {e}"));
+        let assumptions =
+            AssumptionMonitor::new(params, ctx.config.envelope, ctx.config.mpc.delay);
         Self {
             ctx,
             controller,
@@ -170,6 +176,7 @@ impl ControlLoop {
             last_command: VelocityCommand::ZERO,
             sent,
             envelope_log: LogLimiter::new(5, 10.0),
+            assumptions,
             pose_gate,
             pose_log: LogLimiter::new(5, 10.0),
             solve_failures: 0,
@@ -326,10 +333,13 @@ impl ControlLoop {
             .compensated_delay()
             .map_or(configured, |d| d.max(configured));
         self.sent.set_delay(delay);
+        // ---- issue 43: the envelope's assumptions against what the machine
+        // did (one call site; the pilot takes it over).
+        let stop = self.check_assumptions(now, x, flags);
         let g = envelope::guard(
             &EnvelopeInput {
                 params: &self.params,
-                settings: &self.ctx.config.envelope,
+                settings: self.assumptions.effective(),
                 sent: &self.sent,
                 now,
                 state: x,
@@ -364,7 +374,43 @@ impl ControlLoop {
                 );
             }
         }
+        if stop {
+            return envelope::stop_command(self.last_command, Some(x), &self.params, self.period);
+        }
         g.command
+    }
+
+    /// Issue 43: feeds the tick to the assumption monitor
+    /// ([`control::assumption_check`]); a break is flagged (the assumption
+    /// named) and logged; one beyond its bound latches a fault and aborts the
+    /// goal with the measurement in the reason. True: stop now.
+    fn check_assumptions(&mut self, now: f64, x: &State, flags: &mut u32) -> bool {
+        let configured = self.ctx.config.mpc.delay;
+        let a = self.assumptions.observe(&assumption_check::TickInput {
+            now,
+            measured: x,
+            delay_estimate: self.controller.compensated_delay().unwrap_or(configured),
+            gain_estimate: self.controller.actuator_gains().unwrap_or([1.0, 1.0]),
+        });
+        *flags |= assumption_flags(a.broken);
+        let Some(f) = a.finding else {
+            return false;
+        };
+        match a.decision {
+            assumption_check::Decision::Stop => {
+                tracing::error!("{f}: beyond what the envelope may widen to: controlled stop");
+                self.latched |= fault_flags::ASSUMPTION_BROKEN | assumption_flags(a.broken);
+                self.ctx
+                    .goals
+                    .lock()
+                    .abort_active(Abort::new(AbortReason::Fault, format!("fault: {f}")));
+                true
+            }
+            _ => {
+                tracing::warn!("{f}: envelope widened to it");
+                false
+            }
+        }
     }
 
     fn fallback_ticks(&self) -> u32 {
@@ -568,6 +614,8 @@ impl ControlLoop {
     }
 
     fn disengage(&mut self) {
+        // Issue 43: the next residual must not span the ticks not tracked.
+        self.assumptions.gap();
         self.engaged_generation = None;
         self.solve_failures = 0;
         self.subgoal = None;
@@ -729,6 +777,26 @@ impl ControlLoop {
         };
         solve
     }
+}
+
+/// The telemetry bits of the assumptions in `broken` (bit `Assumption as
+/// usize`), with [`fault_flags::ASSUMPTION_BROKEN`] if any (issue 43).
+fn assumption_flags(broken: u8) -> u32 {
+    use assumption_check::Assumption as A;
+    if broken == 0 {
+        return 0;
+    }
+    A::ALL
+        .iter()
+        .filter(|a| broken & (1 << **a as usize) != 0)
+        .fold(fault_flags::ASSUMPTION_BROKEN, |acc, a| {
+            acc | match a {
+                A::Geometry => fault_flags::ASSUMPTION_GEOMETRY,
+                A::Delay => fault_flags::ASSUMPTION_DELAY,
+                A::Gain => fault_flags::ASSUMPTION_GAIN,
+                A::PoseNoiseXy | A::PoseNoiseTheta => fault_flags::ASSUMPTION_POSE_NOISE,
+            }
+        })
 }
 
 /// The detail of a mode change in logs and STATUS=.

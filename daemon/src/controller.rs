@@ -127,6 +127,12 @@ pub trait Controller {
     fn compensated_delay(&self) -> Option<f64> {
         None
     }
+
+    /// The actuator-gain estimates (β̇, v_f), if it has them: the envelope's
+    /// assumption check compares them with `actuator_gain_max` (issue 43).
+    fn actuator_gains(&self) -> Option<[f64; 2]> {
+        None
+    }
 }
 
 /// Builds the controller on the control thread.
@@ -239,6 +245,10 @@ impl<C: StageCost> Controller for MpcController<C> {
 
     fn compensated_delay(&self) -> Option<f64> {
         Some(self.mpc.compensated_delay())
+    }
+
+    fn actuator_gains(&self) -> Option<[f64; 2]> {
+        Some(self.mpc.actuator_gains())
     }
 }
 
