@@ -412,16 +412,10 @@ impl AssumptionMonitor {
         &self.stated
     }
 
-    /// True once a break has demanded a stop (until [`Self::clear_stop`]).
+    /// True once a break has demanded a stop (it stays: the measurement that
+    /// demanded it stops the machine again as long as it holds).
     pub fn stopped(&self) -> bool {
         self.stopped
-    }
-
-    /// Acknowledges a stop (e.g. a new goal after the fault was reported):
-    /// the tolerances stay widened, the measurements go on.
-    pub fn clear_stop(&mut self) {
-        self.stopped = false;
-        self.since = [None; 5];
     }
 
     /// Forgets the previous measurement (a gap in the ticks: the next
@@ -503,7 +497,8 @@ impl AssumptionMonitor {
             input.now,
         );
         self.broken |= broken;
-        if decision == Decision::Widen {
+        // A stop of one assumption does not undo the widening of another.
+        if decision != Decision::Continue {
             for a in Assumption::ALL {
                 a.set(&mut self.effective, self.tolerance[a.index()]);
             }

@@ -141,6 +141,7 @@ fn tick_allocates_only_inside_clarabel() {
                     sol.status
                 );
                 solves += sol.sqp_iterations as usize;
+                let proposed = sol.command;
                 let (delay_estimate, gain_estimate) =
                     (mpc.compensated_delay(), mpc.actuator_gains());
                 monitor.observe(&control::assumption_check::TickInput {
@@ -160,7 +161,7 @@ fn tick_allocates_only_inside_clarabel() {
                         dt: settings.dt,
                         last,
                     },
-                    sol.command,
+                    proposed,
                 )
                 .command;
                 mpc.sent(now, cmd);

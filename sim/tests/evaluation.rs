@@ -485,12 +485,17 @@ fn the_envelope_names_the_assumption_a_machine_breaks_in_closed_loop() {
     assert!(clearance > -0.005, "0.8 s delay: {clearance} m");
 
     let fast = run(None, 1.4);
-    let gain = fast
+    // Named as the gain estimate climbs past 1.2 + its dead band, widened
+    // each time it climbs further, up to what the machine does.
+    let gains: Vec<_> = fast
         .assumption_findings
         .iter()
-        .find(|(_, f, _)| f.assumption == Assumption::Gain)
-        .unwrap_or_else(|| panic!("{:?}", fast.assumption_findings));
-    assert!((gain.1.measured - 1.4).abs() < 0.05 && gain.2 == Decision::Widen, "{gain:?}");
+        .filter(|(_, f, _)| f.assumption == Assumption::Gain)
+        .collect();
+    assert!(!gains.is_empty(), "{:?}", fast.assumption_findings);
+    assert!(gains.iter().all(|(_, _, d)| *d == Decision::Widen), "{gains:?}");
+    let widest = gains.iter().map(|(_, f, _)| f.measured).fold(0.0, f64::max);
+    assert!((widest - 1.4).abs() < 0.05, "{gains:?}");
 
     for (delay, what) in [(None, "ideal"), (Some(0.3), "0.1 s late")] {
         let r = run(delay, 1.0);
