@@ -428,7 +428,11 @@ impl AssumptionMonitor {
     /// The measured pose noise (σ_xy, σ_θ), once enough ticks were seen.
     pub fn pose_noise(&self) -> Option<[f64; 2]> {
         (self.weight >= MIN_WEIGHT).then(|| {
-            [0, 1].map(|k| ((self.p0[k] - self.p1[k]) / (3.0 * self.weight)).max(0.0).sqrt())
+            [0, 1].map(|k| {
+                ((self.p0[k] - self.p1[k]) / (3.0 * self.weight))
+                    .max(0.0)
+                    .sqrt()
+            })
         })
     }
 
@@ -620,7 +624,10 @@ fn heading_sensitivity(p: &MachineParams, x: &State) -> [f64; 2] {
     let (b, bd, v) = (x[ix::BETA], x[ix::BETA_DOT], x[ix::V]);
     let d = p.l_f * b.cos() + p.l_r;
     let n = p.l_r * bd + v * b.sin();
-    [-n * b.cos() / (d * d), (bd * p.l_f * b.cos() - v * b.sin()) / (d * d)]
+    [
+        -n * b.cos() / (d * d),
+        (bd * p.l_f * b.cos() - v * b.sin()) / (d * d),
+    ]
 }
 
 #[cfg(test)]
@@ -819,7 +826,10 @@ mod tests {
         // 0.08 m is beyond the bound (0.06 m): a stop.
         assert_eq!(a.decision, Decision::Stop);
         let [sxy, sth] = m.pose_noise().unwrap();
-        assert!((sxy - 0.08).abs() < 0.025 && (sth - 0.06).abs() < 0.02, "{sxy} {sth}");
+        assert!(
+            (sxy - 0.08).abs() < 0.025 && (sth - 0.06).abs() < 0.02,
+            "{sxy} {sth}"
+        );
         // The matrix's pose-noise level (0.03 m / 0.02 rad) against the
         // stated 0.02 m / 0.01 rad: the heading noise is found and the
         // envelope widened to it (within the bound 0.04 rad).

@@ -914,9 +914,15 @@ mod tests {
             "t",
         )
         .unwrap();
-        assert_eq!(exact.envelope.check.action, control::assumption_check::OnBroken::Stop);
+        assert_eq!(
+            exact.envelope.check.action,
+            control::assumption_check::OnBroken::Stop
+        );
         let report = exact.envelope_report();
-        assert!(report.contains("front axle 0.010 m") && report.contains("rear axle  0.010 m"), "{report}");
+        assert!(
+            report.contains("front axle 0.010 m") && report.contains("rear axle  0.010 m"),
+            "{report}"
+        );
         assert!(report.contains("controlled stop"), "{report}");
         assert!(err("[envelope.check]\nspan = 0\n").contains("`envelope.check.span`"));
         assert!(err("[envelope.check]\nmax_actuator_gain = 3\n").contains("max_actuator_gain"));

@@ -35,8 +35,8 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
-use control::delay::{compensate_pose_age, DelayCompensator};
 use control::assumption_check::{self, AssumptionMonitor};
+use control::delay::{compensate_pose_age, DelayCompensator};
 use control::envelope::{self, EnvelopeInput};
 use control::model::pose_error;
 use control::{Goal, MachineParams, Obstacle, State, VelocityCommand};
@@ -162,8 +162,7 @@ impl ControlLoop {
         let sent =
             envelope::command_record(params, &ctx.config.envelope, ctx.config.mpc.delay, period)
                 .unwrap_or_else(|e| panic!("validated configuration: {e}"));
-        let assumptions =
-            AssumptionMonitor::new(params, ctx.config.envelope, ctx.config.mpc.delay);
+        let assumptions = AssumptionMonitor::new(params, ctx.config.envelope, ctx.config.mpc.delay);
         Self {
             ctx,
             controller,

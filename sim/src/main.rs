@@ -20,8 +20,8 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand, ValueEnum};
-use control::critic::HessianMode;
 use control::assumption_check::{CheckSettings, OnBroken};
+use control::critic::HessianMode;
 use control::envelope::EnvelopeSettings;
 use control::mpc::{MpcSettings, ObstacleConstraint, QpSolver};
 use control::planner::{NavigatorSettings, PlannerKind, Tracking};

@@ -20,8 +20,8 @@ use std::sync::Mutex;
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
-use control::delay::{compensate_pose_age, DelayCompensator};
 use control::assumption_check::{self, AssumptionMonitor};
+use control::delay::{compensate_pose_age, DelayCompensator};
 use control::envelope::{self, EnvelopeInput, EnvelopeSettings};
 use control::mlp::PAPER_HIDDEN;
 use control::model::{
@@ -503,7 +503,10 @@ pub fn run_mpc(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run> 
                 gain_estimate: mpc.actuator_gains(),
             });
             if let Some(f) = check.finding {
-                tracing_note(&format!("{} at {now:.1} s: {f}: {:?}", sc.name, check.decision));
+                tracing_note(&format!(
+                    "{} at {now:.1} s: {f}: {:?}",
+                    sc.name, check.decision
+                ));
                 findings.push((now, f, check.decision));
             }
             aborted |= check.decision == assumption_check::Decision::Stop;

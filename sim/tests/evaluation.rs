@@ -493,12 +493,19 @@ fn the_envelope_names_the_assumption_a_machine_breaks_in_closed_loop() {
         .filter(|(_, f, _)| f.assumption == Assumption::Gain)
         .collect();
     assert!(!gains.is_empty(), "{:?}", fast.assumption_findings);
-    assert!(gains.iter().all(|(_, _, d)| *d == Decision::Widen), "{gains:?}");
+    assert!(
+        gains.iter().all(|(_, _, d)| *d == Decision::Widen),
+        "{gains:?}"
+    );
     let widest = gains.iter().map(|(_, f, _)| f.measured).fold(0.0, f64::max);
     assert!((widest - 1.4).abs() < 0.05, "{gains:?}");
 
     for (delay, what) in [(None, "ideal"), (Some(0.3), "0.1 s late")] {
         let r = run(delay, 1.0);
-        assert!(r.assumption_findings.is_empty(), "{what}: {:?}", r.assumption_findings);
+        assert!(
+            r.assumption_findings.is_empty(),
+            "{what}: {:?}",
+            r.assumption_findings
+        );
     }
 }
