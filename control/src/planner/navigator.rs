@@ -442,11 +442,6 @@ impl Navigator {
         self.stale_routes
     }
 
-    /// Whether a plan is out (asked for, not yet taken).
-    pub fn planning(&self) -> bool {
-        self.spare.is_none() || self.wanted.is_some()
-    }
-
     /// Whether the planner is working on a plan right now (an answer that
     /// waits to be taken does not count).
     pub fn planner_working(&self) -> bool {
