@@ -2,11 +2,11 @@
 //! MPC and the safety envelope (DESIGN §10, §14) that the daemon and
 //! `wlnav-sim` both drive, so the evaluation runs the wiring that ships.
 //!
-//! Per tick ([`Pilot::step`]): the navigator picks the target (the goal
-//! itself while the first route is planned), or ends the goal; the MPC drives to it
+//! Per tick ([`Pilot::step`]): the navigator picks the target (or holds
+//! while the first route is planned, or ends the goal), the MPC drives to it
 //! (following the navigator's path cost where there is one), and the
-//! envelope checks what is proposed against every circle before it is
-//! returned. The caller sends the
+//! envelope checks whatever is proposed — the MPC's command, or the stop of a
+//! hold — against every circle before it is returned. The caller sends the
 //! command (or what it sends instead) back through [`Pilot::sent`], which
 //! both the MPC's delay compensation and the envelope's record use.
 
@@ -39,12 +39,12 @@ pub struct PilotStep<'a> {
     pub proposed: VelocityCommand,
     /// The envelope's verdict on the proposal.
     pub guarded: Guarded,
-    /// The MPC's solution.
-    pub solution: &'a Solution,
+    /// The MPC's solution (`None` while holding for the first route).
+    pub solution: Option<&'a Solution>,
     /// The subgoal driven to, when it is not the goal itself.
     pub subgoal: Option<Goal>,
     /// The route not yet passed, ending with the goal (empty without a global
-    /// layer, or while the first route is planned).
+    /// layer, or while holding).
     pub route: &'a [Goal],
     /// How old the route followed was when it arrived [s].
     pub route_age: f64,
@@ -157,6 +157,7 @@ impl<C: StageCost> Pilot<C> {
         tick_start: Instant,
     ) -> Result<PilotDecision<'_>, PilotError> {
         let mut subgoal = None;
+        let mut holding = false;
         if let Some(nav) = &mut self.navigator {
             match nav.update(x, now) {
                 NavStep::Drive {
@@ -176,6 +177,7 @@ impl<C: StageCost> Pilot<C> {
                     }
                     subgoal = (!final_target).then_some(target);
                 }
+                NavStep::Hold => holding = true,
                 NavStep::Abort(reason) => return Ok(PilotDecision::Abort(reason)),
             }
         }
@@ -190,7 +192,12 @@ impl<C: StageCost> Pilot<C> {
             ),
             None => (&[][..], 0.0, Duration::ZERO),
         };
-        let proposed = self.mpc.step_within(x, now, tick_start)?.command;
+        let proposed = if holding {
+            // Holding for the first route: a stop at the limits (at rest, rest).
+            envelope::stop_command(self.last, Some(x), &self.params, self.dt)
+        } else {
+            self.mpc.step_within(x, now, tick_start)?.command
+        };
         self.sent
             .set_delay(self.configured_delay.max(self.mpc.compensated_delay()));
         let guarded = envelope::guard(
@@ -210,9 +217,9 @@ impl<C: StageCost> Pilot<C> {
             command: guarded.command,
             proposed,
             guarded,
-            solution: self.mpc.solution(),
+            solution: (!holding).then(|| self.mpc.solution()),
             subgoal,
-            route,
+            route: if holding { &[] } else { route },
             route_age,
             plan_time,
             new_plan,

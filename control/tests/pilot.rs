@@ -2,8 +2,7 @@
 //! - the daemon's planner thread and `wlnav-sim`'s inline planner charged one
 //!   tick give the same commands on the same inputs (the evaluation runs the
 //!   wiring that ships);
-//! - until the first route arrives (the charged delay) the critic drives to
-//!   the goal;
+//! - the first route holds the machine for exactly the charged delay;
 //! - an answer older than `max_route_age` is not followed, and asked again;
 //! - no search runs on the tick thread.
 
@@ -100,31 +99,33 @@ fn drive(kind: &str, ticks: usize) -> Vec<VelocityCommand> {
 fn the_planner_thread_and_the_sims_one_tick_charge_give_the_same_commands() {
     let inline = drive("one tick", 60);
     let thread = drive("thread", 60);
+    // Held at rest while the first route was planned, then driving.
+    assert_eq!(inline[0], VelocityCommand::ZERO);
     assert!(inline.iter().any(|c| c.v > 0.3), "it drives");
     assert_eq!(inline, thread);
 }
 
 #[test]
-fn the_first_route_comes_after_the_charged_delay_and_a_stale_one_is_asked_again() {
+fn the_first_route_holds_for_the_charged_delay_and_a_stale_one_is_asked_again() {
     let (actor, critic) = trained();
     let p = MachineParams::default();
     let start = State::zeros();
     let goal = Goal::new(8.0, 0.0, 0.0);
-    // One tick: the goal itself at the goal's tick, the route at the next.
+    // One tick: hold at the goal's tick, the route at the next.
     let s = NavigatorSettings::default();
     let mut nav =
         Navigator::with_routes(p, s.clone(), Some(&critic), routes("one tick", &s, actor.clone()))
             .unwrap();
     nav.set_goal(&start, goal, &wall(), 0.0).unwrap();
-    assert_eq!(nav.update(&start, 0.0), to_goal(goal));
+    assert_eq!(nav.update(&start, 0.0), NavStep::Hold);
     assert!(nav.route().is_empty());
     assert!(matches!(nav.update(&start, 0.2), NavStep::Drive { .. }));
     assert!(nav.route().len() > 1, "the route around the wall arrived");
     assert!((nav.route_age() - 0.2).abs() < 1e-9);
 
     // Answers take 0.6 s but routes may be 0.5 s old: each is dropped and
-    // asked again from where the machine is; the critic drives to the goal
-    // meanwhile (here the machine stands), and the abort window ends the goal.
+    // asked again from where the machine is; the machine holds, and the
+    // abort window ends the goal.
     let mut s = NavigatorSettings::default();
     s.max_route_age = 0.5;
     let planner = RoutePlanner::new(p, &s, Some(actor)).unwrap();
@@ -135,8 +136,8 @@ fn the_first_route_comes_after_the_charged_delay_and_a_stale_one_is_asked_again(
     let end = loop {
         let t = k as f64 * 0.2;
         match nav.update(&start, t) {
+            NavStep::Hold => {}
             NavStep::Abort(r) => break (t, r),
-            step if step == to_goal(goal) => {}
             other => panic!("followed a stale route at {t}: {other:?}"),
         }
         k += 1;
@@ -179,7 +180,7 @@ fn a_search_on_the_tick_thread_fails() {
         .unwrap();
         nav.set_goal(&State::zeros(), Goal::new(8.0, 0.0, 0.0), &wall(), 0.0)
             .unwrap();
-        assert_eq!(nav.update(&State::zeros(), 0.0), to_goal(Goal::new(8.0, 0.0, 0.0)));
+        assert_eq!(nav.update(&State::zeros(), 0.0), NavStep::Hold);
         let t0 = Instant::now();
         while nav.planner_working() && t0.elapsed() < Duration::from_secs(60) {
             std::thread::sleep(Duration::from_millis(1));
@@ -189,12 +190,4 @@ fn a_search_on_the_tick_thread_fails() {
     })
     .join()
     .expect("the planner thread plans for a tick thread");
-}
-
-/// The navigator's step while the first route is planned: the goal itself.
-fn to_goal(goal: Goal) -> NavStep {
-    NavStep::Drive {
-        target: goal,
-        final_target: true,
-    }
 }

@@ -108,12 +108,13 @@ fn the_global_layer_and_the_pilot_do_not_allocate() {
     let wall = &wall[1..8];
     let before = common::allocations();
     pilot.set_goal(&start, goal, wall, 0.0).unwrap();
-    let mut followed = 0;
+    let (mut held, mut followed) = (0, 0);
     for k in 0..80 {
         let now = k as f64 * 0.2;
         let x = State::new(0.1 * k as f64, -0.05 * k as f64, 0.0, 0.0, 0.0, 0.5);
         let command = match pilot.step(&x, now, Instant::now()).unwrap() {
             PilotDecision::Drive(s) => {
+                held += usize::from(s.solution.is_none());
                 followed += usize::from(s.route.len() > 1);
                 s.command
             }
@@ -123,6 +124,7 @@ fn the_global_layer_and_the_pilot_do_not_allocate() {
     }
     let after = common::allocations();
     let nav = pilot.navigator().unwrap();
+    assert_eq!(held, 1, "held for the one tick the route takes");
     assert!(followed > 0);
     assert_eq!(
         nav.last_plan().map(|r| r.outcome),

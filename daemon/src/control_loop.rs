@@ -722,7 +722,8 @@ impl ControlLoop {
                     (false, _) => failed(solve_time),
                     (true, status) => Solve {
                         result: match status {
-                            PlanStatus::Solved => SolveResult::Solved,
+                            // Holding for the first route is no failure.
+                            PlanStatus::Solved | PlanStatus::Holding => SolveResult::Solved,
                             PlanStatus::Fallback => SolveResult::Fallback,
                         },
                         command: Some(plan.command),

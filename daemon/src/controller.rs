@@ -34,6 +34,8 @@ pub enum PlanStatus {
     /// The controller could not solve and returned its shifted previous plan; the
     /// command is still usable for a short while.
     Fallback,
+    /// Holding (at rest) while the global layer plans the goal's first route.
+    Holding,
 }
 
 /// One step's result. `states` is x₀..x_N of the plan.
@@ -43,12 +45,12 @@ pub struct Plan<'a> {
     pub command: VelocityCommand,
     /// What the controller proposed before the envelope.
     pub proposed: VelocityCommand,
-    /// Solved or fallback.
+    /// Solved, fallback or holding.
     pub status: PlanStatus,
     /// The safety envelope's verdict on the proposal (`None`: the controller
     /// has no envelope of its own; the loop's stop rules still apply).
     pub guarded: Option<Guarded>,
-    /// Planned states x₀..x_N.
+    /// Planned states x₀..x_N (empty while holding).
     pub states: &'a [State],
     /// Optimal cost (NaN if unknown).
     pub cost: f64,
@@ -201,21 +203,21 @@ impl<C: StageCost> Controller for PilotController<C> {
             PilotDecision::Abort(reason) => return Ok(Step::Abort(reason)),
             PilotDecision::Drive(p) => p,
         };
-        let s = p.solution;
-        let status = match s.status {
-            StepStatus::Solved => PlanStatus::Solved,
-            StepStatus::Fallback(_) => PlanStatus::Fallback,
+        let status = match p.solution.map(|s| s.status) {
+            None => PlanStatus::Holding,
+            Some(StepStatus::Solved) => PlanStatus::Solved,
+            Some(StepStatus::Fallback(_)) => PlanStatus::Fallback,
         };
         Ok(Step::Drive(Plan {
             command: p.command,
             proposed: p.proposed,
             status,
             guarded: Some(p.guarded),
-            states: &s.states,
-            cost: s.cost,
-            qp_iterations: s.qp_iterations,
-            sqp_iterations: s.sqp_iterations,
-            solve_time: s.solve_time,
+            states: p.solution.map_or(&[][..], |s| &s.states),
+            cost: p.solution.map_or(f64::NAN, |s| s.cost),
+            qp_iterations: p.solution.map_or(0, |s| s.qp_iterations),
+            sqp_iterations: p.solution.map_or(0, |s| s.sqp_iterations),
+            solve_time: p.solution.map_or(Duration::ZERO, |s| s.solve_time),
             subgoal: p.subgoal,
             route: p.route,
             plan_time: p.plan_time,

@@ -475,12 +475,13 @@ pub fn run_mpc(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run> 
                     VelocityCommand::ZERO
                 }
                 PilotDecision::Drive(p) => {
-                    let sol = p.solution;
-                    solve_ms.push(sol.solve_time.as_secs_f64() * 1e3);
-                    penetrating_plans += usize::from(
-                        sol.status == StepStatus::Fallback(FallbackReason::PlanPenetrates),
-                    );
-                    multiplier_max = multiplier_max.max(sol.obstacle_multiplier);
+                    if let Some(sol) = p.solution {
+                        solve_ms.push(sol.solve_time.as_secs_f64() * 1e3);
+                        penetrating_plans += usize::from(
+                            sol.status == StepStatus::Fallback(FallbackReason::PlanPenetrates),
+                        );
+                        multiplier_max = multiplier_max.max(sol.obstacle_multiplier);
+                    }
                     overrides += usize::from(p.guarded.overridden());
                     if let Some(rec) = navigation.as_mut() {
                         rec.tick_ms.push(tick_ms);

@@ -62,6 +62,8 @@ pub struct PathPose {
 pub enum NavStep {
     /// Drive to `target`; `final_target` when it is the goal itself.
     Drive { target: Goal, final_target: bool },
+    /// Hold: the first route is being planned.
+    Hold,
     /// Stop: the goal ends aborted.
     Abort(AbortReason),
 }

@@ -247,17 +247,11 @@ impl Navigator {
             return NavStep::Abort(r);
         }
         if self.route.targets.is_empty() {
-            // The first route is being planned: the critic drives the open way
-            // to the goal meanwhile (anytime: what it did before any plan; the
-            // MPC's rows and the envelope keep it off the circles), within the
-            // abort window.
+            // The first route is being planned: hold, within the abort window.
             if now - self.last_progress >= self.settings.stall.progress.timeout {
                 return self.abort(AbortReason::NoProgress);
             }
-            return NavStep::Drive {
-                target: goal,
-                final_target: true,
-            };
+            return NavStep::Hold;
         }
         self.advance(x, now);
         let target = self.route.targets[self.route_index];

@@ -690,6 +690,7 @@ fn a_stop_beside_the_goal_is_retried_from_the_approach_pose_behind_it() {
                 nav.update(&passing, t);
             }
             NavStep::Drive { .. } => {}
+            NavStep::Hold => panic!("open ground never holds"),
         }
         assert!(t < 100.0);
     };
