@@ -26,7 +26,10 @@ use crate::model::{ix, MachineParams, State};
 
 /// Candidate grid step and largest candidate [s].
 pub const GRID: f64 = 0.05;
-pub const MAX_DELAY: f64 = 0.6;
+/// 1 s: the robustness matrix's longest delay (0.8 s) with room; the envelope
+/// acts after the estimate, so a delay beyond the grid is one the envelope
+/// cannot see (issue 43).
+pub const MAX_DELAY: f64 = 1.0;
 /// Forgetting factor of the scores per tick (≈ 6 s of memory).
 pub const FORGETTING: f64 = 0.97;
 /// The best candidate replaces the current one when its score is below this

@@ -3,9 +3,10 @@
 //! The MPC is not the safety function. Before a command leaves the loop, [`guard`]
 //! predicts the machine's motion under it: the commands already sent that act
 //! within the actuator delay, then this command until the next tick, then a full
-//! stop at the machine's braking limits (β̈_max, a_max); once with every command
-//! acting after the delay and once with every command acting `response_lag`
-//! later, at up to `actuator_gain_max` × the commanded velocities. Both axle
+//! stop at the machine's braking limits (β̈_max, a_max); with every command
+//! acting after the delay and at lags up to `response_lag` later (sampled at
+//! most [`LATE_STEP`] apart, the motion between samples added to the margins),
+//! at up to `actuator_gain_max` × the commanded velocities. Both axle
 //! points are checked on the integration
 //! sub-steps ([`DelayCompensator::propagate_with`], the model the delay
 //! compensation uses). If the prediction comes closer to a circle than the
@@ -40,6 +41,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::assumption_check::CheckSettings;
 use crate::delay::DelayCompensator;
 use crate::model::{MachineParams, State, VelocityCommand};
 use crate::obstacle::{AxlePoint, Obstacle};
@@ -57,31 +59,58 @@ pub struct EnvelopeSettings {
     /// the plan's own margin).
     pub margin: f64,
     /// How far the true rear axle may be from where the configured L_f, L_r put
-    /// it [m] (≤ |ΔL_f| + |ΔL_r|). Default 0.
+    /// it [m] (≤ |ΔL_f| + |ΔL_r|). Default 0.06 (10 % of L_r = 0.6 m).
     pub geometry_tolerance: f64,
-    /// Standard deviation of the pose estimate's position [m]. Default 0.
+    /// Standard deviation of the pose estimate's position [m]. Default 0.02.
     pub pose_noise_xy: f64,
-    /// Standard deviation of the pose estimate's heading [rad]. Default 0.
+    /// Standard deviation of the pose estimate's heading [rad]. Default 0.01.
     pub pose_noise_theta: f64,
     /// How many standard deviations of pose noise the margins cover. Default 3.
     pub noise_sigmas: f64,
     /// Uncertainty of the pose's timestamp once its age is compensated [s].
-    /// Default 0.
+    /// Default 0.01.
     pub pose_latency: f64,
     /// The machine may respond to every command up to this much later than the
     /// compensated delay says [s]: unmodelled velocity lag, an actuator delay
-    /// longer than the compensated one. Default 0.
+    /// longer than the compensated one. Default 0.15.
     pub response_lag: f64,
     /// The machine may achieve up to this many times the commanded
     /// velocities (an actuator gain above 1; the MPC's online estimate
-    /// corrects its plan, not what is already on its way). Default 1.
+    /// corrects its plan, not what is already on its way). Default 1.2.
     pub actuator_gain_max: f64,
     /// Prediction sub-step [s], in (0, 0.02]. Default 0.01 (the plant's).
     pub substep: f64,
+    /// The check of these assumptions while driving (`[envelope.check]`,
+    /// [`crate::assumption_check`]).
+    pub check: CheckSettings,
 }
 
 impl Default for EnvelopeSettings {
+    /// The shipped, conservative tolerances (issue 43; justified in
+    /// docs/envelope-tolerances.md): they cover the robustness matrix's
+    /// moderate levels (L_r × 1.1, the all-moderate pose noise 0.02 m /
+    /// 0.01 rad, a true delay 0.15 s beyond the compensated one, actuator
+    /// gain 1.2) and a 10 ms error of the pose's stamp. Noisier poses are
+    /// caught by [`crate::assumption_check`]. An integrator narrows them knowingly, after
+    /// measuring the machine; [`Self::exact`] states none.
     fn default() -> Self {
+        Self {
+            geometry_tolerance: 0.06,
+            pose_noise_xy: 0.02,
+            pose_noise_theta: 0.01,
+            pose_latency: 0.01,
+            response_lag: 0.15,
+            actuator_gain_max: 1.2,
+            ..Self::exact()
+        }
+    }
+}
+
+impl EnvelopeSettings {
+    /// The envelope of a machine that is exactly its model: every tolerance
+    /// zero (gain 1), margin 0.01 m. The defaults before issue 43; for tests
+    /// and for measuring what the tolerances cost.
+    pub const fn exact() -> Self {
         Self {
             enabled: true,
             margin: 0.01,
@@ -93,6 +122,7 @@ impl Default for EnvelopeSettings {
             response_lag: 0.0,
             actuator_gain_max: 1.0,
             substep: crate::delay::DEFAULT_SUBSTEP,
+            check: CheckSettings::DEFAULT,
         }
     }
 }
@@ -147,6 +177,9 @@ impl EnvelopeSettings {
         }
         if !(self.substep > 0.0 && self.substep <= 0.02) {
             return err("substep", "must be in (0, 0.02] s", self.substep);
+        }
+        if let Err((name, requirement, value)) = self.check.validate() {
+            return err(name, requirement, value);
         }
         Ok(())
     }
@@ -301,8 +334,8 @@ impl Guarded {
 
 /// Smallest clearance beyond the margins [m] of both axle points over the
 /// prediction: `command` sent now, a stop sent a tick later, until at rest;
-/// with the commands acting after the delay and, if `response_lag` > 0, also
-/// that much later.
+/// with the commands acting after the delay and, if `response_lag` > 0, at
+/// lags up to it ([`late_samples`]).
 pub fn predicted_excess(input: &EnvelopeInput, command: VelocityCommand) -> f64 {
     let EnvelopeInput {
         params: p,
@@ -330,12 +363,16 @@ pub fn predicted_excess(input: &EnvelopeInput, command: VelocityCommand) -> f64 
         }
     };
     observe(input.state);
-    // The machine responds after the delay, or up to `response_lag` later:
-    // both ends are predicted (every command, those already sent included,
-    // acts late in the second; the prediction is not monotone in the delay,
-    // so neither end alone bounds the other).
-    let lates = [0.0, s.response_lag];
-    for &late in &lates[..if s.response_lag > 0.0 { 2 } else { 1 }] {
+    // The machine responds after the delay, or up to `response_lag` later.
+    // The prediction is not monotone in the delay (a later stop is farther
+    // along, a later turn is wider or narrower), so neither end bounds what
+    // lies between: the lags in [0, response_lag] are sampled at most
+    // LATE_STEP apart, every command (those already sent included) acting
+    // that late, and the margins grow by the motion between two samples
+    // ([`late_samples`]).
+    let (n, step, pad) = late_samples(s, p);
+    for i in 0..=n {
+        let late = i as f64 * step;
         let end = stop_at + input.sent.delay() + late + braking;
         input.sent.propagate_with(
             input.now,
@@ -347,7 +384,28 @@ pub fn predicted_excess(input: &EnvelopeInput, command: VelocityCommand) -> f64 
             &mut observe,
         );
     }
-    excess
+    excess - pad
+}
+
+/// Largest step between the response lags [`predicted_excess`] samples [s]
+/// (issue 43: with only the two ends sampled, a true delay between them went
+/// unchecked).
+pub const LATE_STEP: f64 = 0.02;
+
+/// The response lags [`predicted_excess`] samples: `n` + 1 of them, `step`
+/// apart from 0 to `response_lag`, and the margin `pad` [m] that covers the
+/// lags between two samples: there every command acts at most step / 2
+/// earlier or later than at the nearer sample, and the axle points move at
+/// most gain × v_max × step / 2 further along their path (to first order;
+/// the change of heading over a 10 ms shift is second order). Zero lag: one
+/// sample, no pad.
+pub fn late_samples(s: &EnvelopeSettings, p: &MachineParams) -> (usize, f64, f64) {
+    if !(s.response_lag > 0.0) {
+        return (0, 0.0, 0.0);
+    }
+    let n = (s.response_lag / LATE_STEP - 1e-9).ceil().max(1.0) as usize;
+    let step = s.response_lag / n as f64;
+    (n, step, s.actuator_gain_max * p.v_max * step / 2.0)
 }
 
 /// Checks `proposed` (module docs) and returns what to send. Allocation-free.
@@ -440,7 +498,7 @@ mod tests {
     #[test]
     fn a_command_that_would_cut_into_a_circle_is_replaced_by_a_stop() {
         let p = avant();
-        let s = EnvelopeSettings::default();
+        let s = EnvelopeSettings::exact();
         let (sent, x) = driving(1.0, 0.2);
         let full = VelocityCommand {
             beta_dot: 0.0,
@@ -477,7 +535,7 @@ mod tests {
         // Reversing at 1 m/s towards a circle behind: the rear axle (1.2 m
         // behind the front one when straight) reaches it first.
         let p = avant();
-        let s = EnvelopeSettings::default();
+        let s = EnvelopeSettings::exact();
         let (sent, x) = driving(-1.0, 0.0);
         let back = VelocityCommand {
             beta_dot: 0.0,
@@ -501,7 +559,7 @@ mod tests {
         let p = avant();
         let s = EnvelopeSettings {
             margin: 0.1,
-            ..Default::default()
+            ..EnvelopeSettings::exact()
         };
         // At rest, 0.05 m from a circle ahead (inside the 0.1 m margin).
         let sent = DelayCompensator::new(p, 0.2, 0.2).unwrap();
@@ -534,7 +592,7 @@ mod tests {
             pose_noise_theta: 0.01,
             noise_sigmas: 3.0,
             pose_latency: 0.05,
-            ..Default::default()
+            ..EnvelopeSettings::exact()
         };
         let [f, r] = s.margins(&p);
         assert!((f - (0.01 + 0.06 + 0.05)).abs() < 1e-12, "{f}");
@@ -550,7 +608,7 @@ mod tests {
         // Edge 0.98 m ahead: the prediction ends 0.08 m before it, more than
         // the 0.01 m margin, less than 0.12 m.
         let o = [Obstacle::new(1.48, 0.0, 0.5)];
-        let zero = EnvelopeSettings::default();
+        let zero = EnvelopeSettings::exact();
         assert!(!guard(&input(&p, &zero, &sent, &x, &o, full), full).overridden());
         assert!(guard(&input(&p, &s, &sent, &x, &o, full), full).overridden());
         assert!(s.validate().is_ok());
@@ -573,7 +631,7 @@ mod tests {
             beta_dot: 0.3,
             v: 1.0,
         };
-        let s = EnvelopeSettings::default();
+        let s = EnvelopeSettings::exact();
         let g = guard(&input(&p, &s, &sent, &x, &[], full), full);
         assert_eq!((g.command, g.choice), (full, Choice::Proposed));
         let off = EnvelopeSettings {
@@ -597,7 +655,7 @@ mod tests {
             v: 0.8,
         };
         let wall = [Obstacle::new(1.2, 0.0, 0.5)];
-        let nominal = EnvelopeSettings::default();
+        let nominal = EnvelopeSettings::exact();
         let fast = EnvelopeSettings {
             actuator_gain_max: 1.2,
             ..nominal
@@ -635,7 +693,7 @@ mod tests {
         let wall = [Obstacle::new(1.5, 0.0, 0.5)];
         let fast = EnvelopeSettings {
             actuator_gain_max: 1.2,
-            ..EnvelopeSettings::default()
+            ..EnvelopeSettings::exact()
         };
         let stop = VelocityCommand::ZERO;
         let e = predicted_excess(&input(&p, &fast, &sent, &x, &wall, stop), stop);
@@ -652,7 +710,7 @@ mod tests {
         let p = avant();
         let late = EnvelopeSettings {
             response_lag: 0.4,
-            ..EnvelopeSettings::default()
+            ..EnvelopeSettings::exact()
         };
         let mut sent = command_record(p, &late, 0.0, 0.2).unwrap();
         for k in -8..-1 {
@@ -668,11 +726,13 @@ mod tests {
         let x = State::new(0.0, 0.0, 0.0, 0.0, 0.0, 1.0);
         let wall = [Obstacle::new(1.5, 0.0, 0.5)];
         let stop = VelocityCommand::ZERO;
-        let on_time = EnvelopeSettings::default();
+        let on_time = EnvelopeSettings::exact();
         let a = predicted_excess(&input(&p, &on_time, &sent, &x, &wall, stop), stop);
         let b = predicted_excess(&input(&p, &late, &sent, &x, &wall, stop), stop);
         assert!((a - (1.0 - 0.5 - on_time.margin)).abs() < 2e-3, "{a}");
-        assert!((b - (1.0 - 0.7 - late.margin)).abs() < 2e-3, "{b}");
+        let (_, _, pad) = late_samples(&late, &p);
+        assert!((pad - 0.01).abs() < 1e-12, "{pad}");
+        assert!((b - (1.0 - 0.7 - late.margin - pad)).abs() < 2e-3, "{b}");
     }
 
     #[test]

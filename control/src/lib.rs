@@ -4,6 +4,7 @@
 //! no async, no global state; functions take buffers and return results.
 
 pub mod actor;
+pub mod assumption_check;
 pub mod cost;
 pub mod critic;
 pub mod delay;
@@ -17,8 +18,8 @@ pub mod model;
 pub mod mpc;
 pub mod networks;
 pub mod obstacle;
-pub mod planner;
 pub mod pilot;
+pub mod planner;
 pub mod plant;
 pub mod progress;
 pub mod scenario;

@@ -9,9 +9,17 @@
 //! hold — against every circle before it is returned. The caller sends the
 //! command (or what it sends instead) back through [`Pilot::sent`], which
 //! both the MPC's delay compensation and the envelope's record use.
+//!
+//! Before anything else each tick, the envelope's assumptions are checked
+//! against what the machine did ([`crate::assumption_check`], issue 43): the
+//! envelope guards with the tolerances in force (the stated ones, widened to
+//! what was measured), and a break beyond what may be widened ends the goal
+//! ([`PilotDecision::Stop`]). The machine never goes on silently with a model
+//! it has just seen to be wrong.
 
 use std::time::{Duration, Instant};
 
+use crate::assumption_check::{self, Assessment, AssumptionMonitor, Decision, Finding};
 use crate::delay::DelayCompensator;
 use crate::envelope::{self, EnvelopeInput, EnvelopeSettings, Guarded};
 use crate::model::{Goal, MachineParams, State, VelocityCommand};
@@ -52,6 +60,9 @@ pub struct PilotStep<'a> {
     pub plan_time: Duration,
     /// A plan was taken this step (its time is `plan_time`).
     pub new_plan: bool,
+    /// The check of the envelope's assumptions this tick (`Continue`, or
+    /// `Widen` with the finding the envelope was widened to).
+    pub assumptions: Assessment,
 }
 
 /// One tick's decision.
@@ -61,6 +72,14 @@ pub enum PilotDecision<'a> {
     /// The global layer ended the goal (no route, no progress): bring the
     /// machine to rest.
     Abort(AbortReason),
+    /// The machine broke an assumption of the envelope beyond what it may be
+    /// widened to (or the check's action is `stop`): a fault, bring the
+    /// machine to rest. `broken`: every assumption broken so far (bit
+    /// `Assumption as usize`).
+    Stop {
+        finding: Finding,
+        broken: u8,
+    },
 }
 
 /// Navigator + MPC + envelope, built once.
@@ -68,7 +87,9 @@ pub struct Pilot<C: StageCost> {
     params: MachineParams,
     mpc: Mpc<C>,
     navigator: Option<Navigator>,
-    envelope: EnvelopeSettings,
+    /// The envelope's stated tolerances, checked against the machine each
+    /// tick; its effective settings are the envelope's.
+    assumptions: AssumptionMonitor,
     /// The commands sent, as the envelope replays them (after the longer of
     /// the configured and the estimated delay).
     sent: DelayCompensator,
@@ -101,7 +122,7 @@ impl<C: StageCost> Pilot<C> {
         Ok(Self {
             params,
             navigator,
-            envelope,
+            assumptions: AssumptionMonitor::new(params, envelope, s.delay),
             sent,
             configured_delay: s.delay,
             dt: s.dt,
@@ -143,6 +164,8 @@ impl<C: StageCost> Pilot<C> {
         self.mpc.clear_goal();
         self.obstacles.clear();
         self.costs_seen = None;
+        // The next residual must not span the ticks between goals.
+        self.assumptions.gap();
         if let Some(nav) = &mut self.navigator {
             nav.clear();
         }
@@ -156,6 +179,20 @@ impl<C: StageCost> Pilot<C> {
         now: f64,
         tick_start: Instant,
     ) -> Result<PilotDecision<'_>, PilotError> {
+        // What the machine did against the envelope's model, before any
+        // decision that relies on it (the estimates are last tick's).
+        let assumptions = self.assumptions.observe(&assumption_check::TickInput {
+            now,
+            measured: x,
+            delay_estimate: self.mpc.compensated_delay(),
+            gain_estimate: self.mpc.actuator_gains(),
+        });
+        if let (Decision::Stop, Some(finding)) = (assumptions.decision, assumptions.finding) {
+            return Ok(PilotDecision::Stop {
+                finding,
+                broken: assumptions.broken,
+            });
+        }
         let mut subgoal = None;
         let mut holding = false;
         if let Some(nav) = &mut self.navigator {
@@ -203,7 +240,7 @@ impl<C: StageCost> Pilot<C> {
         let guarded = envelope::guard(
             &EnvelopeInput {
                 params: &self.params,
-                settings: &self.envelope,
+                settings: self.assumptions.effective(),
                 sent: &self.sent,
                 now,
                 state: x,
@@ -223,6 +260,7 @@ impl<C: StageCost> Pilot<C> {
             route_age,
             plan_time,
             new_plan,
+            assumptions,
         }))
     }
 
@@ -249,5 +287,11 @@ impl<C: StageCost> Pilot<C> {
 
     pub fn params(&self) -> &MachineParams {
         &self.params
+    }
+
+    /// The envelope's tolerances in force: the stated ones, widened to what
+    /// the machine was seen to do.
+    pub fn envelope(&self) -> &EnvelopeSettings {
+        self.assumptions.effective()
     }
 }

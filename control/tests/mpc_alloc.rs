@@ -110,6 +110,12 @@ fn tick_allocates_only_inside_clarabel() {
                 envelope::command_record(p, &envelope_settings, settings.delay, settings.dt)
                     .unwrap();
             let mut last = VelocityCommand::ZERO;
+            // The assumption check (issue 43) runs in the tick too.
+            let mut monitor = control::assumption_check::AssumptionMonitor::new(
+                p,
+                envelope_settings,
+                settings.delay,
+            );
             let ticks = 30;
             let (mut total, mut solves) = (0, 0);
             let in_backends = |mpc: &Mpc<_, _, CountedClarabel>| {
@@ -135,10 +141,19 @@ fn tick_allocates_only_inside_clarabel() {
                     sol.status
                 );
                 solves += sol.sqp_iterations as usize;
+                let proposed = sol.command;
+                let (delay_estimate, gain_estimate) =
+                    (mpc.compensated_delay(), mpc.actuator_gains());
+                monitor.observe(&control::assumption_check::TickInput {
+                    now,
+                    measured: &x,
+                    delay_estimate,
+                    gain_estimate,
+                });
                 let cmd = envelope::guard(
                     &EnvelopeInput {
                         params: &p,
-                        settings: &envelope_settings,
+                        settings: monitor.effective(),
                         sent: &sent,
                         now,
                         state: &x,
@@ -146,7 +161,7 @@ fn tick_allocates_only_inside_clarabel() {
                         dt: settings.dt,
                         last,
                     },
-                    sol.command,
+                    proposed,
                 )
                 .command;
                 mpc.sent(now, cmd);

@@ -14,7 +14,7 @@ use control::mpc::{Mpc, MpcSettings};
 use control::obstacle::Obstacle;
 use control::pilot::{Pilot, PilotDecision};
 use control::planner::{
-    InlineRoutes, Navigator, NavigatorSettings, NavStep, PlanDelay, PlannerThread, RoutePlanner,
+    InlineRoutes, NavStep, Navigator, NavigatorSettings, PlanDelay, PlannerThread, RoutePlanner,
     RouteService,
 };
 use control::plant::{Plant, PlantConfig};
@@ -65,8 +65,12 @@ fn pilot(kind: &str) -> Pilot<Critic> {
 /// daemon sees), so the run is deterministic.
 fn drive(kind: &str, ticks: usize) -> Vec<VelocityCommand> {
     let mut pilot = pilot(kind);
-    let mut plant =
-        Plant::new(MachineParams::default(), PlantConfig::ideal(), State::zeros()).unwrap();
+    let mut plant = Plant::new(
+        MachineParams::default(),
+        PlantConfig::ideal(),
+        State::zeros(),
+    )
+    .unwrap();
     let goal = Goal::new(8.0, 0.0, 0.0);
     let mut sent = Vec::new();
     for k in 0..ticks {
@@ -78,6 +82,7 @@ fn drive(kind: &str, ticks: usize) -> Vec<VelocityCommand> {
         let command = match pilot.step(&x, now, Instant::now()).unwrap() {
             PilotDecision::Drive(s) => s.command,
             PilotDecision::Abort(r) => panic!("{kind}: aborted {r:?} at {now}"),
+            PilotDecision::Stop { finding, .. } => panic!("{kind}: {finding} at {now}"),
         };
         plant.command(command).unwrap();
         pilot.sent(now, command);
@@ -113,9 +118,13 @@ fn the_first_route_holds_for_the_charged_delay_and_a_stale_one_is_asked_again() 
     let goal = Goal::new(8.0, 0.0, 0.0);
     // One tick: hold at the goal's tick, the route at the next.
     let s = NavigatorSettings::default();
-    let mut nav =
-        Navigator::with_routes(p, s.clone(), Some(&critic), routes("one tick", &s, actor.clone()))
-            .unwrap();
+    let mut nav = Navigator::with_routes(
+        p,
+        s.clone(),
+        Some(&critic),
+        routes("one tick", &s, actor.clone()),
+    )
+    .unwrap();
     nav.set_goal(&start, goal, &wall(), 0.0).unwrap();
     assert_eq!(nav.update(&start, 0.0), NavStep::Hold);
     assert!(nav.route().is_empty());
@@ -144,7 +153,10 @@ fn the_first_route_holds_for_the_charged_delay_and_a_stale_one_is_asked_again() 
     };
     assert!(nav.stale_routes() >= 3, "{} stale", nav.stale_routes());
     assert_eq!(end.1, control::planner::AbortReason::NoProgress);
-    assert!((end.0 - s.stall.progress.timeout).abs() < 0.2 + 1e-9, "{end:?}");
+    assert!(
+        (end.0 - s.stall.progress.timeout).abs() < 0.2 + 1e-9,
+        "{end:?}"
+    );
 }
 
 /// The daemon marks its control thread; a navigator planning inline there
@@ -154,8 +166,8 @@ fn the_first_route_holds_for_the_charged_delay_and_a_stale_one_is_asked_again() 
 fn a_search_on_the_tick_thread_fails() {
     let result = std::thread::spawn(|| {
         control::planner::mark_tick_thread();
-        let mut nav = Navigator::new(MachineParams::default(), NavigatorSettings::default(), None)
-            .unwrap();
+        let mut nav =
+            Navigator::new(MachineParams::default(), NavigatorSettings::default(), None).unwrap();
         nav.set_goal(&State::zeros(), Goal::new(8.0, 0.0, 0.0), &wall(), 0.0)
     })
     .join();
@@ -185,7 +197,10 @@ fn a_search_on_the_tick_thread_fails() {
         while nav.planner_working() && t0.elapsed() < Duration::from_secs(60) {
             std::thread::sleep(Duration::from_millis(1));
         }
-        assert!(matches!(nav.update(&State::zeros(), 0.2), NavStep::Drive { .. }));
+        assert!(matches!(
+            nav.update(&State::zeros(), 0.2),
+            NavStep::Drive { .. }
+        ));
         assert!(nav.route().len() > 1);
     })
     .join()

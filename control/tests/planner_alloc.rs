@@ -118,7 +118,7 @@ fn the_global_layer_and_the_pilot_do_not_allocate() {
                 followed += usize::from(s.route.len() > 1);
                 s.command
             }
-            PilotDecision::Abort(_) => VelocityCommand::ZERO,
+            PilotDecision::Abort(_) | PilotDecision::Stop { .. } => VelocityCommand::ZERO,
         };
         pilot.sent(now, command);
     }

@@ -11,10 +11,13 @@
 //! [mpc]                # control::mpc::MpcSettings: horizon, dt, hessian, delay, time_budget, qp_solver, ...
 //! [envelope]           # control::envelope::EnvelopeSettings: the safety envelope (DESIGN §14)
 //! margin = 0.01        # m kept beyond the tolerances below
-//! geometry_tolerance = 0.0  # m: how far the true rear axle may be from the configured L_f, L_r
-//! pose_noise_xy = 0.0  # m, 1 σ;  pose_noise_theta = 0.0  # rad, 1 σ
-//! pose_latency = 0.0   # s: uncertainty of the pose's stamp;  response_lag = 0.0  # s
-//! actuator_gain_max = 1.0  # the machine may achieve up to this × the commanded velocities
+//! geometry_tolerance = 0.06  # m: how far the true rear axle may be from the configured L_f, L_r
+//! pose_noise_xy = 0.02 # m, 1 σ;  pose_noise_theta = 0.01  # rad, 1 σ
+//! pose_latency = 0.01  # s: uncertainty of the pose's stamp;  response_lag = 0.15  # s
+//! actuator_gain_max = 1.2  # the machine may achieve up to this × the commanded velocities
+//! # (the shipped defaults are conservative: docs/envelope-tolerances.md says how to narrow them)
+//! [envelope.check]     # control::assumption_check::CheckSettings: the assumptions checked while driving
+//! span = 1.0           # s outside a tolerance before it counts;  action = "widen"  # or "stop"
 //! [controller]
 //! cost = "critic"      # "critic" (the trained network) or "quadratic" (no weights; for bring-up)
 //! planner = "hybrid-astar"  # the global layer (DESIGN §10): "hybrid-astar" or "none"
@@ -498,6 +501,64 @@ impl Config {
             .widened(self.envelope.tolerance_widening(&self.machine))
     }
 
+    /// What the envelope's tolerances give (issue 43; `wlnavd --check-config`
+    /// prints it): the margins of both axle points and where they come from,
+    /// the response lags predicted, the MPC's planned clearances and the
+    /// assumption check.
+    pub fn envelope_report(&self) -> String {
+        let e = &self.envelope;
+        let p = &self.machine;
+        if !e.enabled {
+            return "envelope: OFF (envelope.enabled = false): no command is checked\n".into();
+        }
+        let [front, rear] = e.margins(p);
+        let (n, step, pad) = control::envelope::late_samples(e, p);
+        let mpc = self.mpc_settings();
+        let c = &e.check;
+        let mut out = format!(
+            "envelope margins (DESIGN §14; docs/envelope-tolerances.md):\n\
+             \x20 front axle {front:.3} m = margin {:.3} + {} × pose_noise_xy {:.3} + v_max {:.2} m/s × pose_latency {:.3} s\n\
+             \x20 rear axle  {rear:.3} m = front {front:.3} + geometry_tolerance {:.3} + (l_f + l_r) {:.2} m × {} × pose_noise_theta {:.3}\n\
+             \x20 response: after the compensated delay and up to response_lag {:.3} s later ({} lag(s), {:.3} s apart, +{:.3} m for the motion between them), at up to actuator_gain_max {:.2} × the command\n\
+             \x20 the MPC plans front {:.3} m, rear {:.3} m from every circle (mpc.obstacle_margin{{,_rear}} + the tolerances)\n",
+            e.margin,
+            e.noise_sigmas,
+            e.pose_noise_xy,
+            p.v_max,
+            e.pose_latency,
+            e.geometry_tolerance,
+            p.l_f + p.l_r,
+            e.noise_sigmas,
+            e.pose_noise_theta,
+            e.response_lag,
+            n + 1,
+            step,
+            pad,
+            e.actuator_gain_max,
+            mpc.obstacle_margin,
+            mpc.obstacle_margin_rear,
+        );
+        if c.enabled {
+            out += &format!(
+                "assumption check: on; a measurement outside its tolerance for {:.1} s → {}; \
+                 widened at most to geometry {:.3} m, delay +{:.2} s, gain {:.2}, pose noise {:.3} m / {:.3} rad (beyond: controlled stop)\n",
+                c.span,
+                match c.action {
+                    control::assumption_check::OnBroken::Widen => "widen the envelope to it",
+                    control::assumption_check::OnBroken::Stop => "controlled stop",
+                },
+                c.max_geometry_tolerance,
+                c.max_response_lag,
+                c.max_actuator_gain,
+                c.max_pose_noise_xy,
+                c.max_pose_noise_theta,
+            );
+        } else {
+            out += "assumption check: OFF (envelope.check.enabled = false)\n";
+        }
+        out
+    }
+
     /// The tick period [s]: the MPC's stage Δt (`mpc.dt`), the command period
     /// the critic was trained with.
     pub fn period(&self) -> f64 {
@@ -815,6 +876,51 @@ mod tests {
         let d = Config::from_toml("[mpc]\nhorizon = 20\n", "t").unwrap();
         assert_eq!(d.mpc_settings().qp_solver, default);
         assert!(err("[mpc]\nqp_solver = \"qdldl\"\n").contains("qp_solver"));
+    }
+
+    /// Issue 43: the shipped envelope states conservative tolerances; a
+    /// file narrows them knowingly, `[envelope.check]` is read and checked,
+    /// and the report `--check-config` prints gives the margins they make.
+    #[test]
+    fn envelope_defaults_are_conservative_and_the_report_gives_the_margins() {
+        let c = Config::default();
+        let e = &c.envelope;
+        assert!(
+            e.geometry_tolerance >= 0.06
+                && e.pose_noise_xy >= 0.02
+                && e.pose_noise_theta >= 0.01
+                && e.pose_latency > 0.0
+                && e.response_lag >= 0.15
+                && e.actuator_gain_max >= 1.2,
+            "{e:?}"
+        );
+        assert!(e.check.enabled);
+        let report = c.envelope_report();
+        // front 0.01 + 3 × 0.02 + 1 × 0.01 = 0.08; rear + 0.06 + 1.2 × 3 × 0.01.
+        assert!(report.contains("front axle 0.080 m"), "{report}");
+        assert!(report.contains("rear axle  0.176 m"), "{report}");
+        assert!(report.contains("assumption check: on"), "{report}");
+        // Narrowed in a file: the report follows.
+        let exact = Config::from_toml(
+            "[envelope]\ngeometry_tolerance = 0.0\npose_noise_xy = 0.0\npose_noise_theta = 0.0\n\
+             pose_latency = 0.0\nresponse_lag = 0.0\nactuator_gain_max = 1.0\n\
+             [envelope.check]\naction = \"stop\"\nspan = 2.0\n",
+            "t",
+        )
+        .unwrap();
+        assert_eq!(
+            exact.envelope.check.action,
+            control::assumption_check::OnBroken::Stop
+        );
+        let report = exact.envelope_report();
+        assert!(
+            report.contains("front axle 0.010 m") && report.contains("rear axle  0.010 m"),
+            "{report}"
+        );
+        assert!(report.contains("controlled stop"), "{report}");
+        assert!(err("[envelope.check]\nspan = 0\n").contains("`envelope.check.span`"));
+        assert!(err("[envelope.check]\nmax_actuator_gain = 3\n").contains("max_actuator_gain"));
+        assert!(err("[envelope.check]\naction = \"ignore\"\n").contains("action"));
     }
 
     fn err(text: &str) -> String {

@@ -148,6 +148,8 @@ struct Solve {
     envelope_override: bool,
     /// The wall time of a route plan taken this step [s].
     new_plan_time: Option<f64>,
+    /// The telemetry bits of the envelope's assumptions broken so far.
+    assumption_flags: u32,
 }
 
 impl Solve {
@@ -160,6 +162,7 @@ impl Solve {
         if self.envelope_override {
             flags |= fault_flags::ENVELOPE_OVERRIDE;
         }
+        flags |= self.assumption_flags;
         flags
     }
 }
@@ -666,6 +669,7 @@ impl ControlLoop {
             solve_time,
             envelope_override: false,
             new_plan_time: None,
+            assumption_flags: 0,
         };
         if self.engaged_generation != Some(g.generation) {
             tracing::info!(
@@ -706,9 +710,34 @@ impl ControlLoop {
                     solve_time: None,
                     envelope_override: false,
                     new_plan_time: None,
+                    assumption_flags: 0,
+                };
+            }
+            Ok(Step::AssumptionBroken { finding, broken }) => {
+                // Beyond what the envelope may be widened to: a fault, the
+                // goal aborted with the measurement in its reason.
+                tracing::error!(
+                    "{finding}: beyond what the envelope may widen to: controlled stop"
+                );
+                let bits = assumption_flags(broken);
+                self.latched |= bits;
+                self.ctx
+                    .goals
+                    .lock()
+                    .abort_active(Abort::new(AbortReason::Fault, format!("fault: {finding}")));
+                return Solve {
+                    result: SolveResult::RouteEnded,
+                    command: None,
+                    solve_time: None,
+                    envelope_override: false,
+                    new_plan_time: None,
+                    assumption_flags: bits,
                 };
             }
             Ok(Step::Drive(plan)) => {
+                if let Some(f) = plan.widened {
+                    tracing::warn!("{f}: envelope widened to it");
+                }
                 self.subgoal = plan.subgoal;
                 plan.fill_telemetry(t);
                 let solve_time = Some(plan.solve_time.as_secs_f64());
@@ -730,6 +759,7 @@ impl ControlLoop {
                         solve_time,
                         envelope_override: overridden.is_some(),
                         new_plan_time: plan.new_plan.then(|| plan.plan_time.as_secs_f64()),
+                        assumption_flags: assumption_flags(plan.assumptions_broken),
                     },
                 };
                 if let Some((proposed, g)) = overridden {
@@ -748,6 +778,25 @@ impl ControlLoop {
         };
         solve
     }
+}
+
+/// The telemetry bits of the envelope's assumptions in `broken` (bit
+/// `Assumption as usize`), with [`fault_flags::ASSUMPTION_BROKEN`] if any
+/// (issue 43).
+fn assumption_flags(broken: u8) -> u32 {
+    use control::assumption_check::Assumption as A;
+    A::ALL
+        .iter()
+        .filter(|a| broken & (1 << **a as usize) != 0)
+        .fold(0, |acc, a| {
+            acc | fault_flags::ASSUMPTION_BROKEN
+                | match a {
+                    A::Geometry => fault_flags::ASSUMPTION_GEOMETRY,
+                    A::Delay => fault_flags::ASSUMPTION_DELAY,
+                    A::Gain => fault_flags::ASSUMPTION_GAIN,
+                    A::PoseNoiseXy | A::PoseNoiseTheta => fault_flags::ASSUMPTION_POSE_NOISE,
+                }
+        })
 }
 
 /// The detail of a mode change in logs and STATUS=.
@@ -779,5 +828,32 @@ pub fn mode_name(mode: Mode) -> &'static str {
         Mode::Reached => "reached",
         Mode::Stopping => "stopping",
         Mode::Fault => "fault",
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use control::assumption_check::Assumption;
+
+    #[test]
+    fn each_broken_assumption_is_named_by_its_own_telemetry_bit() {
+        assert_eq!(assumption_flags(0), 0, "nothing broken raises nothing");
+        for (a, name) in [
+            (Assumption::Geometry, "assumption-geometry"),
+            (Assumption::Delay, "assumption-delay"),
+            (Assumption::Gain, "assumption-gain"),
+            (Assumption::PoseNoiseXy, "assumption-pose-noise"),
+            (Assumption::PoseNoiseTheta, "assumption-pose-noise"),
+        ] {
+            let names = fault_flags::names(assumption_flags(1 << a as usize));
+            assert_eq!(names, ["assumption-broken", name], "{a:?}");
+        }
+        let both = 1 << Assumption::Delay as usize | 1 << Assumption::Gain as usize;
+        let names = fault_flags::names(assumption_flags(both));
+        assert_eq!(
+            names,
+            ["assumption-broken", "assumption-delay", "assumption-gain"]
+        );
     }
 }

@@ -14,6 +14,7 @@
 
 use std::time::{Duration, Instant};
 
+use control::assumption_check::{Decision, Finding};
 use control::envelope::Guarded;
 use control::mpc::{Mpc, MpcSettings, QuadraticCost, StageCost, StepStatus};
 use control::pilot::{Pilot, PilotDecision};
@@ -71,6 +72,11 @@ pub struct Plan<'a> {
     pub new_plan: bool,
     /// How old the route followed was when it arrived [s].
     pub route_age: f64,
+    /// The envelope's assumptions the machine has broken so far (bit
+    /// `Assumption as usize`), and the one the envelope was widened to this
+    /// tick, if any (issue 43).
+    pub assumptions_broken: u8,
+    pub widened: Option<Finding>,
 }
 
 impl Plan<'_> {
@@ -110,6 +116,10 @@ pub enum Step<'a> {
     /// The global layer ended the goal (no route, or no progress towards its
     /// target); the loop ends it as aborted and brings the machine to rest.
     Abort(planner::AbortReason),
+    /// The machine broke an assumption of the safety envelope beyond what it
+    /// may be widened to: a fault; the loop latches it, aborts the goal with
+    /// the finding in its reason and brings the machine to rest.
+    AssumptionBroken { finding: Finding, broken: u8 },
 }
 
 /// A failed step (no usable plan at all).
@@ -186,7 +196,9 @@ impl<C: StageCost> Controller for PilotController<C> {
         obstacles: &[Obstacle],
         now: f64,
     ) -> Result<(), ControllerError> {
-        self.pilot.set_goal(start, goal, obstacles, now).map_err(err)
+        self.pilot
+            .set_goal(start, goal, obstacles, now)
+            .map_err(err)
     }
 
     fn reset(&mut self) {
@@ -201,6 +213,9 @@ impl<C: StageCost> Controller for PilotController<C> {
     ) -> Result<Step<'_>, ControllerError> {
         let p = match self.pilot.step(state, now, tick_start).map_err(err)? {
             PilotDecision::Abort(reason) => return Ok(Step::Abort(reason)),
+            PilotDecision::Stop { finding, broken } => {
+                return Ok(Step::AssumptionBroken { finding, broken })
+            }
             PilotDecision::Drive(p) => p,
         };
         let status = match p.solution.map(|s| s.status) {
@@ -223,6 +238,11 @@ impl<C: StageCost> Controller for PilotController<C> {
             plan_time: p.plan_time,
             new_plan: p.new_plan,
             route_age: p.route_age,
+            assumptions_broken: p.assumptions.broken,
+            widened: p
+                .assumptions
+                .finding
+                .filter(|_| p.assumptions.decision == Decision::Widen),
         }))
     }
 
@@ -307,12 +327,10 @@ pub fn load_controller(config: &Config) -> Result<ControllerFactory, LoadError> 
                 controller(mpc, &parts, networks)
             }))
         }
-        CostKind::Quadratic => {
-            Ok(Box::new(move || {
-                let mpc = Mpc::new(machine, quadratic_cost(), actor, settings).map_err(err)?;
-                controller(mpc, &parts, None)
-            }))
-        }
+        CostKind::Quadratic => Ok(Box::new(move || {
+            let mpc = Mpc::new(machine, quadratic_cost(), actor, settings).map_err(err)?;
+            controller(mpc, &parts, None)
+        })),
     }
 }
 
@@ -374,6 +392,9 @@ pub fn first_solve(c: &mut dyn Controller) -> Result<Duration, ControllerError> 
             "first solve: the global layer aborted an open-ground goal ({})",
             reason.name()
         ))),
+        Ok(Step::AssumptionBroken { finding, .. }) => {
+            Err(ControllerError(format!("first solve: {finding}")))
+        }
         Err(e) => Err(e),
     };
     c.reset();

@@ -142,6 +142,7 @@ fn main() -> ExitCode {
     if args.check_config {
         return match wlnavd::controller::load_controller(&config) {
             Ok(_) => {
+                print!("{}", config.envelope_report());
                 println!("wlnavd: configuration and weights OK");
                 ExitCode::SUCCESS
             }

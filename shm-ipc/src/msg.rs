@@ -668,9 +668,24 @@ pub mod fault_flags {
     /// it would have come closer to an obstacle than the protective margin. Not a fault:
     /// the machine brakes (or brakes while steering) and the controller goes on.
     pub const ENVELOPE_OVERRIDE: u32 = 1 << 10;
+    /// The machine was seen to break one of the safety envelope's stated tolerances
+    /// (issue 43): the assumption bits below name which. Alone, a warning: the envelope
+    /// was widened to what was measured (and stays so). With the mode `fault`, the
+    /// measurement was beyond what the envelope may be widened to: controlled stop, the
+    /// goal aborted with the measurement in its reason text.
+    pub const ASSUMPTION_BROKEN: u32 = 1 << 11;
+    /// … the geometry (`envelope.geometry_tolerance`): the heading's response says the
+    /// rear axle is farther from the modelled one.
+    pub const ASSUMPTION_GEOMETRY: u32 = 1 << 12;
+    /// … the actuator delay beyond the configured one (`envelope.response_lag`).
+    pub const ASSUMPTION_DELAY: u32 = 1 << 13;
+    /// … the actuator gain (`envelope.actuator_gain_max`).
+    pub const ASSUMPTION_GAIN: u32 = 1 << 14;
+    /// … the pose estimate's noise (`envelope.pose_noise_xy` or `pose_noise_theta`).
+    pub const ASSUMPTION_POSE_NOISE: u32 = 1 << 15;
 
     /// Every bit and its name, in bit order (logs, reject reasons, `wlnav watch`).
-    pub const NAMES: [(u32, &str); 11] = [
+    pub const NAMES: [(u32, &str); 16] = [
         (POSE_STALE, "pose-stale"),
         (MACHINE_STATE_STALE, "machine-state-stale"),
         (CAN_CRC, "can-crc"),
@@ -682,6 +697,11 @@ pub mod fault_flags {
         (CAN_BUS, "can-bus"),
         (POSE_REJECTED, "pose-rejected"),
         (ENVELOPE_OVERRIDE, "envelope-override"),
+        (ASSUMPTION_BROKEN, "assumption-broken"),
+        (ASSUMPTION_GEOMETRY, "assumption-geometry"),
+        (ASSUMPTION_DELAY, "assumption-delay"),
+        (ASSUMPTION_GAIN, "assumption-gain"),
+        (ASSUMPTION_POSE_NOISE, "assumption-pose-noise"),
     ];
 
     /// Names of the bits set in `flags`, in bit order ([`NAMES`]); bits

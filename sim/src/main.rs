@@ -20,6 +20,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
+use control::assumption_check::{CheckSettings, OnBroken};
 use control::critic::HessianMode;
 use control::envelope::EnvelopeSettings;
 use control::mpc::{MpcSettings, ObstacleConstraint, QpSolver};
@@ -170,11 +171,30 @@ struct EnvelopeArgs {
     /// The machine may achieve up to K × the commanded velocities (K in [1, 2]).
     #[arg(long, value_name = "K")]
     actuator_gain_max: Option<f64>,
+    /// State no tolerance at all (the envelope of a machine that is exactly
+    /// its model; the defaults before issue 43); the flags above still apply.
+    #[arg(long)]
+    exact_envelope: bool,
+    /// What a broken assumption does (issue 43; default: the daemon's).
+    #[arg(long, value_name = "ACTION", value_parser = serde_value::<OnBroken>)]
+    assumption_action: Option<OnBroken>,
+    /// Do not check the envelope's assumptions while driving.
+    #[arg(long)]
+    no_assumption_check: bool,
 }
 
 impl EnvelopeArgs {
     fn settings(&self) -> Result<EnvelopeSettings> {
-        let d = EnvelopeSettings::default();
+        let d = if self.exact_envelope {
+            EnvelopeSettings::exact()
+        } else {
+            EnvelopeSettings::default()
+        };
+        let check = CheckSettings {
+            enabled: !self.no_assumption_check,
+            action: self.assumption_action.unwrap_or(d.check.action),
+            ..d.check
+        };
         let (sxy, sth) = self
             .pose_noise_tolerance
             .unwrap_or((d.pose_noise_xy, d.pose_noise_theta));
@@ -187,6 +207,7 @@ impl EnvelopeArgs {
             pose_latency: self.pose_latency_tolerance.unwrap_or(d.pose_latency),
             response_lag: self.response_lag.unwrap_or(d.response_lag),
             actuator_gain_max: self.actuator_gain_max.unwrap_or(d.actuator_gain_max),
+            check,
             ..d
         };
         s.validate()?;
@@ -304,6 +325,10 @@ enum Command {
         /// Base name of the page (NAME.md) and its asset directory.
         #[arg(long, default_value = "robustness")]
         name: String,
+        /// Run every case with the shipped envelope (nothing stated about the
+        /// perturbation; issue 43) instead of the tolerances each case states.
+        #[arg(long)]
+        shipped_envelope: bool,
         #[command(flatten)]
         common: Common,
         #[arg(long, default_value = "docs")]
@@ -533,6 +558,7 @@ fn main() -> Result<()> {
             t_star,
             no_estimation,
             name,
+            shipped_envelope,
             common,
             out,
         } => {
@@ -594,6 +620,7 @@ fn main() -> Result<()> {
                 t_star_source: t_star.display().to_string(),
                 command,
                 commit,
+                shipped_envelope,
             };
             robustness::robustness(&inputs, &robustness::standard_sweeps(), &out)?;
         }

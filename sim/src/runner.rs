@@ -20,6 +20,7 @@ use std::sync::Mutex;
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
+use control::assumption_check;
 use control::delay::{compensate_pose_age, DelayCompensator};
 use control::envelope::EnvelopeSettings;
 use control::mlp::PAPER_HIDDEN;
@@ -294,6 +295,9 @@ pub struct Run {
     /// Largest per-stage sum of obstacle-row multipliers over the run's QPs
     /// (MPC runs): the obstacle slack weight must exceed it (DESIGN §14).
     pub obstacle_multiplier_max: f64,
+    /// The envelope's assumptions the machine broke (MPC runs, issue 43):
+    /// when, what, and what the pilot did (widened the envelope, or stopped).
+    pub assumption_findings: Vec<(f64, assumption_check::Finding, assumption_check::Decision)>,
 }
 
 /// The global layer's record of one run.
@@ -438,6 +442,7 @@ pub fn run_mpc(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run> 
     let mut rest = RestCounter::new(cfg, dt);
     let mut aborted = false;
     let mut overrides = 0;
+    let mut findings = Vec::new();
     let (mut penetrating_plans, mut multiplier_max) = (0, 0.0f64);
     for k in 0..=steps {
         // The pose is stamped: its age is known and compensated, as in the
@@ -474,7 +479,19 @@ pub fn run_mpc(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run> 
                     aborted = true;
                     VelocityCommand::ZERO
                 }
+                PilotDecision::Stop { finding, .. } => {
+                    tracing_note(&format!("{} at {now:.1} s: {finding}: stop", sc.name));
+                    findings.push((now, finding, assumption_check::Decision::Stop));
+                    aborted = true;
+                    VelocityCommand::ZERO
+                }
                 PilotDecision::Drive(p) => {
+                    if let (Some(f), assumption_check::Decision::Widen) =
+                        (p.assumptions.finding, p.assumptions.decision)
+                    {
+                        tracing_note(&format!("{} at {now:.1} s: {f}: widened", sc.name));
+                        findings.push((now, f, assumption_check::Decision::Widen));
+                    }
                     if let Some(sol) = p.solution {
                         solve_ms.push(sol.solve_time.as_secs_f64() * 1e3);
                         penetrating_plans += usize::from(
@@ -516,6 +533,7 @@ pub fn run_mpc(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run> 
         envelope_overrides: overrides,
         penetrating_plans,
         obstacle_multiplier_max: multiplier_max,
+        assumption_findings: findings,
     })
 }
 
@@ -571,6 +589,7 @@ pub fn run_actor(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run
         envelope_overrides: 0,
         penetrating_plans: 0,
         obstacle_multiplier_max: 0.0,
+        assumption_findings: Vec::new(),
     })
 }
 
@@ -616,6 +635,7 @@ pub fn run_baseline(cfg: &EvalConfig, sc: &Scenario) -> Result<(Run, ocp::Plan)>
             envelope_overrides: 0,
             penetrating_plans: 0,
             obstacle_multiplier_max: 0.0,
+            assumption_findings: Vec::new(),
         },
         plan,
     ))
@@ -713,6 +733,7 @@ pub fn run_min_time(cfg: &EvalConfig, sc: &Scenario, others: &[(Method, Run)]) -
         envelope_overrides: 0,
         penetrating_plans: 0,
         obstacle_multiplier_max: 0.0,
+        assumption_findings: Vec::new(),
     })
 }
 

@@ -305,12 +305,20 @@ fn at_horizon_40_the_envelope_keeps_out_of_circles_the_plan_cuts_into() {
     });
     for row in &without.rows {
         let c = row.min_clearance.unwrap();
-        assert!(c < -0.05, "{}: without the envelope {c} m: the plan was to cut in", row.name);
+        assert!(
+            c < -0.05,
+            "{}: without the envelope {c} m: the plan was to cut in",
+            row.name
+        );
     }
     for (s, row) in with.runs.iter().zip(&with.rows) {
         let c = row.min_clearance.unwrap();
         assert!(c > -0.005, "{}: {c} m with the envelope", row.name);
-        assert!(s.runs[0].1.envelope_overrides > 0, "{}: never acted", row.name);
+        assert!(
+            s.runs[0].1.envelope_overrides > 0,
+            "{}: never acted",
+            row.name
+        );
     }
 }
 
@@ -478,6 +486,75 @@ fn the_large_loader_stopped_beside_its_goal_is_retried_into_it() {
             ],
             "{}",
             row.name
+        );
+    }
+}
+
+/// Issue 43: the envelope's assumptions checked in closed loop. With the
+/// shipped envelope and nothing stated, a machine whose delay is 0.8 s
+/// against 0.2 s compensated (0.45 s beyond the stated response lag) is named
+/// within seconds and driven safely on gap006 (the issue's worst run, 0.367 m
+/// into a circle before); a gain of 1.4 (above the stated 1.2) is named and the
+/// envelope widened to it; the ideal machine and one within the stated lag
+/// (0.3 s) raise nothing.
+#[test]
+fn the_envelope_names_the_assumption_a_machine_breaks_in_closed_loop() {
+    use control::assumption_check::{Assumption, Decision};
+    let nets = committed();
+    let text = std::fs::read_to_string(manifest("scenarios/obstacles200.csv")).unwrap();
+    let set = scenario::parse(&text, "obstacles200.csv").unwrap();
+    let sc = set.iter().find(|s| s.name == "gap006").unwrap();
+    let run = |delay: Option<f64>, gain: f64| {
+        let cfg = EvalConfig {
+            params: nets.machine,
+            methods: vec![Method::Mpc],
+            plant: control::PlantConfig {
+                delay: 0.2,
+                ..control::PlantConfig::ideal()
+            },
+            perturbation: control::PlantPerturbation {
+                delay,
+                actuator_gain: gain,
+                ..Default::default()
+            },
+            end_at_rest: true,
+            jobs: 1,
+            progress: false,
+            ..Default::default()
+        };
+        runner::run_mpc(&cfg, &nets, sc).unwrap()
+    };
+    let late = run(Some(0.8), 1.0);
+    let (t, f, d) = late.assumption_findings[0];
+    assert_eq!(f.assumption, Assumption::Delay, "{f}");
+    assert!((f.measured - 0.6).abs() < 0.051, "{f}");
+    assert_eq!(d, Decision::Widen);
+    assert!(t <= 5.0, "named at {t} s");
+    let clearance = late.row.min_clearance.unwrap();
+    assert!(clearance > -0.005, "0.8 s delay: {clearance} m");
+
+    let fast = run(None, 1.4);
+    // Named as the gain estimate climbs past 1.2 + its dead band, widened
+    // each time it climbs further, up to what the machine does.
+    let gains: Vec<_> = fast
+        .assumption_findings
+        .iter()
+        .filter(|(_, f, _)| f.assumption == Assumption::Gain)
+        .collect();
+    assert!(!gains.is_empty(), "{:?}", fast.assumption_findings);
+    assert!(
+        gains.iter().all(|(_, _, d)| *d == Decision::Widen),
+        "{gains:?}"
+    );
+    let widest = gains.iter().map(|(_, f, _)| f.measured).fold(0.0, f64::max);
+    assert!((widest - 1.4).abs() < 0.05, "{gains:?}");
+
+    for (delay, what) in [(None, "ideal"), (Some(0.3), "0.1 s late")] {
+        let r = run(delay, 1.0);
+        assert!(
+            r.assumption_findings.is_empty(),
+            "{what}: {:?}",
+            r.assumption_findings
         );
     }
 }

@@ -39,7 +39,9 @@ use std::time::Duration;
 pub use hybrid_astar::{HybridAStar, SearchFailure, SearchStats};
 pub use navigator::{critic_cost_per_metre, Navigator};
 pub use route_planner::{PlanJob, PlanKind, PlanRequest, Route, RoutePlanner};
-pub use service::{mark_tick_thread, on_tick_thread, InlineRoutes, PlanDelay, PlannerThread, RouteService};
+pub use service::{
+    mark_tick_thread, on_tick_thread, InlineRoutes, PlanDelay, PlannerThread, RouteService,
+};
 pub use settings::{FollowingSettings, NavigatorSettings, SearchSettings, StallSettings};
 pub use world::World;
 

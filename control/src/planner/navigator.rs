@@ -4,7 +4,9 @@
 //! (the planner thread); this side never searches.
 
 use crate::critic::{Critic, CriticWorkspace};
-use crate::model::{goal_distance, ix, wrap_angle, Control, Goal, MachineParams, State, REACH_SPEED};
+use crate::model::{
+    goal_distance, ix, wrap_angle, Control, Goal, MachineParams, State, REACH_SPEED,
+};
 use crate::mpc::{PathCost, PathWeights};
 use crate::obstacle::Obstacle;
 use crate::progress::ProgressChecker;
@@ -133,13 +135,11 @@ impl Navigator {
         critic: Option<&Critic>,
         routes: Box<dyn RouteService>,
     ) -> Result<Self, NavError> {
-        params
-            .validate()
-            .map_err(|_| NavError::BadSettings {
-                name: "params",
-                requirement: "machine parameters must be valid",
-                value: f64::NAN,
-            })?;
+        params.validate().map_err(|_| NavError::BadSettings {
+            name: "params",
+            requirement: "machine parameters must be valid",
+            value: f64::NAN,
+        })?;
         settings.validate()?;
         let cost_per_metre = critic
             .and_then(|c| critic_cost_per_metre(c, &mut CriticWorkspace::new(c)))
@@ -576,7 +576,8 @@ impl Navigator {
         let poses = path[start..=end].iter().map(|p| [p.x, p.y, p.theta]);
         // A shot that reverses on the way is a manoeuvre for the critic.
         let traced = &self.route.shot;
-        let drivable = shot && !traced.is_empty() && !traced.iter().any(|x| x[ix::V] < -REACH_SPEED);
+        let drivable =
+            shot && !traced.is_empty() && !traced.iter().any(|x| x[ix::V] < -REACH_SPEED);
         let tail: &[State] = if drivable { traced } else { &[] };
         let tail = tail.iter().map(|x| [x[ix::X], x[ix::Y], x[ix::THETA]]);
         let open_end = shot && !drivable;

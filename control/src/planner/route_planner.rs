@@ -178,7 +178,12 @@ impl RoutePlanner {
 
     /// Decides direct or not (a replan always searches), searches, writes the
     /// route.
-    fn route(&mut self, req: &PlanRequest, route: &mut Route, report: &mut PlanReport) -> PlanOutcome {
+    fn route(
+        &mut self,
+        req: &PlanRequest,
+        route: &mut Route,
+        report: &mut PlanReport,
+    ) -> PlanOutcome {
         let (start, goal) = (&req.start, req.goal);
         let s = &self.search_settings;
         // Near a pile the start or goal may already be inside the margin: the

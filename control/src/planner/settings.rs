@@ -264,7 +264,10 @@ impl NavigatorSettings {
             ("following.control", f.control),
             ("search.clearance_margin", s.clearance_margin),
             ("search.direct_margin", s.direct_margin),
-            ("search.direction_change_penalty", s.direction_change_penalty),
+            (
+                "search.direction_change_penalty",
+                s.direction_change_penalty,
+            ),
         ];
         for (name, v) in non_negative {
             if !(v.is_finite() && v >= 0.0) {
@@ -302,8 +305,7 @@ impl NavigatorSettings {
             ));
         }
         if s.articulations.is_empty()
-            || s
-                .articulations
+            || s.articulations
                 .iter()
                 .any(|a| !(a.is_finite() && (0.0..=1.0).contains(a)))
         {
@@ -351,8 +353,9 @@ mod tests {
         assert_eq!(s.search.max_expansions, 20_000);
         assert_eq!(s.following, FollowingSettings::default());
         // A typo is an error, not a silent default.
-        assert!(serde_json::from_str::<NavigatorSettings>(r#"{"search": {"heuristc": 1}}"#)
-            .is_err());
+        assert!(
+            serde_json::from_str::<NavigatorSettings>(r#"{"search": {"heuristc": 1}}"#).is_err()
+        );
     }
 
     fn toml_like(json: &str) -> NavigatorSettings {

@@ -6,13 +6,13 @@ use super::hybrid_astar::primitive_free;
 use super::primitives::{build, compose};
 use super::*;
 use crate::critic::CriticWorkspace;
-use crate::model::{goal_distance, ix, Control, Goal, MachineParams, State};
-use crate::obstacle::Obstacle;
-use crate::{Actor, Critic};
 use crate::goal_check::GoalConflict;
+use crate::model::{goal_distance, ix, Control, Goal, MachineParams, State};
 use crate::mpc::MpcSettings;
+use crate::obstacle::Obstacle;
 use crate::obstacle::{footprint_clearance, AxlePoint};
 use crate::weights;
+use crate::{Actor, Critic};
 
 /// Wall-clock limits are multiplied by `WLNAV_TIMING_SCALE` (default 1; the one factor
 /// for emulation, set by scripts/cross-check.sh for the tests under qemu): the shared
@@ -36,7 +36,12 @@ fn trained() -> (Actor, Critic) {
 }
 
 fn navigator(networks: bool) -> Navigator {
-    Navigator::new(params(), NavigatorSettings::default(), networks.then(trained)).unwrap()
+    Navigator::new(
+        params(),
+        NavigatorSettings::default(),
+        networks.then(trained),
+    )
+    .unwrap()
 }
 
 /// With and without the networks (the roll-outs and goal shots).
@@ -168,11 +173,7 @@ fn a_wall_is_in_the_way_and_the_route_goes_around_it() {
         nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &obstacles, 0.0)
             .unwrap();
         let report = nav.last_plan().unwrap();
-        assert_eq!(
-            report.outcome,
-            PlanOutcome::Route,
-            "networks {networks}"
-        );
+        assert_eq!(report.outcome, PlanOutcome::Route, "networks {networks}");
         assert_path_clear(&nav, &obstacles, nav.settings().search.clearance_margin);
         // Around the wall's end (|y| ≥ 3.2 + 0.6).
         let widest = nav.path().iter().map(|q| q.y.abs()).fold(0.0, f64::max);
@@ -184,10 +185,7 @@ fn a_wall_is_in_the_way_and_the_route_goes_around_it() {
         let s = nav.settings();
         for w in route.windows(2) {
             let d = (w[1].x - w[0].x).hypot(w[1].y - w[0].y);
-            assert!(
-                d <= 2.0 * s.following.subgoal_spacing + 1.0,
-                "{d}"
-            );
+            assert!(d <= 2.0 * s.following.subgoal_spacing + 1.0, "{d}");
         }
         // The first tick drives to the end of the path's first forward part:
         // a cusp of the path, or the goal, with the path cost leading there.
@@ -389,7 +387,10 @@ fn subgoals_are_passed_as_the_machine_follows_the_path_and_the_goal_is_last() {
     // radius of it or past it on the path, and the goal is never passed.
     for (i, p) in path.iter().enumerate() {
         let x = State::new(p.x, p.y, p.theta, p.beta, 0.0, 0.5);
-        assert!(matches!(nav.update(&x, 0.2 * i as f64), NavStep::Drive { .. }));
+        assert!(matches!(
+            nav.update(&x, 0.2 * i as f64),
+            NavStep::Drive { .. }
+        ));
         let remaining = nav.remaining_route();
         assert!(remaining.len() <= left);
         for passed in &route[route.len() - left..route.len() - remaining.len()] {
@@ -584,10 +585,7 @@ fn the_critics_cost_of_a_metre_is_its_slope_in_the_goal_distance() {
     let per_metre = critic_cost_per_metre(&critic, &mut ws).unwrap();
     // Measured on the published critic: 3.0 (3.0), and
     // about the time to go at cruising speed / 0.22 s per unit (waypoint graph).
-    assert!(
-        (per_metre - 3.0).abs() < 0.5,
-        "{per_metre}"
-    );
+    assert!((per_metre - 3.0).abs() < 0.5, "{per_metre}");
     // Independently: the slope straight ahead, 4 to 9 m, is of the same size.
     let mut value = |d: f64| {
         critic.value(
@@ -653,7 +651,8 @@ fn a_stop_beside_the_goal_is_retried_from_the_approach_pose_behind_it() {
     let s = nav.settings().clone();
     let goal = Goal::new(5.0, 0.0, 0.0);
     let behind = Goal::new(5.0 - s.stall.approach_distance, 0.0, 0.0);
-    nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &[], 0.0).unwrap();
+    nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &[], 0.0)
+        .unwrap();
     let stuck = stopped_beside(&goal);
     assert!(goal_distance(&stuck, &goal) > s.stall.reached_tolerance);
     let dt = 0.2;
@@ -669,7 +668,14 @@ fn a_stop_beside_the_goal_is_retried_from_the_approach_pose_behind_it() {
     assert_eq!(nav.route(), &[behind, goal]);
     // Within the subgoal radius of it (driving back): the goal again.
     t += dt;
-    let passing = State::new(behind.x + 0.9 * s.following.subgoal_radius, 0.0, 0.0, 0.0, 0.0, -0.5);
+    let passing = State::new(
+        behind.x + 0.9 * s.following.subgoal_radius,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        -0.5,
+    );
     assert_eq!(nav.update(&passing, t), drive(goal, true));
     // Stopped beside it once more: the second and last retry; the third
     // stall waits for the abort window.
@@ -754,7 +760,8 @@ fn no_retry_while_moving_or_far_from_the_goal() {
     let far = at_rest(goal.x - s.stall.approach_distance - 0.1, 0.0, 0.0);
     for x in [moving, far] {
         let mut nav = navigator(false);
-        nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &[], 0.0).unwrap();
+        nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &[], 0.0)
+            .unwrap();
         for k in 0..45 {
             assert_eq!(nav.update(&x, k as f64 * 0.2), drive(goal, true));
         }
@@ -807,7 +814,8 @@ fn a_retry_opens_its_own_abort_window() {
     let mut nav = navigator(false);
     let s = nav.settings().clone();
     let goal = Goal::new(5.0, 0.0, 0.0);
-    nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &[], 0.0).unwrap();
+    nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &[], 0.0)
+        .unwrap();
     let stuck = stopped_beside(&goal);
     let dt = 0.2;
     let (mut retry_at, mut k) = (None, 0);
@@ -825,7 +833,10 @@ fn a_retry_opens_its_own_abort_window() {
         assert!(k < 1000);
     };
     let retry_at = retry_at.expect("a retry");
-    assert!((retry_at - s.stall.replan_after).abs() < dt + 1e-9, "{retry_at}");
+    assert!(
+        (retry_at - s.stall.replan_after).abs() < dt + 1e-9,
+        "{retry_at}"
+    );
     assert!(
         (aborted_at - retry_at - s.stall.progress.timeout).abs() < dt + 1e-9,
         "retry at {retry_at}, aborted at {aborted_at}"

@@ -256,6 +256,8 @@ impl Hooks for Failing {
                 plan_time: Duration::ZERO,
                 new_plan: false,
                 route_age: 0.0,
+                assumptions_broken: 0,
+                widened: None,
             }));
         }
         inner.step(state, now, tick_start)

@@ -139,12 +139,30 @@ pub(super) fn write_page(
         true,
     );
     md.push('\n');
+    let envelope_note = if inp.shipped_envelope {
+        let e = &inp.base.envelope;
+        format!(
+            "Each case runs with the safety envelope's shipped defaults and nothing stated about the perturbation \
+             (issue 43, docs/envelope-tolerances.md: geometry {} m, pose noise {} m / {} rad, pose latency {} s, \
+             response lag {} s, actuator gain up to {}; the assumption check on, action {:?})",
+            e.geometry_tolerance,
+            e.pose_noise_xy,
+            e.pose_noise_theta,
+            e.pose_latency,
+            e.response_lag,
+            e.actuator_gain_max,
+            e.check.action
+        )
+    } else {
+        "Each case runs with the safety envelope's tolerances \
+         stated as an integrator who knows these bounds would (`Case::stated_envelope`: geometry |ΔL_f| + |ΔL_r|, the \
+         pose noise, a delay beyond the compensated one as response lag, a gain above 1 as `actuator_gain_max`)"
+            .to_string()
+    };
     let _ = writeln!(
         md,
         "t₀: the unperturbed MPC's time on the same obstacle scenario (no T* for this set here). The all-moderate case needs \
-         ≥ 95 % (issue 16) and no run below −{} m (issue 26). Each case runs with the safety envelope's tolerances \
-         stated as an integrator who knows these bounds would (`Case::stated_envelope`: geometry |ΔL_f| + |ΔL_r|, the \
-         pose noise, a delay beyond the compensated one as response lag, a gain above 1 as `actuator_gain_max`); an override is a tick whose command the \
+         ≥ 95 % (issue 16) and no run below −{} m (issue 26). {envelope_note}; an override is a tick whose command the \
          envelope replaced.\n",
         PENETRATION_TOLERANCE
     );

@@ -314,5 +314,4 @@ impl RiccatiBackend {
         }
         self.scratch = sd;
     }
-
 }
