@@ -26,6 +26,7 @@ use crate::model::{Goal, MachineParams, State, VelocityCommand};
 use crate::mpc::{Mpc, MpcError, Solution, StageCost};
 use crate::obstacle::Obstacle;
 use crate::planner::{AbortReason, NavError, NavStep, Navigator};
+use crate::progress::{ProgressChecker, ProgressSettings};
 
 /// Errors of [`Pilot`]'s calls: each names the part that refused.
 #[derive(Debug, thiserror::Error)]
@@ -102,16 +103,22 @@ pub struct Pilot<C: StageCost> {
     costs_seen: Option<u64>,
     /// The navigator's plan count at the last step.
     plans_seen: u64,
+    /// The goal's progress window without a navigator (with one, the
+    /// navigator's window towards its current target decides, among its
+    /// replans and retries): the pilot is the one owner of `no-progress`.
+    progress: ProgressChecker,
 }
 
 impl<C: StageCost> Pilot<C> {
-    /// The MPC under `navigator` (none: it drives straight to the goal),
-    /// checked by the envelope with `envelope`'s tolerances.
+    /// The MPC under `navigator` (none: it drives straight to the goal, and a
+    /// goal not approached within `progress` ends `NoProgress`), checked by
+    /// the envelope with `envelope`'s tolerances.
     pub fn new(
         params: MachineParams,
         mpc: Mpc<C>,
         navigator: Option<Navigator>,
         envelope: EnvelopeSettings,
+        progress: ProgressSettings,
     ) -> Result<Self, PilotError> {
         envelope
             .validate()
@@ -130,6 +137,7 @@ impl<C: StageCost> Pilot<C> {
             obstacles: Vec::with_capacity(s.max_obstacles),
             costs_seen: None,
             plans_seen: 0,
+            progress: ProgressChecker::new(progress),
             mpc,
         })
     }
@@ -153,7 +161,10 @@ impl<C: StageCost> Pilot<C> {
         }
         match &mut self.navigator {
             Some(nav) => nav.set_goal(start, goal, obstacles, now)?,
-            None => self.mpc.set_goal(goal, obstacles)?,
+            None => {
+                self.mpc.set_goal(goal, obstacles)?;
+                self.progress.reset(goal, now);
+            }
         }
         self.obstacles.extend_from_slice(obstacles);
         Ok(())
@@ -216,6 +227,10 @@ impl<C: StageCost> Pilot<C> {
                 }
                 NavStep::Hold => holding = true,
                 NavStep::Abort(reason) => return Ok(PilotDecision::Abort(reason)),
+            }
+        } else if let Some(goal) = self.mpc.goal() {
+            if self.progress.update(x, &goal, now) {
+                return Ok(PilotDecision::Abort(AbortReason::NoProgress));
             }
         }
         let plans = self.navigator.as_ref().map_or(0, |n| n.plans());

@@ -4,20 +4,25 @@
 //!   wiring that ships);
 //! - the first route holds the machine for exactly the charged delay;
 //! - an answer older than `max_route_age` is not followed, and asked again;
-//! - no search runs on the tick thread.
+//! - no search runs on the tick thread;
+//! - without a navigator, the pilot's own progress window ends a stalled goal
+//!   (`no-progress`; the pilot is its one owner, the daemon reports it).
 
 use std::time::{Duration, Instant};
 
+use control::assumption_check::CheckSettings;
 use control::envelope::EnvelopeSettings;
 use control::model::{Goal, MachineParams, State};
 use control::mpc::{Mpc, MpcSettings};
 use control::obstacle::Obstacle;
 use control::pilot::{Pilot, PilotDecision};
+use control::planner::AbortReason;
 use control::planner::{
     InlineRoutes, NavStep, Navigator, NavigatorSettings, PlanDelay, PlannerThread, RoutePlanner,
     RouteService,
 };
 use control::plant::{Plant, PlantConfig};
+use control::progress::ProgressSettings;
 use control::{weights, Actor, Critic, VelocityCommand};
 
 fn trained() -> (Actor, Critic) {
@@ -56,7 +61,14 @@ fn pilot(kind: &str) -> Pilot<Critic> {
     let nav = Navigator::with_routes(p, s.clone(), Some(&critic), routes(kind, &s, actor.clone()))
         .unwrap();
     let mpc = Mpc::new(p, critic, Some(actor), MpcSettings::default()).unwrap();
-    Pilot::new(p, mpc, Some(nav), EnvelopeSettings::default()).unwrap()
+    Pilot::new(
+        p,
+        mpc,
+        Some(nav),
+        EnvelopeSettings::default(),
+        Default::default(),
+    )
+    .unwrap()
 }
 
 /// The pilot in closed loop on the ideal plant around a wall; the commands
@@ -205,4 +217,84 @@ fn a_search_on_the_tick_thread_fails() {
     })
     .join()
     .expect("the planner thread plans for a tick thread");
+}
+
+/// The pilot without a navigator, a 2 s progress window, the assumption
+/// check off (the states below are laid out by hand).
+fn pilot_without_navigator() -> Pilot<Critic> {
+    let (actor, critic) = trained();
+    let p = MachineParams::default();
+    let mpc = Mpc::new(p, critic, Some(actor), MpcSettings::default()).unwrap();
+    let envelope = EnvelopeSettings {
+        check: CheckSettings {
+            enabled: false,
+            ..CheckSettings::DEFAULT
+        },
+        ..EnvelopeSettings::default()
+    };
+    let progress = ProgressSettings {
+        timeout: 2.0,
+        min_approach: 0.1,
+    };
+    Pilot::new(p, mpc, None, envelope, progress).unwrap()
+}
+
+/// Steps the pilot along `x_at(t)` from `from` s; the time it ended the goal
+/// and why (None: it drove every tick up to `to`).
+fn ends(
+    pilot: &mut Pilot<Critic>,
+    from: f64,
+    to: f64,
+    x_at: impl Fn(f64) -> State,
+) -> Option<(f64, AbortReason)> {
+    let mut t = from;
+    while t <= to + 1e-9 {
+        let x = x_at(t);
+        let command = match pilot.step(&x, t, Instant::now()).unwrap() {
+            PilotDecision::Drive(s) => s.command,
+            PilotDecision::Abort(r) => return Some((t, r)),
+            PilotDecision::Stop { finding, .. } => panic!("{finding}"),
+        };
+        pilot.sent(t, command);
+        t += 0.2;
+    }
+    None
+}
+
+#[test]
+fn without_a_navigator_a_stalled_goal_ends_no_progress_and_a_new_goal_restarts_the_window() {
+    let mut pilot = pilot_without_navigator();
+    // Approaching at 0.2 m/s for 5 s, then stuck at x = 1 m.
+    let x_at = |t: f64| {
+        let moving = t < 5.0;
+        State::new(
+            (0.2 * t).min(1.0),
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+            if moving { 0.2 } else { 0.0 },
+        )
+    };
+    pilot
+        .set_goal(&x_at(0.0), Goal::new(5.0, 0.0, 0.0), &[], 0.0)
+        .unwrap();
+    let (t, reason) = ends(&mut pilot, 0.0, 12.0, x_at).expect("ended");
+    // New bests every 0.12 m (3 ticks) from t = 0; the last at t = 4.8 s
+    // (x = 0.96; x = 1 is only 0.04 closer): 2 s later it ends.
+    assert_eq!(reason, AbortReason::NoProgress);
+    assert!((6.7..=6.9).contains(&t), "ended at {t}");
+
+    // At rest at the same pose, a new goal gets its own 2 s.
+    let still = |_: f64| State::new(1.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+    pilot
+        .set_goal(&still(0.0), Goal::new(5.0, 0.0, 0.0), &[], 8.0)
+        .unwrap();
+    assert_eq!(
+        ends(&mut pilot, 8.0, 9.8, still),
+        None,
+        "within the new window"
+    );
+    let (t, reason) = ends(&mut pilot, 10.0, 11.0, still).expect("ended");
+    assert_eq!((t, reason), (10.0, AbortReason::NoProgress));
 }

@@ -103,7 +103,14 @@ fn the_global_layer_and_the_pilot_do_not_allocate() {
     let p = MachineParams::default();
     let mpc = Mpc::new(p, critic.clone(), Some(actor), MpcSettings::default()).unwrap();
     let nav = navigator("delayed", true);
-    let mut pilot = Pilot::new(p, mpc, Some(nav), EnvelopeSettings::default()).unwrap();
+    let mut pilot = Pilot::new(
+        p,
+        mpc,
+        Some(nav),
+        EnvelopeSettings::default(),
+        Default::default(),
+    )
+    .unwrap();
     // The MPC takes 8 circles (the wire's limit).
     let wall = &wall[1..8];
     let before = common::allocations();

@@ -803,20 +803,18 @@ impl Config {
         )
     }
 
-    /// What the goal lifecycle decides with: the machine's footprint, the reach test,
-    /// the progress checker.
+    /// What the goal lifecycle decides with: the machine's footprint, the reach test.
     pub fn lifecycle_settings(&self) -> crate::goal_lifecycle::LifecycleSettings {
         crate::goal_lifecycle::LifecycleSettings {
             machine: self.machine,
             reach_tolerance: self.control.reach_tolerance,
             reach_speed: self.control.reach_speed,
-            progress: self.control.progress(),
         }
     }
 
     /// The global layer's settings (`None` for `controller.planner = "none"`): the
-    /// measured defaults, the configured planner, and the loop's progress window (one
-    /// window for the navigator's abort and the goal lifecycle's).
+    /// measured defaults, the configured planner, and the loop's progress window (the
+    /// pilot's: the navigator's abort window, or the pilot's own without one).
     pub fn navigator_settings(&self) -> Option<control::planner::NavigatorSettings> {
         if self.controller.planner == PlannerChoice::None {
             return None;

@@ -39,7 +39,7 @@ use std::time::Instant;
 use control::delay::compensate_pose_age;
 use control::envelope::{self, Guarded};
 use control::model::pose_error;
-use control::{Goal, MachineParams, State, VelocityCommand};
+use control::{MachineParams, State, VelocityCommand};
 use shm_ipc::{fault_flags, AbortReason, DaemonEndpoint, GoalOutcome, Mode, Pose2, Telemetry};
 use tokio::sync::mpsc;
 
@@ -114,10 +114,6 @@ pub struct ControlLoop {
     pose_log: LogLimiter,
     /// Ticks in a row without a fresh solution.
     solve_failures: u32,
-    /// The subgoal of the global route driven to on the last tracking tick (None: the
-    /// goal itself, or no global layer); the goal lifecycle's progress window runs
-    /// towards it.
-    subgoal: Option<Goal>,
     prev_counters: crate::can::RxCounters,
     mode: Mode,
     shutdown_started: Option<f64>,
@@ -187,7 +183,6 @@ impl ControlLoop {
             pose_gate,
             pose_log: LogLimiter::new(5, 10.0),
             solve_failures: 0,
-            subgoal: None,
             prev_counters: Default::default(),
             mode: Mode::Startup,
             shutdown_started: None,
@@ -451,7 +446,6 @@ impl ControlLoop {
             state,
             abort,
             blocking_faults,
-            subgoal: self.subgoal,
         });
         (plan, goals.operator_stop())
     }
@@ -570,7 +564,6 @@ impl ControlLoop {
     fn disengage(&mut self) {
         self.engaged_generation = None;
         self.solve_failures = 0;
-        self.subgoal = None;
     }
 
     /// Feeds every waiting pose sample through the gate (oldest first, bounded per tick);
@@ -696,12 +689,18 @@ impl ControlLoop {
                 let (wire, what) = match reason {
                     control::planner::AbortReason::NoRoute => (
                         AbortReason::NoRoute,
-                        "the global layer found no collision-free route",
+                        "the global layer found no collision-free route".to_string(),
                     ),
-                    control::planner::AbortReason::NoProgress => (
-                        AbortReason::NoProgress,
-                        "no approach to the route's target after replanning",
-                    ),
+                    control::planner::AbortReason::NoProgress => {
+                        let p = self.ctx.config.control.progress();
+                        (
+                            AbortReason::NoProgress,
+                            format!(
+                                "no approach to its target by {} for {:.1} s",
+                                p.min_approach, p.timeout
+                            ),
+                        )
+                    }
                 };
                 self.ctx.goals.lock().abort_active(Abort::new(wire, what));
                 return Solve {
@@ -738,7 +737,6 @@ impl ControlLoop {
                 if let Some(f) = plan.widened {
                     tracing::warn!("{f}: envelope widened to it");
                 }
-                self.subgoal = plan.subgoal;
                 plan.fill_telemetry(t);
                 let solve_time = Some(plan.solve_time.as_secs_f64());
                 let finite = plan.command.is_finite()

@@ -179,7 +179,14 @@ impl<C: StageCost> PilotController<C> {
 
     /// The MPC alone under the envelope of `config` (no global layer): for tests.
     pub fn without_navigator(mpc: Mpc<C>, config: &Config) -> Result<Self, ControllerError> {
-        let pilot = Pilot::new(config.machine, mpc, None, config.envelope).map_err(err)?;
+        let pilot = Pilot::new(
+            config.machine,
+            mpc,
+            None,
+            config.envelope,
+            config.control.progress(),
+        )
+        .map_err(err)?;
         Ok(Self::new(pilot))
     }
 }
@@ -303,6 +310,7 @@ pub fn load_controller(config: &Config) -> Result<ControllerFactory, LoadError> 
         machine,
         navigator: config.navigator_settings(),
         envelope: config.envelope,
+        progress: config.control.progress(),
     };
     if let Some(s) = &parts.navigator {
         s.validate()
@@ -363,7 +371,14 @@ fn controller<C: StageCost + 'static>(
         Some(s) => Some(build_navigator(config.machine, s, networks).map_err(err)?),
         None => None,
     };
-    let pilot = Pilot::new(config.machine, mpc, navigator, config.envelope).map_err(err)?;
+    let pilot = Pilot::new(
+        config.machine,
+        mpc,
+        navigator,
+        config.envelope,
+        config.progress,
+    )
+    .map_err(err)?;
     Ok(Box::new(PilotController::new(pilot)))
 }
 
@@ -373,6 +388,7 @@ struct ControllerParts {
     machine: MachineParams,
     navigator: Option<NavigatorSettings>,
     envelope: control::envelope::EnvelopeSettings,
+    progress: control::progress::ProgressSettings,
 }
 
 /// The start-up self-test: a first solve from rest towards a goal 3 m ahead must

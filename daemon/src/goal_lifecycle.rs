@@ -13,10 +13,11 @@
 //!   `cancelled`; stop latches until resume.
 //! * **ticks** ([`GoalLifecycle::on_tick`], the control thread, once per tick): given the
 //!   measured state and whether the goal can be driven at all, end the goal as
-//!   `aborted` (a fault, shutdown), `succeeded` (reached, DESIGN §7 test at rest) or
-//!   `aborted (no-progress)` ([`ProgressChecker`]), and tell the loop what to do
-//!   ([`TickPlan`]). A failure found while tracking ends it through
-//!   [`GoalLifecycle::abort_active`].
+//!   `aborted` (a fault, shutdown) or `succeeded` (reached, DESIGN §7 test at rest), and
+//!   tell the loop what to do ([`TickPlan`]). What the pilot decided while tracking
+//!   (`no-progress`, `no-route`, a broken envelope assumption) and a solver failure end
+//!   it through [`GoalLifecycle::abort_active`]: the pilot owns the progress window, the
+//!   lifecycle reports it.
 //!
 //! Ended goals queue as [`Outcome`]s; the loop publishes one per tick
 //! ([`GoalLifecycle::next_outcome`]) in the order they ended. Only a goal being driven can
@@ -28,7 +29,6 @@ use std::collections::VecDeque;
 use control::goal_check::{check_goal, GoalConflict};
 use control::model::{goal_distance, ix};
 use control::obstacle::Obstacle;
-use control::progress::{ProgressChecker, ProgressSettings};
 use control::{Goal, MachineParams, State};
 use shm_ipc::{fault_flags, AbortReason, GoalOutcome, RejectCode, ValidRequest, MAX_OBSTACLES};
 
@@ -45,8 +45,6 @@ pub struct LifecycleSettings {
     pub reach_tolerance: f64,
     /// … and |v_f| below this [m/s].
     pub reach_speed: f64,
-    /// No approach for this long aborts the goal (`no-progress`).
-    pub progress: ProgressSettings,
 }
 
 /// A goal the daemon accepted.
@@ -124,10 +122,6 @@ pub struct TickInput<'a> {
     pub abort: Option<Abort>,
     /// Faults that make new goals wait ([`fault_flags`] bits; 0 = goals welcome).
     pub blocking_faults: u32,
-    /// The subgoal the machine drives to on the global route, if not the goal itself:
-    /// the progress window runs towards it (a route around a wall may lead away from
-    /// the goal for longer than the window).
-    pub subgoal: Option<Goal>,
 }
 
 /// What the loop does this tick.
@@ -153,9 +147,6 @@ pub struct GoalLifecycle {
     settings: LifecycleSettings,
     goal: Option<(AcceptedGoal, Phase)>,
     generation: u64,
-    /// Generation whose progress window is running.
-    progress_generation: u64,
-    progress: ProgressChecker,
     operator_stop: bool,
     blocking_faults: u32,
     /// Latest measured state, for the request-time footprint check.
@@ -172,8 +163,6 @@ impl GoalLifecycle {
             settings,
             goal: None,
             generation: 0,
-            progress_generation: 0,
-            progress: ProgressChecker::new(settings.progress),
             operator_stop: false,
             blocking_faults: fault_flags::POSE_STALE | fault_flags::MACHINE_STATE_STALE,
             machine: None,
@@ -295,10 +284,6 @@ impl GoalLifecycle {
         let Some(x) = input.state else {
             return TickPlan::Track(goal);
         };
-        if self.progress_generation != goal.generation {
-            self.progress_generation = goal.generation;
-            self.progress.reset(goal.goal, input.now);
-        }
         let distance = goal_distance(x, &goal.goal);
         let s = &self.settings;
         if distance < s.reach_tolerance && x[ix::V].abs() < s.reach_speed {
@@ -310,24 +295,6 @@ impl GoalLifecycle {
             self.end_driven(GoalOutcome::Succeeded, AbortReason::None, text);
             self.goal = Some((goal, Phase::Reached));
             return TickPlan::Hold(goal);
-        }
-        let target = input.subgoal.unwrap_or(goal.goal);
-        if self.progress.update(x, &target, input.now) {
-            let p = self.progress.settings();
-            let text = format!(
-                "no approach to the {} by {} for {:.1} s (error {:.2})",
-                if input.subgoal.is_some() {
-                    "subgoal"
-                } else {
-                    "goal"
-                },
-                p.min_approach,
-                p.timeout,
-                goal_distance(x, &target)
-            );
-            self.end_driven(GoalOutcome::Aborted, AbortReason::NoProgress, text);
-            self.goal = None;
-            return TickPlan::NoGoal;
         }
         TickPlan::Track(goal)
     }
@@ -374,21 +341,17 @@ mod tests {
     use shm_ipc::heapless_obstacles::Obstacles;
     use shm_ipc::{Obstacle as WireObstacle, Pose2};
 
-    fn settings(timeout: f64) -> LifecycleSettings {
+    fn settings() -> LifecycleSettings {
         LifecycleSettings {
             machine: MachineParams::default(),
             reach_tolerance: 0.1,
             reach_speed: control::model::REACH_SPEED,
-            progress: ProgressSettings {
-                timeout,
-                min_approach: 0.1,
-            },
         }
     }
 
     /// A lifecycle past start-up (data seen, no fault) with the machine at `x`.
     fn ready(x: &State) -> GoalLifecycle {
-        let mut l = GoalLifecycle::new(settings(10.0));
+        let mut l = GoalLifecycle::new(settings());
         assert_eq!(l.on_tick(tick(0.0, Some(x))), TickPlan::NoGoal);
         l
     }
@@ -399,7 +362,6 @@ mod tests {
             state,
             abort: None,
             blocking_faults: 0,
-            subgoal: None,
         }
     }
 
@@ -498,90 +460,6 @@ mod tests {
                 (2, GoalOutcome::Preempted, AbortReason::None, 2)
             ]
         );
-    }
-
-    #[test]
-    fn no_approach_for_the_timeout_aborts_with_no_progress() {
-        let mut l = GoalLifecycle::new(settings(2.0));
-        l.on_tick(tick(0.0, Some(&at(0.0))));
-        l.on_request(&set_goal(4, 5.0, 0.0, &[]), false).unwrap();
-        // Approaching at 0.2 m/s for 5 s, then stuck at x = 1 m.
-        let mut ended_at = None;
-        for k in 1..60 {
-            let t = 0.2 * k as f64;
-            let x = at((0.2 * t).min(1.0));
-            match l.on_tick(tick(t, Some(&x))) {
-                TickPlan::Track(_) => {}
-                TickPlan::NoGoal => {
-                    ended_at = Some(t);
-                    break;
-                }
-                other => panic!("{other:?}"),
-            }
-        }
-        let t = ended_at.expect("aborted");
-        // New bests every 0.12 m (3 ticks); the last at t = 5 s (x = 1.0): 2 s later it ends.
-        assert!((6.9..=7.1).contains(&t), "aborted at {t}");
-        let o = l.next_outcome().unwrap();
-        assert_eq!(
-            (o.request_id, o.outcome, o.abort_reason),
-            (4, GoalOutcome::Aborted, AbortReason::NoProgress)
-        );
-        assert!(o.text.contains("no approach"), "{}", o.text);
-    }
-
-    #[test]
-    fn the_progress_window_runs_towards_the_subgoal_on_a_route() {
-        // The route leads away from the goal at x = 5 (back to a subgoal at x = −6):
-        // approaching the subgoal is progress, and stalling short of it is not.
-        let mut l = GoalLifecycle::new(settings(2.0));
-        l.on_tick(tick(0.0, Some(&at(0.0))));
-        l.on_request(&set_goal(7, 5.0, 0.0, &[]), false).unwrap();
-        let subgoal = Goal::new(-6.0, 0.0, 0.0);
-        let mut ended_at = None;
-        for k in 1..80 {
-            let t = 0.2 * k as f64;
-            let x = at((-0.3 * t).max(-3.0));
-            let mut input = tick(t, Some(&x));
-            input.subgoal = Some(subgoal);
-            match l.on_tick(input) {
-                TickPlan::Track(_) => {}
-                TickPlan::NoGoal => {
-                    ended_at = Some(t);
-                    break;
-                }
-                other => panic!("{other:?}"),
-            }
-        }
-        // Moving away from the goal for 10 s did not end it; the stall at x = −3
-        // (from t = 10 s) did, 2 s later.
-        let t = ended_at.expect("aborted");
-        assert!((11.7..=12.3).contains(&t), "aborted at {t}");
-        let o = l.next_outcome().unwrap();
-        assert_eq!(o.abort_reason, AbortReason::NoProgress);
-        assert!(o.text.contains("subgoal"), "{}", o.text);
-    }
-
-    #[test]
-    fn a_new_goal_at_the_same_pose_restarts_the_progress_window() {
-        let mut l = GoalLifecycle::new(settings(2.0));
-        l.on_tick(tick(0.0, Some(&at(0.0))));
-        l.on_request(&set_goal(1, 5.0, 0.0, &[]), false).unwrap();
-        for k in 1..=9 {
-            assert!(matches!(
-                l.on_tick(tick(0.2 * k as f64, Some(&at(0.0)))),
-                TickPlan::Track(_)
-            ));
-        }
-        l.on_request(&set_goal(2, 5.0, 0.0, &[]), false).unwrap();
-        // 1.8 s of the old window have passed; the new goal gets its own 2 s.
-        for k in 10..=19 {
-            assert!(
-                matches!(l.on_tick(tick(0.2 * k as f64, Some(&at(0.0)))), TickPlan::Track(g) if g.request_id == 2),
-                "k {k}"
-            );
-        }
-        assert_eq!(l.on_tick(tick(4.0, Some(&at(0.0)))), TickPlan::NoGoal);
     }
 
     #[test]
@@ -719,7 +597,7 @@ mod tests {
 
     #[test]
     fn goals_wait_for_data_and_shutdown_rejects_and_aborts() {
-        let mut l = GoalLifecycle::new(settings(10.0));
+        let mut l = GoalLifecycle::new(settings());
         let r = l
             .on_request(&set_goal(1, 5.0, 0.0, &[]), false)
             .unwrap_err();

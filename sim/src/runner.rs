@@ -33,6 +33,7 @@ use control::planner::{
     AbortReason, InlineRoutes, Navigator, NavigatorSettings, PlanDelay, PlanOutcome, RoutePlanner,
 };
 use control::plant::{Plant, PlantConfig, PlantPerturbation};
+use control::progress::ProgressSettings;
 use control::scenario::Scenario;
 use control::weights::{self, random_network, NetworkMetadata, NetworkRole};
 use control::VelocityCommand;
@@ -423,7 +424,19 @@ pub fn pilot(cfg: &EvalConfig, nets: &Networks) -> Result<Pilot<Critic>> {
         }
         None => None,
     };
-    Ok(Pilot::new(cfg.params, mpc, navigator, cfg.envelope)?)
+    // The goal's progress window: the navigator's (stall.progress), the
+    // daemon's default without one.
+    let progress = cfg
+        .navigator
+        .as_ref()
+        .map_or_else(ProgressSettings::default, |s| s.stall.progress);
+    Ok(Pilot::new(
+        cfg.params,
+        mpc,
+        navigator,
+        cfg.envelope,
+        progress,
+    )?)
 }
 
 /// The MPC (the pilot) in closed loop with the plant.
