@@ -344,9 +344,17 @@ pub fn goal_distance(x: &State, g: &Goal) -> f64 {
 /// as converged in every evaluation, `verify` and the daemon's default.
 pub const SUCCESS_TOLERANCE: f64 = 0.1;
 
-/// |v_f| below which a converged machine counts as at rest at its goal [m/s]:
-/// the evaluations' settling test and the daemon's default "goal reached".
+/// |v_f| below which a converged machine counts as having reached its goal
+/// [m/s]: the evaluations' settling test and the daemon's default "goal
+/// reached". Not "at rest" ([`REST_SPEED`]): a goal is reported reached while
+/// the machine still settles into it.
 pub const REACH_SPEED: f64 = 0.05;
+
+/// |v_f| and |β̇| below which the machine is at rest [m/s, rad/s]: the one
+/// definition (the daemon's default `loop.rest_speed`: a stop or shutdown is
+/// complete; telemetry's `at_rest`, which clients such as the fleet link read
+/// instead of keeping a threshold of their own).
+pub const REST_SPEED: f64 = 0.02;
 
 /// Convergence test of DESIGN §7: [`goal_distance`] below `tolerance` ([`SUCCESS_TOLERANCE`] in the paper).
 pub fn converged(x: &State, g: &Goal, tolerance: f64) -> bool {

@@ -296,7 +296,7 @@ impl Default for LoopConfig {
             progress_min_approach: ProgressSettings::default().min_approach,
             plausibility_margin: 0.2,
             shutdown_timeout: 5.0,
-            rest_speed: 0.02,
+            rest_speed: control::model::REST_SPEED,
             max_ticks: 0,
             pose_max_future: 0.05,
             pose_jump_tolerance: 0.5,

@@ -250,6 +250,9 @@ impl ControlLoop {
         let shutting_down = self.shutting_down(start);
         let inputs = self.read_inputs(start);
         t.state = self.telemetry_state(&inputs);
+        t.at_rest = u32::from(
+            (inputs.machine).is_some_and(|s| s.at_rest(self.ctx.config.control.rest_speed)),
+        );
         self.seen_data |= inputs.x.is_some();
 
         let faults = inputs.faults.stop | self.latched;

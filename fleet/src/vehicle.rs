@@ -19,8 +19,6 @@ use crate::vda::{
     Header, NodeState, OperatingMode, SafetyState, State, Velocity,
 };
 
-/// Below this speed [m/s] the machine counts as at rest (the daemon's `reach_speed`).
-pub const REST_SPEED: f64 = 0.05;
 /// A goal refused as not ready (daemon starting, faulted) is sent again after this long.
 const RETRY_AFTER: Duration = Duration::from_secs(1);
 /// Errors kept from rejected messages and ended goals (the newest).
@@ -152,7 +150,7 @@ impl Vehicle {
     fn at_rest(&self) -> bool {
         self.telemetry
             .as_ref()
-            .is_some_and(|t| t.state.v_f.abs() < REST_SPEED && t.mode != Mode::Tracking.code())
+            .is_some_and(|t| t.at_rest != 0 && t.mode != Mode::Tracking.code())
     }
 
     /// An `order` message arrived.
@@ -705,7 +703,7 @@ impl Vehicle {
             ids: self.book.ids.clone(),
             last_node_id: self.book.last_node_id.clone(),
             last_node_sequence_id: self.book.last_node_sequence_id,
-            driving: self.daemon_ok && t.is_some_and(|t| t.state.v_f.abs() >= REST_SPEED),
+            driving: self.daemon_ok && t.is_some_and(|t| t.at_rest == 0),
             paused: Some(self.paused || stop_latched),
             new_base_request: None,
             distance_since_last_node: Some(self.distance_since_last_node),
@@ -803,6 +801,8 @@ mod tests {
         t.state.x_f = x;
         t.state.y_f = y;
         t.state.v_f = v;
+        // As the daemon sets it (its default `loop.rest_speed`).
+        t.at_rest = u32::from(v.abs() < 0.02);
         t
     }
 

@@ -51,6 +51,8 @@ fn telemetry(x: f64, v: f64, mode: Mode) -> Telemetry {
     t.mode = mode.code();
     t.state.x_f = x;
     t.state.v_f = v;
+    // As the daemon sets it (its default `loop.rest_speed`).
+    t.at_rest = u32::from(v.abs() < 0.02);
     t
 }
 

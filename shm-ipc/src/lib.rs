@@ -292,7 +292,7 @@
 //! | 32 | f64 | heading | front-body heading θ_f \[rad\] |
 //! | 40 | f64\[9\] | covariance | row-major 3×3 of (x, y, heading) \[m², m·rad, rad²\] |
 //!
-//! [`Telemetry`] (`wlnav::v2::Telemetry`), 2720 bytes:
+//! [`Telemetry`] (`wlnav::v2::Telemetry`), 2728 bytes:
 //!
 //! | offset | type | field | meaning |
 //! |---|---|---|---|
@@ -323,6 +323,10 @@
 //! | 2292 | u32 | route_len | valid entries in `route` (≤ 16) |
 //! | 2296 | Pose2 | subgoal | the intermediate goal the MPC drives to |
 //! | 2320 | Pose2\[16\] | route | global route towards the goal, rest zero |
+//! | 2704 | f64 | plan_time_us | wall time of the last route plan (planner thread) \[µs\] |
+//! | 2712 | f64 | route_age_s | age of the route followed when it arrived \[s\] |
+//! | 2720 | u32 | at_rest | 1: \|v_f\| and \|β̇\| below `loop.rest_speed` (the one "at rest") |
+//! | 2724 | u32 | _reserved | zero |
 //!
 //! ## Goal lifecycle
 //!
@@ -377,7 +381,8 @@
 //!                  uint8_t outcome_text[128];
 //!                  uint32_t subgoal_active, route_len;
 //!                  wlnav_pose2 subgoal, route[16];
-//!                  double plan_time_us, route_age_s; } wlnav_telemetry; /* 2720 */
+//!                  double plan_time_us, route_age_s;
+//!                  uint32_t at_rest, _reserved; } wlnav_telemetry; /* 2728 */
 //! ```
 //!
 //! ## Start-up clean-up

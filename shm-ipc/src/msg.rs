@@ -723,7 +723,7 @@ pub mod fault_flags {
     }
 }
 
-/// Published on `{prefix}/v2/telemetry` by the daemon once per control tick. 2720 bytes,
+/// Published on `{prefix}/v2/telemetry` by the daemon once per control tick. 2728 bytes,
 /// alignment 8.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
@@ -788,6 +788,12 @@ pub struct Telemetry {
     pub plan_time_us: f64,
     /// How old the route followed was when it arrived from the planner [s].
     pub route_age_s: f64,
+    /// 1 when the machine is at rest: |v_f| and |β̇| below the daemon's
+    /// `loop.rest_speed` (the one definition; clients read it, they do not
+    /// keep a threshold of their own). 0 while moving or with no machine state.
+    pub at_rest: u32,
+    /// Zero (keeps the size a multiple of 8).
+    pub _reserved: u32,
 }
 
 impl Telemetry {
@@ -825,6 +831,8 @@ impl Telemetry {
         route: [Pose2::new(0.0, 0.0, 0.0); MAX_ROUTE],
         plan_time_us: 0.0,
         route_age_s: 0.0,
+        at_rest: 0,
+        _reserved: 0,
     };
 
     /// The decoded mode, or the unknown wire code.
@@ -964,7 +972,7 @@ const _: () = assert!(offset_of!(PoseEstimate, y) == 24);
 const _: () = assert!(offset_of!(PoseEstimate, heading) == 32);
 const _: () = assert!(offset_of!(PoseEstimate, covariance) == 40);
 
-const _: () = assert!(size_of::<Telemetry>() == 2720 && align_of::<Telemetry>() == 8);
+const _: () = assert!(size_of::<Telemetry>() == 2728 && align_of::<Telemetry>() == 8);
 const _: () = assert!(offset_of!(Telemetry, tick) == 0);
 const _: () = assert!(offset_of!(Telemetry, timestamp_ns) == 8);
 const _: () = assert!(offset_of!(Telemetry, goal_request_id) == 16);
@@ -994,3 +1002,4 @@ const _: () = assert!(offset_of!(Telemetry, subgoal) == 2296);
 const _: () = assert!(offset_of!(Telemetry, route) == 2320);
 const _: () = assert!(offset_of!(Telemetry, plan_time_us) == 2704);
 const _: () = assert!(offset_of!(Telemetry, route_age_s) == 2712);
+const _: () = assert!(offset_of!(Telemetry, at_rest) == 2720);

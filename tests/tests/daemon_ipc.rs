@@ -90,7 +90,7 @@ fn goal_sent_through_the_client_is_reached() {
         converged as f64 * TICK_S
     );
     // The machine comes to rest and stays there.
-    let rest = wait_for(&d, Duration::from_secs(10), |t| t.state.v_f.abs() < 0.02);
+    let rest = wait_for(&d, Duration::from_secs(10), |t| t.at_rest == 1);
     assert_eq!(rest.mode(), Ok(Mode::Reached));
     assert_eq!(rest.goal_request_id, id);
     d.stop();
@@ -502,7 +502,7 @@ fn an_enclosed_goal_ends_aborted_within_15_s_with_the_machine_at_rest() {
         if t.outcome != 0 && Some(t.outcome_request_id) == id {
             ended_tick = Some(t.tick);
         }
-        let rest = t.state.v_f.abs() < 0.02 && t.command.v == 0.0 && t.command.beta_dot == 0.0;
+        let rest = t.at_rest == 1 && t.command.v == 0.0 && t.command.beta_dot == 0.0;
         log.push(t);
         if ended_tick.is_some() && rest && t.mode() == Ok(Mode::Idle) {
             break;

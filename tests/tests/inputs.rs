@@ -91,7 +91,7 @@ fn a_process_holding_every_client_slot_cannot_keep_a_stop_out() {
     let deadline = Instant::now() + e2e::timing_scale::real(Duration::from_secs(10));
     loop {
         let t = d.next(Duration::from_secs(2));
-        if t.goal_active == 0 && t.command.v == 0.0 && t.state.v_f.abs() < 0.05 {
+        if t.goal_active == 0 && t.command.v == 0.0 && t.at_rest == 1 {
             break;
         }
         assert!(Instant::now() < deadline, "not stopping: {t:?}");

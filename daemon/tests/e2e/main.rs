@@ -40,7 +40,7 @@ fn goal_reached_and_machine_stopped() {
         mode(t) == Mode::Reached
             && t.command.v == 0.0
             && t.command.beta_dot == 0.0
-            && t.state.v_f.abs() < 0.02
+            && t.at_rest == 1
     });
     let last = seen.last().unwrap();
     assert_eq!(last.goal_active, 1);

@@ -20,7 +20,7 @@ fn mode(t: &Telemetry) -> Mode {
 }
 
 fn at_rest(t: &Telemetry) -> bool {
-    t.command.v == 0.0 && t.command.beta_dot == 0.0 && t.state.v_f.abs() < 0.02
+    t.command.v == 0.0 && t.command.beta_dot == 0.0 && t.at_rest == 1
 }
 
 fn accepted(d: &Running, goal: Pose2, obstacles: &[Obstacle]) -> u64 {
