@@ -70,6 +70,7 @@ fn sizes_alignments_and_offsets() {
             + 24
             + MAX_ROUTE * 24
             + 2 * 8
+            + 2 * 4
     );
 
     assert_eq!(offset_of!(GoalRequest, obstacles), 40);
