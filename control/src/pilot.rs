@@ -300,6 +300,15 @@ impl<C: StageCost> Pilot<C> {
         self.navigator.as_ref()
     }
 
+    /// Wall time routes were planned on the tick's thread since the last
+    /// call ([`Navigator::take_plan_time_on_tick`]; zero with the planner
+    /// thread): `wlnav-sim` leaves it out of the tick's time.
+    pub fn take_plan_time_on_tick(&mut self) -> Duration {
+        self.navigator
+            .as_mut()
+            .map_or(Duration::ZERO, Navigator::take_plan_time_on_tick)
+    }
+
     pub fn params(&self) -> &MachineParams {
         &self.params
     }

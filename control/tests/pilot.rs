@@ -298,3 +298,44 @@ fn without_a_navigator_a_stalled_goal_ends_no_progress_and_a_new_goal_restarts_t
     let (t, reason) = ends(&mut pilot, 10.0, 11.0, still).expect("ended");
     assert_eq!((t, reason), (10.0, AbortReason::NoProgress));
 }
+
+#[test]
+fn plan_time_on_the_tick_thread_is_counted_for_the_inline_planner_only() {
+    let goal = Goal::new(8.0, 0.0, 0.0);
+    let x = State::zeros();
+    for (kind, inline) in [("one tick", true), ("thread", false)] {
+        let mut pilot = pilot(kind);
+        pilot.set_goal(&x, goal, &wall(), 0.0).unwrap();
+        // The first update asks for the route: inline, the search runs here.
+        assert!(matches!(
+            pilot.step(&x, 0.0, Instant::now()).unwrap(),
+            PilotDecision::Drive(_)
+        ));
+        let on_tick = pilot.take_plan_time_on_tick();
+        assert_eq!(
+            pilot.take_plan_time_on_tick(),
+            Duration::ZERO,
+            "{kind}: taken once"
+        );
+        if !inline {
+            assert_eq!(
+                on_tick,
+                Duration::ZERO,
+                "the planner thread's plan is not the tick's"
+            );
+            continue;
+        }
+        pilot.sent(0.0, VelocityCommand::ZERO);
+        pilot.step(&x, 0.2, Instant::now()).unwrap();
+        let plan = pilot
+            .navigator()
+            .unwrap()
+            .last_plan()
+            .expect("the route arrived");
+        assert!(
+            plan.duration > Duration::ZERO && plan.duration <= on_tick,
+            "{kind}: the plan took {:?}, the tick's thread {on_tick:?}",
+            plan.duration
+        );
+    }
+}

@@ -482,8 +482,8 @@ pub fn run_mpc(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run> 
         } else {
             let t0 = Instant::now();
             let decision = pilot.step(&x, now, t0)?;
-            let tick_ms = t0.elapsed().as_secs_f64() * 1e3;
-            match decision {
+            let elapsed = t0.elapsed();
+            let cmd = match decision {
                 PilotDecision::Abort(reason) => {
                     if let Some(rec) = navigation.as_mut() {
                         rec.abort = Some(reason);
@@ -513,12 +513,18 @@ pub fn run_mpc(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run> 
                         multiplier_max = multiplier_max.max(sol.obstacle_multiplier);
                     }
                     overrides += usize::from(p.guarded.overridden());
-                    if let Some(rec) = navigation.as_mut() {
-                        rec.tick_ms.push(tick_ms);
-                    }
                     p.command
                 }
+            };
+            // The tick without the route searches the inline planner ran in
+            // it (charged as simulated delay; the daemon runs them on the
+            // planner thread): what the daemon's tick costs.
+            let on_tick = pilot.take_plan_time_on_tick();
+            if let Some(rec) = navigation.as_mut() {
+                rec.tick_ms
+                    .push(elapsed.saturating_sub(on_tick).as_secs_f64() * 1e3);
             }
+            cmd
         };
         if let (Some(nav), Some(rec)) = (pilot.navigator(), navigation.as_mut()) {
             rec.record_plan(nav, &mut plans_seen, now);

@@ -442,6 +442,13 @@ impl Navigator {
         self.routes.working()
     }
 
+    /// Wall time its route service planned on the calling (tick) thread
+    /// since the last call: zero with the planner thread; with the
+    /// simulator's inline planner, what a tick's timing leaves out.
+    pub fn take_plan_time_on_tick(&mut self) -> std::time::Duration {
+        self.routes.take_time_on_caller()
+    }
+
     /// Forgets the goal and the route (an answer still out is dropped when it
     /// comes back).
     pub fn clear(&mut self) {

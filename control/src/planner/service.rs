@@ -30,6 +30,12 @@ pub trait RouteService: Send {
     fn working(&self) -> bool {
         false
     }
+    /// Wall time spent planning on the caller's thread since the last call
+    /// (an inline service's; a thread's is zero): what a caller timing its
+    /// tick subtracts, the plan being charged as simulated delay instead.
+    fn take_time_on_caller(&mut self) -> std::time::Duration {
+        std::time::Duration::ZERO
+    }
 }
 
 /// How [`InlineRoutes`] charges a plan's time.
@@ -48,6 +54,8 @@ pub struct InlineRoutes {
     planner: RoutePlanner,
     delay: PlanDelay,
     answered: Option<(f64, Box<PlanJob>)>,
+    /// Planning time on the calling thread not yet taken.
+    time_on_caller: std::time::Duration,
 }
 
 impl InlineRoutes {
@@ -56,13 +64,16 @@ impl InlineRoutes {
             planner,
             delay,
             answered: None,
+            time_on_caller: std::time::Duration::ZERO,
         }
     }
 }
 
 impl RouteService for InlineRoutes {
     fn submit(&mut self, mut job: Box<PlanJob>) {
+        let t0 = std::time::Instant::now();
         self.planner.plan(&mut job);
+        self.time_on_caller += t0.elapsed();
         let delay = match self.delay {
             PlanDelay::Fixed(d) => d,
             PlanDelay::Measured => job.route.report.duration.as_secs_f64(),
@@ -77,6 +88,10 @@ impl RouteService for InlineRoutes {
             Some((due, _)) if now + 1e-9 >= *due => self.answered.take().map(|(_, j)| j),
             _ => None,
         }
+    }
+
+    fn take_time_on_caller(&mut self) -> std::time::Duration {
+        std::mem::take(&mut self.time_on_caller)
     }
 }
 
