@@ -123,6 +123,39 @@ pub fn envelope_text(ev: &Evaluation) -> String {
     )
 }
 
+/// The envelope's assumptions the machine broke (MPC runs, issue 43): per
+/// assumption and decision, in how many runs (each run counted once per
+/// pair); "none" when nothing was raised.
+pub fn assumptions_text(ev: &Evaluation) -> String {
+    let mut counts: std::collections::BTreeMap<(&str, String), usize> = Default::default();
+    for r in ev.runs.iter().flat_map(|s| {
+        s.runs
+            .iter()
+            .filter(|(m, _)| *m == crate::runner::Method::Mpc)
+            .map(|(_, r)| r)
+    }) {
+        let mut seen = std::collections::BTreeSet::new();
+        for (_, f, d) in &r.assumption_findings {
+            seen.insert((f.assumption.setting(), format!("{d:?}").to_lowercase()));
+        }
+        for key in seen {
+            *counts.entry(key).or_default() += 1;
+        }
+    }
+    let parts: Vec<String> = counts
+        .iter()
+        .map(|((what, decision), n)| format!("{what} {decision} in {n} run(s)"))
+        .collect();
+    format!(
+        "envelope assumptions broken: {}\n",
+        if parts.is_empty() {
+            "none".to_string()
+        } else {
+            parts.join(", ")
+        }
+    )
+}
+
 /// The obstacle rows' figures (MPC runs): plans discarded because they
 /// penetrated a circle, and the largest stage multiplier sum seen (the L1
 /// penalty is exact while `obstacle_slack_weight` exceeds it, DESIGN §14).

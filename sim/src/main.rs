@@ -526,6 +526,7 @@ fn main() -> Result<()> {
             print!("{}", eval::timing_text(&ev));
             print!("{}", eval::navigation_text(&ev));
             print!("{}", eval::envelope_text(&ev));
+            print!("{}", eval::assumptions_text(&ev));
             print!(
                 "{}",
                 eval::obstacle_rows_text(&ev, cfg.mpc.obstacle_slack_weight)

@@ -504,27 +504,32 @@ fn the_envelope_names_the_assumption_a_machine_breaks_in_closed_loop() {
     let text = std::fs::read_to_string(manifest("scenarios/obstacles200.csv")).unwrap();
     let set = scenario::parse(&text, "obstacles200.csv").unwrap();
     let sc = set.iter().find(|s| s.name == "gap006").unwrap();
-    let run = |delay: Option<f64>, gain: f64| {
-        let cfg = EvalConfig {
-            params: nets.machine,
-            methods: vec![Method::Mpc],
-            plant: control::PlantConfig {
-                delay: 0.2,
-                ..control::PlantConfig::ideal()
-            },
-            perturbation: control::PlantPerturbation {
-                delay,
-                actuator_gain: gain,
-                ..Default::default()
-            },
-            end_at_rest: true,
-            jobs: 1,
-            progress: false,
+    let config = |delay: Option<f64>, gain: f64| EvalConfig {
+        params: nets.machine,
+        methods: vec![Method::Mpc],
+        plant: control::PlantConfig {
+            delay: 0.2,
+            ..control::PlantConfig::ideal()
+        },
+        perturbation: control::PlantPerturbation {
+            delay,
+            actuator_gain: gain,
             ..Default::default()
-        };
-        runner::run_mpc(&cfg, &nets, sc).unwrap()
+        },
+        end_at_rest: true,
+        jobs: 1,
+        progress: false,
+        ..Default::default()
     };
-    let late = run(Some(0.8), 1.0);
+    let run =
+        |delay: Option<f64>, gain: f64| runner::run_mpc(&config(delay, gain), &nets, sc).unwrap();
+    // Through the evaluation, whose summary counts the findings per run.
+    let ev = sim::eval::evaluate(&config(Some(0.8), 1.0), &nets, &[sc.clone()]).unwrap();
+    assert_eq!(
+        sim::eval::assumptions_text(&ev),
+        "envelope assumptions broken: response_lag widen in 1 run(s)\n"
+    );
+    let late = &ev.runs[0].runs[0].1;
     let (t, f, d) = late.assumption_findings[0];
     assert_eq!(f.assumption, Assumption::Delay, "{f}");
     assert!((f.measured - 0.6).abs() < 0.051, "{f}");
