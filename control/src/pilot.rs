@@ -312,10 +312,4 @@ impl<C: StageCost> Pilot<C> {
     pub fn params(&self) -> &MachineParams {
         &self.params
     }
-
-    /// The envelope's tolerances in force: the stated ones, widened to what
-    /// the machine was seen to do.
-    pub fn envelope(&self) -> &EnvelopeSettings {
-        self.assumptions.effective()
-    }
 }

@@ -1,7 +1,8 @@
 //! The progress checker (DESIGN §10, after Nav2's): a goal whose pose error has
 //! not come closer by `min_approach` for `timeout` seconds has stalled. The
-//! daemon aborts such a goal (`no-progress`) and brings the machine to rest;
-//! the global layer replans on a shorter window.
+//! pilot ends such a goal (`no-progress`: the navigator's window, or the
+//! pilot's own without one) and the daemon brings the machine to rest; the
+//! global layer replans on a shorter window.
 //!
 //! The error is DESIGN §7's ‖(x_f − x_g, y_f − y_g, e_θ)‖ towards whatever
 //! the machine is driving to (the goal, or a subgoal of the global route: a

@@ -180,7 +180,7 @@ impl Default for FollowingSettings {
 pub struct StallSettings {
     /// The abort window: no approach to the current target for
     /// `progress.timeout` (default 10 s) → `Abort(NoProgress)`. The one
-    /// progress window of a goal (the daemon's goal lifecycle reports it).
+    /// progress window of a goal (the pilot decides, the daemon's goal lifecycle reports it).
     #[serde(skip)]
     pub progress: ProgressSettings,
     /// Seconds without approach to the current target before a replan from

@@ -2,6 +2,7 @@
 //! goals and telemetry through iceoryx2, commands checked as the machine received
 //! them. Each test has its own service prefix.
 
+mod assumptions;
 mod common;
 mod faults;
 mod outcomes;
