@@ -73,8 +73,14 @@ fn the_global_layer_and_the_pilot_do_not_allocate() {
                     break;
                 }
                 if routes == "thread" {
-                    // Time for the planner thread (the tick never waits for it).
-                    std::thread::sleep(std::time::Duration::from_millis(20));
+                    // The rest of the tick: the planner thread's plan finishes
+                    // in it (the tick never waits for it; a wait on the thread,
+                    // not a fixed sleep, so that a slow machine — qemu — sees
+                    // the same ticks).
+                    let t0 = std::time::Instant::now();
+                    while nav.planner_working() && t0.elapsed().as_secs() < 60 {
+                        std::thread::sleep(std::time::Duration::from_millis(1));
+                    }
                 }
                 steps += 1;
             }
