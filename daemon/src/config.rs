@@ -813,13 +813,17 @@ impl Config {
     }
 
     /// The global layer's settings (`None` for `controller.planner = "none"`): the
-    /// measured defaults, the configured planner, and the loop's progress window (the
+    /// measured defaults, the configured planner, its route clearance widened by the
+    /// envelope's tolerances as the MPC's is, and the loop's progress window (the
     /// pilot's: the navigator's abort window, or the pilot's own without one).
     pub fn navigator_settings(&self) -> Option<control::planner::NavigatorSettings> {
         if self.controller.planner == PlannerChoice::None {
             return None;
         }
-        let mut n = self.navigator.clone();
+        let mut n = self
+            .navigator
+            .clone()
+            .widened(self.envelope.tolerance_widening(&self.machine));
         n.stall.progress = self.control.progress();
         n.stall.reached_tolerance = self.control.reach_tolerance;
         Some(n)
@@ -916,6 +920,25 @@ mod tests {
             "{report}"
         );
         assert!(report.contains("controlled stop"), "{report}");
+        // The MPC and the route planner plan outside the tolerances: the
+        // MPC's clearances by each axle's widening, the route's one margin by
+        // their mean; with nothing stated, as configured.
+        let (m, n) = (c.mpc_settings(), c.navigator_settings().unwrap());
+        let base = control::planner::NavigatorSettings::default()
+            .search
+            .clearance_margin;
+        assert!((m.obstacle_margin - (c.mpc.obstacle_margin + 0.07)).abs() < 1e-9);
+        assert!((m.obstacle_margin_rear - (c.mpc.obstacle_margin_rear + 0.166)).abs() < 1e-9);
+        assert!(
+            (n.search.clearance_margin - (base + 0.118)).abs() < 1e-9,
+            "{n:?}"
+        );
+        let n = exact.navigator_settings().unwrap();
+        assert_eq!(n.search.clearance_margin, base);
+        assert_eq!(
+            exact.mpc_settings().obstacle_margin,
+            exact.mpc.obstacle_margin
+        );
         assert!(err("[envelope.check]\nspan = 0\n").contains("`envelope.check.span`"));
         assert!(err("[envelope.check]\nmax_actuator_gain = 3\n").contains("max_actuator_gain"));
         assert!(err("[envelope.check]\naction = \"ignore\"\n").contains("action"));

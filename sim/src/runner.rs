@@ -413,6 +413,10 @@ pub fn pilot(cfg: &EvalConfig, nets: &Networks) -> Result<Pilot<Critic>> {
     )?;
     let navigator = match &cfg.navigator {
         Some(s) => {
+            // Widened as the daemon widens it (`Config::navigator_settings`).
+            let s = &s
+                .clone()
+                .widened(cfg.envelope.tolerance_widening(&cfg.params));
             let planner = RoutePlanner::new(cfg.params, s, Some(nets.actor.clone()))?;
             let routes = Box::new(InlineRoutes::new(planner, cfg.plan_delay));
             Some(Navigator::with_routes(
