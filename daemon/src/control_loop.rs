@@ -251,7 +251,9 @@ impl ControlLoop {
         let inputs = self.read_inputs(start);
         t.state = self.telemetry_state(&inputs);
         t.at_rest = u32::from(
-            (inputs.machine).is_some_and(|s| s.at_rest(self.ctx.config.control.rest_speed)),
+            inputs
+                .machine
+                .is_some_and(|s| s.at_rest(self.ctx.config.control.rest_speed)),
         );
         self.seen_data |= inputs.x.is_some();
 
