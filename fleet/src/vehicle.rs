@@ -703,7 +703,12 @@ impl Vehicle {
             ids: self.book.ids.clone(),
             last_node_id: self.book.last_node_id.clone(),
             last_node_sequence_id: self.book.last_node_sequence_id,
-            driving: self.daemon_ok && t.is_some_and(|t| t.at_rest == 0),
+            // Moving, by the daemon's one "at rest" (telemetry `at_rest`), unless
+            // holding a reached goal: the daemon reports a goal reached below its
+            // reach speed, and the last centimetres per second of settling into a
+            // stop node are not driving on.
+            driving: self.daemon_ok
+                && t.is_some_and(|t| t.at_rest == 0 && t.mode != Mode::Reached.code()),
             paused: Some(self.paused || stop_latched),
             new_base_request: None,
             distance_since_last_node: Some(self.distance_since_last_node),
