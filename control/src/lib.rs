@@ -25,6 +25,7 @@ pub mod progress;
 pub mod scenario;
 pub mod site;
 pub mod weights;
+pub mod world;
 
 pub use actor::{Actor, ActorWorkspace};
 pub use cost::{CostForm, CostWeights};

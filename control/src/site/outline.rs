@@ -61,6 +61,8 @@ pub enum OutlineError {
     TooMany(usize),
     #[error("outline circle {0}: offset must be finite and radius finite and > 0")]
     BadCircle(usize),
+    #[error("outline half_width must be finite and > 0, got {0}")]
+    BadHalfWidth(f64),
 }
 
 /// The machine's outline as covering circles.
@@ -68,24 +70,32 @@ pub enum OutlineError {
 #[serde(deny_unknown_fields, try_from = "OutlineDoc", into = "OutlineDoc")]
 pub struct Outline {
     circles: Vec<OutlineCircle>,
+    /// The machine's half-width [m]: what a circle on the v2 wire includes
+    /// in its radius (DESIGN §10), so that such a circle of radius R is the
+    /// physical circle R − half_width ([`crate::world`] converts it).
+    half_width: f64,
 }
 
 #[derive(Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct OutlineDoc {
     circles: Vec<OutlineCircle>,
+    half_width: f64,
 }
 
 impl TryFrom<OutlineDoc> for Outline {
     type Error = OutlineError;
     fn try_from(d: OutlineDoc) -> Result<Self, Self::Error> {
-        Outline::new(d.circles)
+        Outline::new(d.circles, d.half_width)
     }
 }
 
 impl From<Outline> for OutlineDoc {
     fn from(o: Outline) -> Self {
-        OutlineDoc { circles: o.circles }
+        OutlineDoc {
+            circles: o.circles,
+            half_width: o.half_width,
+        }
     }
 }
 
@@ -132,8 +142,11 @@ fn body_frame(body: Body, p: &MachineParams, x: &State) -> (P2, f64) {
 
 impl Outline {
     /// An outline of these circles (1 to [`MAX_OUTLINE_CIRCLES`], finite
-    /// offsets, radii > 0).
-    pub fn new(circles: Vec<OutlineCircle>) -> Result<Self, OutlineError> {
+    /// offsets, radii > 0) of a machine `half_width` wide on each side.
+    pub fn new(circles: Vec<OutlineCircle>, half_width: f64) -> Result<Self, OutlineError> {
+        if !(half_width.is_finite() && half_width > 0.0) {
+            return Err(OutlineError::BadHalfWidth(half_width));
+        }
         if circles.is_empty() {
             return Err(OutlineError::Empty);
         }
@@ -149,7 +162,10 @@ impl Outline {
                 return Err(OutlineError::BadCircle(i));
             }
         }
-        Ok(Self { circles })
+        Ok(Self {
+            circles,
+            half_width,
+        })
     }
 
     /// Today's model (DESIGN §10): one circle of the half-width at each axle
@@ -157,18 +173,21 @@ impl Outline {
     /// `obstacle::footprint_clearance` against that circle inflated to
     /// R + half_width, so every existing figure keeps its meaning.
     pub fn axle_circles(half_width: f64) -> Result<Self, OutlineError> {
-        Self::new(vec![
-            OutlineCircle {
-                body: Body::Front,
-                offset: [0.0, 0.0],
-                radius: half_width,
-            },
-            OutlineCircle {
-                body: Body::Rear,
-                offset: [0.0, 0.0],
-                radius: half_width,
-            },
-        ])
+        Self::new(
+            vec![
+                OutlineCircle {
+                    body: Body::Front,
+                    offset: [0.0, 0.0],
+                    radius: half_width,
+                },
+                OutlineCircle {
+                    body: Body::Rear,
+                    offset: [0.0, 0.0],
+                    radius: half_width,
+                },
+            ],
+            half_width,
+        )
     }
 
     /// The Avant 635 (the paper's machine, L_f = L_r = 0.6 m) as five
@@ -190,13 +209,16 @@ impl Outline {
     ///   two circles at x = −0.375, 0.275, r = 0.73
     ///   (√(0.325² + 0.65²) = 0.727).
     pub fn avant635() -> Self {
-        Self::axial(&[
-            (Body::Front, -0.3, 0.72),
-            (Body::Front, 0.3, 0.72),
-            (Body::Front, 0.9, 0.72),
-            (Body::Rear, -0.375, 0.73),
-            (Body::Rear, 0.275, 0.73),
-        ])
+        Self::axial(
+            0.65,
+            &[
+                (Body::Front, -0.3, 0.72),
+                (Body::Front, 0.3, 0.72),
+                (Body::Front, 0.9, 0.72),
+                (Body::Rear, -0.375, 0.73),
+                (Body::Rear, 0.275, 0.73),
+            ],
+        )
     }
 
     /// The large loader of issue 19 (L_f 0.9 m, L_r 1.1 m: a 2.0 m
@@ -216,19 +238,23 @@ impl Outline {
     /// - rear body, x ∈ [−1.2, 1.1], |y| ≤ 0.9: three circles at
     ///   x = −0.8167, −0.05, 0.7167, r = 0.98 (√(0.3833² + 0.9²) = 0.978).
     pub fn large_loader() -> Self {
-        Self::axial(&[
-            (Body::Front, -0.575, 0.96),
-            (Body::Front, 0.075, 0.96),
-            (Body::Front, 0.725, 0.96),
-            (Body::Front, 1.375, 0.96),
-            (Body::Rear, -0.8167, 0.98),
-            (Body::Rear, -0.05, 0.98),
-            (Body::Rear, 0.7167, 0.98),
-        ])
+        Self::axial(
+            0.9,
+            &[
+                (Body::Front, -0.575, 0.96),
+                (Body::Front, 0.075, 0.96),
+                (Body::Front, 0.725, 0.96),
+                (Body::Front, 1.375, 0.96),
+                (Body::Rear, -0.8167, 0.98),
+                (Body::Rear, -0.05, 0.98),
+                (Body::Rear, 0.7167, 0.98),
+            ],
+        )
     }
 
-    fn axial(spec: &[(Body, f64, f64)]) -> Self {
+    fn axial(half_width: f64, spec: &[(Body, f64, f64)]) -> Self {
         Self {
+            half_width,
             circles: spec
                 .iter()
                 .map(|&(body, x, radius)| OutlineCircle {
@@ -242,6 +268,35 @@ impl Outline {
 
     pub fn circles(&self) -> &[OutlineCircle] {
         &self.circles
+    }
+
+    /// The machine's half-width [m] (what a v2 wire circle's radius includes).
+    pub fn half_width(&self) -> f64 {
+        self.half_width
+    }
+
+    /// The radius of the largest disc around the front axle that the front
+    /// body's circles cover (0 if none covers the axle): what a test of the
+    /// front axle's position alone may assume of the machine (the route
+    /// search's grid heuristic). The default outline's: its half-width.
+    pub fn front_axle_radius(&self) -> f64 {
+        self.circles
+            .iter()
+            .filter(|c| c.body == Body::Front)
+            .map(|c| c.radius - c.offset[0].hypot(c.offset[1]))
+            .fold(0.0, f64::max)
+    }
+
+    /// How far the centre of circle `i` can be from the front axle [m] (the
+    /// lever arm a heading error acts on): its offset on the front body; the
+    /// wheelbase plus its offset on the rear body.
+    pub fn lever_arm(&self, i: usize, p: &MachineParams) -> f64 {
+        let c = &self.circles[i];
+        let off = c.offset[0].hypot(c.offset[1]);
+        match c.body {
+            Body::Front => off,
+            Body::Rear => p.l_f + p.l_r + off,
+        }
     }
 
     pub fn len(&self) -> usize {
@@ -460,7 +515,7 @@ mod tests {
             ),
         ];
         for (o, bodies, hw) in cases {
-            assert!(Outline::new(o.circles().to_vec()).is_ok());
+            assert!(Outline::new(o.circles().to_vec(), o.half_width()).is_ok());
             for (body, lo, hi) in bodies {
                 assert!(o.covers_body_rectangle(body, lo, hi, hw), "{body:?}");
                 assert!(sampled_cover(&o, body, lo, hi, hw), "{body:?} sampled");
@@ -473,13 +528,16 @@ mod tests {
 
     #[test]
     fn outline_validation_and_serde() {
-        assert_eq!(Outline::new(vec![]), Err(OutlineError::Empty));
+        assert_eq!(Outline::new(vec![], 0.65), Err(OutlineError::Empty));
         let bad = OutlineCircle {
             body: Body::Rear,
             offset: [0.0, f64::NAN],
             radius: 1.0,
         };
-        assert_eq!(Outline::new(vec![bad]), Err(OutlineError::BadCircle(0)));
+        assert_eq!(
+            Outline::new(vec![bad], 0.65),
+            Err(OutlineError::BadCircle(0))
+        );
         let o = Outline::avant635();
         let text = serde_json::to_string(&o).unwrap();
         let back: Outline = serde_json::from_str(&text).unwrap();

@@ -1,0 +1,253 @@
+//! The world's answers against independent computations: the pre-site
+//! footprint (default outline, goal circles), a linear scan over the site's
+//! features, and finite differences of the rows.
+
+use super::*;
+use crate::obstacle::footprint_clearance;
+use crate::site::generate::random_site;
+use crate::site::Site;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+fn random_state(rng: &mut ChaCha8Rng, size: f64) -> State {
+    State::new(
+        rng.gen_range(0.0..size),
+        rng.gen_range(0.0..size),
+        rng.gen_range(-3.2..3.2),
+        rng.gen_range(-0.7..0.7),
+        0.0,
+        0.0,
+    )
+}
+
+fn random_circles(rng: &mut ChaCha8Rng, size: f64, n: usize) -> Vec<Obstacle> {
+    (0..n)
+        .map(|_| {
+            Obstacle::new(
+                rng.gen_range(0.0..size),
+                rng.gen_range(0.0..size),
+                rng.gen_range(0.3..2.0),
+            )
+        })
+        .collect()
+}
+
+fn site(seed: u64, n: usize, size: f64) -> Arc<SiteIndex> {
+    Arc::new(SiteIndex::new(
+        Site::from_file(random_site(seed, n, size), 0).unwrap(),
+    ))
+}
+
+/// With the default outline and no site, the clearance is the pre-site
+/// footprint's (both axle points against the wire's inflated circles),
+/// bit for bit: the figures measured before the site keep their meaning.
+#[test]
+fn the_default_outline_reproduces_the_axle_footprint_exactly() {
+    let p = MachineParams::default();
+    let mut w = World::with_axle_circles(p, 8);
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    for _ in 0..2000 {
+        let n = rng.gen_range(1..=8);
+        let circles = random_circles(&mut rng, 10.0, n);
+        w.set_circles(&circles).unwrap();
+        let x = random_state(&mut rng, 10.0);
+        assert_eq!(w.clearance(&x), footprint_clearance(&p, &x, &circles));
+        // And each row's value is the axle point's clearance.
+        for j in 0..circles.len() {
+            for (a, point) in crate::obstacle::AxlePoint::ALL.iter().enumerate() {
+                let (h, g) = w.row(&x, a, Target::Circle(j));
+                let (h0, g0) = circles[j].point_clearance(&p, *point, &x);
+                assert_eq!(h, h0);
+                for k in 0..4 {
+                    assert!((g[k] - g0[k]).abs() < 1e-15, "{g:?} {g0:?}");
+                }
+            }
+        }
+    }
+}
+
+/// The least excess with per-circle margins against a scan over every
+/// feature, the bounds and the circles; its target is the scan's.
+#[test]
+fn excess_is_a_linear_scans() {
+    let p = MachineParams::default();
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    for (seed, n, size) in [(1, 200, 60.0), (2, 30, 30.0)] {
+        let idx = site(seed, n, size);
+        for outline in [default_outline(), Outline::avant635()] {
+            let mut w = World::new(p, outline.clone(), 8);
+            w.set_site(Some(idx.clone()));
+            let margins: Vec<f64> = (0..outline.len()).map(|i| 0.05 + 0.01 * i as f64).collect();
+            for _ in 0..300 {
+                let k = rng.gen_range(0..4);
+                let circles = random_circles(&mut rng, size, k);
+                w.set_circles(&circles).unwrap();
+                let x = random_state(&mut rng, size);
+                let placed = w.place(&x);
+                let mut scan = f64::INFINITY;
+                for (i, c) in placed[..outline.len()].iter().enumerate() {
+                    for f in idx.site().features() {
+                        scan = scan.min(f.shape.clearance(c.center, c.radius) - margins[i]);
+                    }
+                    scan = scan.min(
+                        -idx.site().bounds().signed_distance(c.center) - c.radius - margins[i],
+                    );
+                    for o in &circles {
+                        let phys = o.radius - outline.half_width();
+                        let d = (c.center[0] - o.x).hypot(c.center[1] - o.y);
+                        scan = scan.min(d - phys - c.radius - margins[i]);
+                    }
+                }
+                let got = w.excess(&x, &margins, f64::INFINITY).unwrap();
+                assert!((got.clearance - scan).abs() < 1e-9, "{got:?} vs {scan}");
+                // The contact's own row says the same.
+                let (h, _) = w.row(&x, got.circle, got.target);
+                assert!((h - margins[got.circle] - got.clearance).abs() < 1e-9);
+                // A cutoff below the answer finds nothing; above, the same.
+                assert_eq!(w.excess(&x, &margins, scan - 1e-6), None);
+                let cut = w.excess(&x, &margins, scan + 0.5).unwrap();
+                assert!((cut.clearance - scan).abs() < 1e-9);
+            }
+        }
+    }
+}
+
+/// Every row's gradient against central differences of its value, on every
+/// kind of target and both bodies of a truer outline.
+#[test]
+fn row_gradients_match_finite_differences() {
+    let p = MachineParams::default();
+    let idx = site(7, 60, 40.0);
+    let mut w = World::new(p, Outline::avant635(), 8);
+    w.set_site(Some(idx.clone()));
+    let mut rng = ChaCha8Rng::seed_from_u64(9);
+    w.set_circles(&random_circles(&mut rng, 40.0, 3)).unwrap();
+    let eps = 1e-6;
+    let mut checked = 0;
+    for _ in 0..300 {
+        let x = random_state(&mut rng, 40.0);
+        let targets = (0..idx.site().features().len())
+            .map(Target::Feature)
+            .chain([Target::Bounds])
+            .chain((0..3).map(Target::Circle));
+        for t in targets {
+            for c in 0..w.outline().len() {
+                let (h, g) = w.row(&x, c, t);
+                // Away from kinks (polygon corners, medial axes) only: the
+                // gradient is checked where the distance is smooth.
+                let mut fd = [0.0; 4];
+                let mut smooth = true;
+                for k in 0..4 {
+                    let (mut a, mut b) = (x, x);
+                    a[k] += eps;
+                    b[k] -= eps;
+                    let (ha, _) = w.row(&a, c, t);
+                    let (hb, _) = w.row(&b, c, t);
+                    fd[k] = (ha - hb) / (2.0 * eps);
+                    let (h2, _) = w.row(&a, c, t);
+                    smooth &= ((ha - h) - (h - hb)).abs() < 1e-9 && h2 == ha;
+                }
+                if !smooth || h.abs() > 30.0 {
+                    continue;
+                }
+                for k in 0..4 {
+                    assert!(
+                        (fd[k] - g[k]).abs() < 1e-5,
+                        "{t:?} circle {c}: {fd:?} vs {g:?}"
+                    );
+                }
+                checked += 1;
+            }
+        }
+    }
+    assert!(checked > 10_000, "{checked}");
+}
+
+/// The site's rows are the smallest (circle, feature) pairs within reach.
+#[test]
+fn site_rows_keep_the_nearest_pairs() {
+    let p = MachineParams::default();
+    let idx = site(4, 400, 80.0);
+    let mut w = World::new(p, Outline::avant635(), 8);
+    w.set_site(Some(idx.clone()));
+    let mut rng = ChaCha8Rng::seed_from_u64(13);
+    let margins = [0.05, 0.08];
+    let mut near = [Near::default(); 16];
+    for _ in 0..200 {
+        let x = random_state(&mut rng, 80.0);
+        let mut out = [RowPair::default(); 16];
+        let mut len = 0;
+        let reach = 4.0;
+        w.site_rows(&x, margins, reach, &mut near, &mut out, &mut len);
+        // The scan: every pair within reach.
+        let placed = w.place(&x);
+        let mut all = Vec::new();
+        for (i, c) in placed[..w.outline().len()].iter().enumerate() {
+            let m = margins[(w.outline().circles()[i].body == Body::Rear) as usize];
+            for (f, feat) in idx.site().features().iter().enumerate() {
+                let e = feat.shape.signed_distance(c.center) - c.radius - m;
+                if e <= reach {
+                    all.push(e);
+                }
+                let _ = f;
+            }
+            let b = -idx.site().bounds().signed_distance(c.center) - c.radius - m;
+            if b < reach {
+                all.push(b);
+            }
+        }
+        all.sort_by(f64::total_cmp);
+        let mut got: Vec<f64> = out[..len].iter().map(|r| r.excess).collect();
+        got.sort_by(f64::total_cmp);
+        let want = &all[..all.len().min(16)];
+        assert_eq!(got.len(), want.len());
+        for (g, w) in got.iter().zip(want) {
+            assert!((g - w).abs() < 1e-12, "{got:?} vs {want:?}");
+        }
+    }
+}
+
+#[test]
+fn circles_beyond_the_capacity_or_invalid_are_refused() {
+    let mut w = World::with_axle_circles(MachineParams::default(), 2);
+    let o = Obstacle::new(1.0, 1.0, 1.0);
+    assert!(matches!(
+        w.set_circles(&[o, o, o]),
+        Err(WorldError::TooManyObstacles { given: 3, max: 2 })
+    ));
+    assert!(matches!(
+        w.set_circles(&[o, Obstacle::new(f64::NAN, 0.0, 1.0)]),
+        Err(WorldError::BadObstacle(_))
+    ));
+    assert!(w.is_empty());
+}
+
+/// The swept-disc filter agrees with a dense check: never clear where a
+/// point of the segment is closer than `extra`.
+#[test]
+fn segment_clear_never_passes_a_blocked_segment() {
+    let p = MachineParams::default();
+    let idx = site(2, 80, 40.0);
+    let mut w = World::with_axle_circles(p, 8);
+    w.set_site(Some(idx));
+    let mut rng = ChaCha8Rng::seed_from_u64(17);
+    let mut blocked = 0;
+    for _ in 0..400 {
+        let a = [rng.gen_range(0.0..40.0), rng.gen_range(0.0..40.0)];
+        let b = [
+            a[0] + rng.gen_range(-6.0..6.0),
+            a[1] + rng.gen_range(-6.0..6.0),
+        ];
+        let extra = 0.2;
+        let dense_blocked = (0..=2000).any(|k| {
+            let t = k as f64 / 2000.0;
+            let q = [a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])];
+            w.disc_clearance(q, 0.65, f64::INFINITY) < extra
+        });
+        if dense_blocked {
+            blocked += 1;
+            assert!(!w.segment_clear(a, b, 0.65, extra));
+        }
+    }
+    assert!(blocked > 50, "{blocked}");
+}
