@@ -146,7 +146,7 @@ impl Loop {
                 sent: &self.sent,
                 now,
                 state: &x,
-                obstacles: self.obstacles,
+                world: self.mpc.world(),
                 dt: 0.2,
                 last: self.last,
             },

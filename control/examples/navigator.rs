@@ -28,7 +28,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let settings = NavigatorSettings::default();
     let file = std::env::args().nth(1);
     let mut planner = RoutePlanner::new(MachineParams::default(), &settings, Some(actor))?;
-    let mut job = PlanJob::new(&settings.search);
+    let mut job = PlanJob::new(&MachineParams::default(), &settings.search);
 
     if let Some(file) = file {
         let set = control::scenario::parse(&std::fs::read_to_string(&file)?, &file)?;
@@ -117,8 +117,10 @@ fn plan(
     job.request.kind = PlanKind::First;
     job.request.start = *start;
     job.request.goal = goal;
-    job.request.obstacles.clear();
-    job.request.obstacles.extend_from_slice(obstacles);
+    job.request
+        .world
+        .set_circles(obstacles)
+        .expect("the scenario file's circles were validated when parsed");
     planner.plan(job);
     job.route.report
 }

@@ -44,7 +44,8 @@ use serde::{Deserialize, Serialize};
 use crate::assumption_check::CheckSettings;
 use crate::delay::DelayCompensator;
 use crate::model::{MachineParams, State, VelocityCommand};
-use crate::obstacle::{AxlePoint, Obstacle};
+use crate::site::outline::{Body, Outline, MAX_OUTLINE_CIRCLES};
+use crate::world::World;
 
 /// Settings of the envelope: what it assumes about the machine and its pose
 /// estimate. `Default` gives the values below.
@@ -195,6 +196,29 @@ impl EnvelopeSettings {
         [front, rear]
     }
 
+    /// The margin of each of `outline`'s circles [m]: [`Self::margins`] with
+    /// the heading noise acting on the circle's lever arm from the front
+    /// axle ([`Outline::lever_arm`]) and the geometry's tolerance on every
+    /// circle but one at the front axle itself. For the default outline (a
+    /// circle at each axle point) exactly [front, rear].
+    pub fn circle_margins(
+        &self,
+        p: &MachineParams,
+        outline: &Outline,
+    ) -> [f64; MAX_OUTLINE_CIRCLES] {
+        let [front, _] = self.margins(p);
+        let mut out = [0.0; MAX_OUTLINE_CIRCLES];
+        for (i, (m, c)) in out.iter_mut().zip(outline.circles()).enumerate() {
+            let lever = outline.lever_arm(i, p);
+            *m = if c.body == Body::Front && lever == 0.0 {
+                front
+            } else {
+                front + self.geometry_tolerance + lever * self.noise_sigmas * self.pose_noise_theta
+            };
+        }
+        out
+    }
+
     /// What the tolerances add to each margin beyond `margin` [front, rear]: the
     /// MPC's planned clearance grows by this too, so that it plans outside the
     /// envelope's reach ([`crate::mpc::MpcSettings::with_tolerances`]).
@@ -282,8 +306,8 @@ pub struct EnvelopeInput<'a> {
     pub now: f64,
     /// The measured state at `now` (the pose's age compensated).
     pub state: &'a State,
-    /// The circles, radii inflated by the machine's half-width.
-    pub obstacles: &'a [Obstacle],
+    /// Everything the outline must keep off (the site, the goal's circles).
+    pub world: &'a World,
     /// The command period Δt [s].
     pub dt: f64,
     /// The last command sent (the stop ramps down from it).
@@ -342,10 +366,10 @@ pub fn predicted_excess(input: &EnvelopeInput, command: VelocityCommand) -> f64 
         settings: s,
         ..
     } = *input;
-    if input.obstacles.is_empty() {
+    if input.world.is_empty() {
         return f64::INFINITY;
     }
-    let margins = s.margins(p);
+    let margins = s.circle_margins(p, input.world.outline());
     let stop_at = input.now + input.dt;
     // The stop acts a delay after it is sent; from the fastest the machine can
     // go (gain × the bounds), it is at rest within the longer of the two
@@ -355,11 +379,9 @@ pub fn predicted_excess(input: &EnvelopeInput, command: VelocityCommand) -> f64 
     let pending = [(input.now, command), (stop_at, VelocityCommand::ZERO)];
     let mut excess = f64::INFINITY;
     let mut observe = |x: &State| {
-        for (point, m) in AxlePoint::ALL.iter().zip(margins) {
-            let q = point.position(p, x);
-            for o in input.obstacles {
-                excess = excess.min(o.clearance_of(q) - m);
-            }
+        // Below the least so far only: the index prunes everything farther.
+        if let Some(c) = input.world.excess(x, &margins, excess) {
+            excess = excess.min(c.clearance);
         }
     };
     observe(input.state);
@@ -416,7 +438,7 @@ pub fn guard(input: &EnvelopeInput, proposed: VelocityCommand) -> Guarded {
         proposed_excess: f64::INFINITY,
         excess: f64::INFINITY,
     };
-    if !input.settings.enabled || input.obstacles.is_empty() {
+    if !input.settings.enabled || input.world.is_empty() {
         return pass;
     }
     let excess = predicted_excess(input, proposed);
@@ -461,6 +483,7 @@ pub fn guard(input: &EnvelopeInput, proposed: VelocityCommand) -> Guarded {
 mod tests {
     use super::*;
     use crate::model::ix;
+    use crate::obstacle::Obstacle;
 
     fn avant() -> MachineParams {
         MachineParams::default()
@@ -483,13 +506,16 @@ mod tests {
         obstacles: &'a [Obstacle],
         last: VelocityCommand,
     ) -> EnvelopeInput<'a> {
+        let mut world = World::with_axle_circles(*p, 8);
+        world.set_circles(obstacles).unwrap();
+        let world: &'a World = Box::leak(Box::new(world));
         EnvelopeInput {
             params: p,
             settings: s,
             sent,
             now: 0.0,
             state: x,
-            obstacles,
+            world,
             dt: 0.2,
             last,
         }

@@ -27,6 +27,10 @@ use crate::mpc::{Mpc, MpcError, Solution, StageCost};
 use crate::obstacle::Obstacle;
 use crate::planner::{AbortReason, NavError, NavStep, Navigator};
 use crate::progress::{ProgressChecker, ProgressSettings};
+use crate::site::outline::{Body, Outline, MAX_OUTLINE_CIRCLES};
+use crate::site::SiteIndex;
+use crate::world::World;
+use std::sync::Arc;
 
 /// Errors of [`Pilot`]'s calls: each names the part that refused.
 #[derive(Debug, thiserror::Error)]
@@ -97,8 +101,9 @@ pub struct Pilot<C: StageCost> {
     configured_delay: f64,
     dt: f64,
     last: VelocityCommand,
-    /// The goal's circles (the envelope's world, the MPC's rows).
-    obstacles: Vec<Obstacle>,
+    /// The site, the goal's circles and the outline: the envelope's world,
+    /// kept equal to the MPC's and the navigator's (DESIGN §17).
+    world: World,
     /// The navigator's path cost version the MPC has.
     costs_seen: Option<u64>,
     /// The navigator's plan count at the last step.
@@ -134,7 +139,7 @@ impl<C: StageCost> Pilot<C> {
             configured_delay: s.delay,
             dt: s.dt,
             last: VelocityCommand::ZERO,
-            obstacles: Vec::with_capacity(s.max_obstacles),
+            world: World::with_axle_circles(params, s.max_obstacles),
             costs_seen: None,
             plans_seen: 0,
             progress: ProgressChecker::new(progress),
@@ -153,10 +158,10 @@ impl<C: StageCost> Pilot<C> {
         now: f64,
     ) -> Result<(), PilotError> {
         self.reset();
-        if obstacles.len() > self.obstacles.capacity() {
+        if obstacles.len() > self.world.capacity() {
             return Err(PilotError::Mpc(MpcError::TooManyObstacles {
                 given: obstacles.len(),
-                max: self.obstacles.capacity(),
+                max: self.world.capacity(),
             }));
         }
         match &mut self.navigator {
@@ -166,14 +171,56 @@ impl<C: StageCost> Pilot<C> {
                 self.progress.reset(goal, now);
             }
         }
-        self.obstacles.extend_from_slice(obstacles);
+        self.world
+            .set_circles(obstacles)
+            .map_err(|e| PilotError::Envelope(e.to_string()))?;
         Ok(())
+    }
+
+    /// The site every layer keeps off (`None`: the goal's circles only):
+    /// the envelope and the MPC from the next step on, the navigator from
+    /// its next plan. Call it between ticks (a swap at a tick boundary). No
+    /// allocation.
+    pub fn set_site(&mut self, site: Option<Arc<SiteIndex>>) {
+        self.world.set_site(site.clone());
+        self.mpc.set_site(site.clone());
+        if let Some(nav) = &mut self.navigator {
+            nav.set_site(site);
+        }
+    }
+
+    /// The machine's outline for every layer; the MPC's rows get each
+    /// circle's envelope margin beyond its body's, so that it plans outside
+    /// what the envelope guards.
+    pub fn set_outline(&mut self, outline: Outline) {
+        let settings = self.assumptions.stated();
+        let per_circle = settings.circle_margins(&self.params, &outline);
+        let [front, rear] = settings.margins(&self.params);
+        let mut extra = [0.0; MAX_OUTLINE_CIRCLES];
+        for (i, c) in outline.circles().iter().enumerate() {
+            extra[i] = per_circle[i]
+                - match c.body {
+                    Body::Front => front,
+                    Body::Rear => rear,
+                };
+        }
+        self.mpc
+            .set_outline(outline.clone(), &extra[..outline.len()]);
+        if let Some(nav) = &mut self.navigator {
+            nav.set_outline(outline.clone());
+        }
+        self.world.set_outline(outline);
+    }
+
+    /// The world the envelope checks (site, circles, outline).
+    pub fn world(&self) -> &World {
+        &self.world
     }
 
     /// Forgets goal and plan (not the commands sent: they still act).
     pub fn reset(&mut self) {
         self.mpc.clear_goal();
-        self.obstacles.clear();
+        self.world.clear_circles();
         self.costs_seen = None;
         // The next residual must not span the ticks between goals.
         self.assumptions.gap();
@@ -215,7 +262,7 @@ impl<C: StageCost> Pilot<C> {
                     // The first target starts from an actor roll-out; later
                     // ones (subgoal switches, replans) keep the plan.
                     match self.mpc.goal() {
-                        None => self.mpc.set_goal(target, &self.obstacles)?,
+                        None => self.mpc.set_goal(target, self.world.circles())?,
                         Some(g) if g != target => self.mpc.retarget(target)?,
                         Some(_) => {}
                     }
@@ -259,7 +306,7 @@ impl<C: StageCost> Pilot<C> {
                 sent: &self.sent,
                 now,
                 state: x,
-                obstacles: &self.obstacles,
+                world: &self.world,
                 dt: self.dt,
                 last: self.last,
             },

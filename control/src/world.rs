@@ -20,7 +20,7 @@ use crate::model::{MachineParams, State};
 use crate::obstacle::{BadObstacle, Obstacle};
 use crate::site::geometry::P2;
 use crate::site::index::{Near, Target as SiteTarget};
-use crate::site::outline::{Body, Outline, OutlineError, WorldCircle, MAX_OUTLINE_CIRCLES};
+use crate::site::outline::{Body, Outline, WorldCircle, MAX_OUTLINE_CIRCLES};
 use crate::site::SiteIndex;
 
 /// The default machine's half-width [m]: the Avant 635's published 1.3 m
@@ -74,8 +74,6 @@ pub enum WorldError {
     TooManyObstacles { given: usize, max: usize },
     #[error(transparent)]
     BadObstacle(#[from] BadObstacle),
-    #[error(transparent)]
-    Outline(#[from] OutlineError),
 }
 
 /// Site + a goal's circles + the outline (module docs).
@@ -431,7 +429,7 @@ impl World {
 
 /// Appends `pair` to `out[..*len]`, or, when full, puts it in place of the
 /// pair of largest excess if its own is smaller.
-fn push_smallest(out: &mut [RowPair], len: &mut usize, pair: RowPair) {
+pub(crate) fn push_smallest(out: &mut [RowPair], len: &mut usize, pair: RowPair) {
     if *len < out.len() {
         out[*len] = pair;
         *len += 1;

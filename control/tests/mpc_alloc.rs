@@ -157,7 +157,7 @@ fn tick_allocates_only_inside_clarabel() {
                         sent: &sent,
                         now,
                         state: &x,
-                        obstacles: &obstacles,
+                        world: mpc.world(),
                         dt: settings.dt,
                         last,
                     },
@@ -168,7 +168,7 @@ fn tick_allocates_only_inside_clarabel() {
                 sent.record(now, cmd);
                 last = cmd;
                 total += count() - before;
-                active_counts.push(mpc.active_obstacles().len());
+                active_counts.push(mpc.active_obstacles().count());
                 plant.command(cmd).unwrap();
                 plant.advance(settings.dt);
             }

@@ -29,8 +29,11 @@ use std::collections::VecDeque;
 use control::goal_check::{check_goal, GoalConflict};
 use control::model::{goal_distance, ix};
 use control::obstacle::Obstacle;
+use control::site::{Outline, SiteIndex};
+use control::world::World;
 use control::{Goal, MachineParams, State};
 use shm_ipc::{fault_flags, AbortReason, GoalOutcome, RejectCode, ValidRequest, MAX_OBSTACLES};
+use std::sync::Arc;
 
 /// Outcomes waiting for their tick; beyond this the oldest are dropped (a flood of goals
 /// ending faster than 5 per second). Documented in the `shm-ipc` crate docs.
@@ -151,6 +154,9 @@ pub struct GoalLifecycle {
     blocking_faults: u32,
     /// Latest measured state, for the request-time footprint check.
     machine: Option<State>,
+    /// The site and the outline the goal check uses (the pilot's, DESIGN §17);
+    /// its circles are each request's.
+    world: World,
     pending: VecDeque<Outcome>,
     next_seq: u32,
     dropped: u64,
@@ -166,10 +172,21 @@ impl GoalLifecycle {
             operator_stop: false,
             blocking_faults: fault_flags::POSE_STALE | fault_flags::MACHINE_STATE_STALE,
             machine: None,
+            world: World::with_axle_circles(settings.machine, MAX_OBSTACLES),
             pending: VecDeque::with_capacity(MAX_PENDING_OUTCOMES + 1),
             next_seq: 1,
             dropped: 0,
         }
+    }
+
+    /// The site goals are checked against (DESIGN §17), from the next request.
+    pub fn set_site(&mut self, site: Option<Arc<SiteIndex>>) {
+        self.world.set_site(site);
+    }
+
+    /// The machine's outline the goal check uses.
+    pub fn set_outline(&mut self, outline: Outline) {
+        self.world.set_outline(outline);
     }
 
     /// True while an operator stop is latched (goals rejected until resume).
@@ -215,18 +232,23 @@ impl GoalLifecycle {
                     *dst = Obstacle::new(o.x, o.y, o.r);
                 }
                 let n_obstacles = obstacles.len().min(MAX_OBSTACLES);
-                check_goal(
-                    &self.settings.machine,
-                    self.machine.as_ref(),
-                    &goal,
-                    &list[..n_obstacles],
-                )
-                .map_err(|conflict| Rejection {
-                    code: match conflict {
-                        GoalConflict::GoalInCollision { .. } => RejectCode::GoalInCollision,
-                        GoalConflict::MachineInCollision { .. } => RejectCode::MachineInCollision,
-                    },
-                    text: conflict.to_string(),
+                // Validated on the wire (finite, at most MAX_OBSTACLES).
+                self.world
+                    .set_circles(&list[..n_obstacles])
+                    .map_err(|e| Rejection {
+                        code: RejectCode::BadObstacle,
+                        text: e.to_string(),
+                    })?;
+                check_goal(&self.world, self.machine.as_ref(), &goal).map_err(|conflict| {
+                    Rejection {
+                        code: match conflict {
+                            GoalConflict::GoalInCollision { .. } => RejectCode::GoalInCollision,
+                            GoalConflict::MachineInCollision { .. } => {
+                                RejectCode::MachineInCollision
+                            }
+                        },
+                        text: conflict.to_string(),
+                    }
                 })?;
                 self.end_driven(
                     GoalOutcome::Preempted,

@@ -4,10 +4,11 @@
 //! all linearised at the linearisation point (x̄, ū). Rows and entries are
 //! those of [`super::layout::QpLayout`].
 
-use crate::obstacle::AxlePoint;
 pub use crate::obstacle::Obstacle;
 
 use crate::model::{Control, MachineParams, State};
+use crate::site::outline::MAX_OUTLINE_CIRCLES;
+use crate::world::{RowPair, World};
 
 use super::layout::{QpLayout, AXLE_POINTS, OBS_STATES, SOFT_STATES};
 use super::settings::ObstacleConstraint;
@@ -39,23 +40,33 @@ pub fn fill_bounds(
     }
 }
 
-/// Obstacle rows: for each row k = 0..N−1, slot j and axle point a,
+/// What the obstacle rows are built from: row k's (outline circle, target)
+/// pairs `pairs[k · stride ..][..len[k]]`, the world that measures them and
+/// each outline circle's margin.
+pub struct ObstacleRows<'a> {
+    pub world: &'a World,
+    pub margins: [f64; MAX_OUTLINE_CIRCLES],
+    pub pairs: &'a [RowPair],
+    pub len: &'a [usize],
+    pub stride: usize,
+}
+
+/// Obstacle rows (paper eq. 18 on the outline, DESIGN §17): for each row
+/// k = 0..N−1 and slot s (the layout's slot s / 2, row s mod 2) holding the
+/// pair (outline circle c, target t),
 ///
 /// * distance form: h(x̄_{k+1}) + ∇h·Δx_{k+1} + s ≥ 0,
 /// * CBF form: h(x̄_{k+1}) + ∇h_{k+1}·Δx_{k+1} − (1 − γ)(h(x̄_k) + ∇h_k·Δx_k) + s ≥ 0,
 ///
-/// with h the clearance of the axle point and ∇h over (x_f, y_f, θ, β),
-/// written as A w ≤ b. `margin` tightens every circle (h − margin ≥ 0).
-/// Empty slots get zero coefficients and b = 1 (always satisfied with a zero
-/// slack).
-#[allow(clippy::too_many_arguments)]
+/// with h the clearance of c to t less c's margin ([`World::row`]: a
+/// feature's nearest edge is its half-plane at x̄) and ∇h over
+/// (x_f, y_f, θ, β), written as A w ≤ b. Empty slots get zero coefficients
+/// and b = 1 (always satisfied with a zero slack).
 pub fn fill_obstacles(
     layout: &QpLayout,
-    params: &MachineParams,
+    rows: &ObstacleRows,
     form: ObstacleConstraint,
     gamma: f64,
-    margins: [f64; AXLE_POINTS],
-    obstacles: &[Obstacle],
     xbar: &[State],
     a: &mut [f64],
     b: &mut [f64],
@@ -63,11 +74,12 @@ pub fn fill_obstacles(
     let cbf = form == ObstacleConstraint::Cbf;
     let m = OBS_STATES.len();
     for k in 0..layout.horizon {
+        let pairs = &rows.pairs[k * rows.stride..][..rows.len[k]];
         for j in 0..layout.n_obs {
-            for (ai, &point) in AxlePoint::ALL.iter().enumerate() {
+            for ai in 0..AXLE_POINTS {
                 let e = &layout.a_obs[layout.obstacle_entry(k, j, ai)];
                 let r = layout.row_obstacle(k, j, ai);
-                let Some(o) = obstacles.get(j) else {
+                let Some(pair) = pairs.get(j * AXLE_POINTS + ai) else {
                     let used = if cbf { 2 * m } else { m };
                     for &pos in &e[..used] {
                         a[pos] = 0.0;
@@ -75,14 +87,14 @@ pub fn fill_obstacles(
                     b[r] = 1.0;
                     continue;
                 };
-                let margin = margins[ai];
-                let (h1, g1) = o.point_clearance(params, point, &xbar[k + 1]);
+                let margin = rows.margins[pair.circle];
+                let (h1, g1) = rows.world.row(&xbar[k + 1], pair.circle, pair.target);
                 for c in 0..m {
                     a[e[c]] = -g1[c];
                 }
                 b[r] = h1 - margin;
                 if cbf {
-                    let (h0, g0) = o.point_clearance(params, point, &xbar[k]);
+                    let (h0, g0) = rows.world.row(&xbar[k], pair.circle, pair.target);
                     let keep = 1.0 - gamma;
                     for c in 0..m {
                         a[e[m + c]] = keep * g0[c];
@@ -97,6 +109,7 @@ pub fn fill_obstacles(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::obstacle::AxlePoint;
 
     /// The rear-axle row carries the clearance's θ and β derivatives; an
     /// obstacle only the rear axle is near gives the smaller right-hand side.
@@ -108,13 +121,26 @@ mod tests {
         let o = [Obstacle::new(-1.5, -0.3, 0.2)];
         let mut a = layout.a_constant.clone();
         let mut b = vec![0.0; layout.n_eq + layout.n_ineq];
+        let mut world = World::with_axle_circles(p, 1);
+        world.set_circles(&o).unwrap();
+        let pair = |circle| RowPair {
+            circle,
+            target: crate::world::Target::Circle(0),
+            excess: 0.0,
+        };
+        let mut margins = [0.0; MAX_OUTLINE_CIRCLES];
+        margins[..2].copy_from_slice(&[0.05, 0.08]);
         fill_obstacles(
             &layout,
-            &p,
+            &ObstacleRows {
+                world: &world,
+                margins,
+                pairs: &[pair(0), pair(1), pair(0), pair(1)],
+                len: &[2, 2],
+                stride: 2,
+            },
             ObstacleConstraint::Distance,
             0.0,
-            [0.05, 0.08],
-            &o,
             &xbar,
             &mut a,
             &mut b,

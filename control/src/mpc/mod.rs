@@ -64,6 +64,11 @@ use crate::delay::DelayCompensator;
 use crate::delay_estimate::DelayEstimator;
 use crate::gain::GainEstimator;
 use crate::model::{Control, Goal, MachineParams, State, VelocityCommand};
+use crate::site::index::Near;
+use crate::site::outline::{Outline, MAX_OUTLINE_CIRCLES};
+use crate::site::SiteIndex;
+use crate::world::{RowPair, World};
+use std::sync::Arc;
 
 /// The MPC: built once, then `set_goal` and `step` every tick.
 pub struct Mpc<C: StageCost, D: Dynamics = Rk4Model, B: QpBackend = QpSolverBackend> {
@@ -76,7 +81,10 @@ pub struct Mpc<C: StageCost, D: Dynamics = Rk4Model, B: QpBackend = QpSolverBack
     /// `qps[n]`: the QP with rows for n circles, n = 0..=max_obstacles.
     qps: Vec<Qp<B>>,
     /// The circles within reach at this tick (the rows of `qps[n_active]`).
-    active: [Obstacle; MAX_OBSTACLES],
+    /// The goal's circles within reach this tick (indices into the world's).
+    active: [usize; MAX_OBSTACLES],
+    n_reach: usize,
+    /// The QP this tick uses (`qps[n_active]`, its `n_obs`).
     n_active: usize,
     delay: DelayCompensator,
     /// Online actuator-gain estimate ([`crate::gain`]), used when
@@ -91,8 +99,16 @@ pub struct Mpc<C: StageCost, D: Dynamics = Rk4Model, B: QpBackend = QpSolverBack
     path_cost: PathCost,
     /// The path segment the last tick's x̂ was projected onto.
     path_hint: usize,
-    obstacles: [Obstacle; MAX_OBSTACLES],
-    n_obstacles: usize,
+    /// The site, the goal's circles and the outline (DESIGN §17).
+    world: World,
+    /// Extra margin of each outline circle beyond its body's [m]
+    /// ([`Mpc::set_outline`]).
+    circle_margins: [f64; MAX_OUTLINE_CIRCLES],
+    /// Each row k's (outline circle, target) pairs: `rows[k · row_stride ..]`,
+    /// `row_len[k]` of them (DESIGN §17: the nearest, a bounded count).
+    rows: Vec<RowPair>,
+    row_len: Vec<usize>,
+    near: Vec<Near>,
     /// The plan, which is also the next linearisation point once shifted.
     xs: Vec<State>,
     us: Vec<Control>,
@@ -117,29 +133,57 @@ struct Qp<B> {
     backend: B,
 }
 
-/// The circles a plan over the horizon can come near, in their given order:
-/// those whose edge is within `reach` of the front axle at `x`, where `reach`
-/// covers the horizon at the top speed (soft bounds included), the rear
-/// axle's lever and the largest margin. Writes them to `out` and returns how
-/// many.
+/// The goal's circles a plan over the horizon can come near, in their given
+/// order: those whose edge is within `reach` of the front axle at `x`, where
+/// `reach` covers the horizon at the top speed (soft bounds included), the
+/// outline's extent beyond the front axle and the largest margin. Writes
+/// their indices to `out` and returns how many.
 pub fn reachable_obstacles(
-    params: &MachineParams,
     settings: &MpcSettings,
+    world: &World,
     x: &State,
-    obstacles: &[Obstacle],
-    out: &mut [Obstacle; MAX_OBSTACLES],
+    out: &mut [usize; MAX_OBSTACLES],
 ) -> usize {
-    let reach = settings.obstacle_reach(params);
+    let params = world.params();
+    let reach = settings.obstacle_reach(params) + outline_extent_beyond_axles(world, params);
     let q = crate::obstacle::AxlePoint::Front.position(params, x);
     let mut n = 0;
-    for o in obstacles {
+    for (j, o) in world.circles().iter().enumerate() {
         // A non-finite pose keeps every circle: the tick falls back anyway.
         if !(o.clearance_of(q) > reach) && n < MAX_OBSTACLES {
-            out[n] = *o;
+            out[n] = j;
             n += 1;
         }
     }
     n
+}
+
+/// How much farther from the front axle the outline reaches than the
+/// default's rear axle circle (0 for the default outline).
+fn outline_extent_beyond_axles(world: &World, p: &MachineParams) -> f64 {
+    let o = world.outline();
+    let far = (0..o.len())
+        .map(|i| o.lever_arm(i, p) + o.circles()[i].radius)
+        .fold(0.0, f64::max);
+    (far - (p.l_f + p.l_r + o.half_width())).max(0.0)
+}
+
+fn check_goal_finite(goal: &Goal) -> Result<(), MpcError> {
+    if goal.x.is_finite() && goal.y.is_finite() && goal.theta.is_finite() {
+        Ok(())
+    } else {
+        Err(MpcError::BadGoal {
+            x: goal.x,
+            y: goal.y,
+            theta: goal.theta,
+        })
+    }
+}
+
+/// Rows per stage: two per circle slot (`QpLayout`'s front and rear rows of
+/// a slot take any two (outline circle, target) pairs).
+fn row_stride(settings: &MpcSettings) -> usize {
+    layout::AXLE_POINTS * settings.max_obstacles
 }
 
 impl<C: StageCost> Mpc<C> {
@@ -210,7 +254,8 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
             dynamics,
             actor,
             qps,
-            active: [Obstacle::default(); MAX_OBSTACLES],
+            active: [0; MAX_OBSTACLES],
+            n_reach: 0,
             n_active: 0,
             delay,
             gain: GainEstimator::new(params, settings.delay, settings.dt),
@@ -218,8 +263,11 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
             goal: None,
             path_cost: PathCost::new(),
             path_hint: 0,
-            obstacles: [Obstacle::default(); MAX_OBSTACLES],
-            n_obstacles: 0,
+            world: World::with_axle_circles(params, settings.max_obstacles),
+            circle_margins: [0.0; MAX_OUTLINE_CIRCLES],
+            rows: vec![RowPair::default(); n * row_stride(&settings)],
+            row_len: vec![0; n],
+            near: vec![Near::default(); row_stride(&settings)],
             xs: vec![State::zeros(); n + 1],
             us: vec![Control::zeros(); n],
             backup_xs: vec![State::zeros(); n + 1],
@@ -248,8 +296,32 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
         self.goal
     }
 
+    /// The goal's circles (wire radii).
     pub fn obstacles(&self) -> &[Obstacle] {
-        &self.obstacles[..self.n_obstacles]
+        self.world.circles()
+    }
+
+    /// The site, the goal's circles and the outline the rows are built from.
+    pub fn world(&self) -> &World {
+        &self.world
+    }
+
+    /// The site every goal's rows include from the next tick (`None`: the
+    /// goal's circles only). No allocation.
+    pub fn set_site(&mut self, site: Option<Arc<SiteIndex>>) {
+        self.world.set_site(site);
+    }
+
+    /// The machine's outline, each circle's margin `extra[i]` beyond its
+    /// body's (`obstacle_margin` or `obstacle_margin_rear`): the envelope's
+    /// per-circle margins less its per-body ones, so that the MPC plans
+    /// outside what the envelope guards.
+    pub fn set_outline(&mut self, outline: Outline, extra: &[f64]) {
+        self.circle_margins = [0.0; MAX_OUTLINE_CIRCLES];
+        for (m, e) in self.circle_margins.iter_mut().zip(extra) {
+            *m = *e;
+        }
+        self.world.set_outline(outline);
     }
 
     /// The last tick's result.
@@ -272,9 +344,11 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
         self.qps.iter().map(|qp| &qp.backend)
     }
 
-    /// The circles the last tick's QP constrained (those within reach).
-    pub fn active_obstacles(&self) -> &[Obstacle] {
-        &self.active[..self.n_active]
+    /// The goal's circles the last tick's QP constrained (those within reach).
+    pub fn active_obstacles(&self) -> impl Iterator<Item = &Obstacle> + '_ {
+        self.active[..self.n_reach]
+            .iter()
+            .map(|&j| &self.world.circles()[j])
     }
 
     /// Forgets the goal and the plan, and keeps the command history: the
@@ -283,7 +357,7 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
     pub fn clear_goal(&mut self) {
         self.goal = None;
         self.path_cost.clear();
-        self.n_obstacles = 0;
+        self.world.clear_circles();
         self.has_plan = false;
         self.set_obstacle_weight(self.settings.obstacle_slack_weight);
     }
@@ -332,13 +406,7 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
     /// the next tick start from an actor roll-out; the same goal with new
     /// obstacles keeps the warm start.
     pub fn set_goal(&mut self, goal: Goal, obstacles: &[Obstacle]) -> Result<(), MpcError> {
-        if !(goal.x.is_finite() && goal.y.is_finite() && goal.theta.is_finite()) {
-            return Err(MpcError::BadGoal {
-                x: goal.x,
-                y: goal.y,
-                theta: goal.theta,
-            });
-        }
+        check_goal_finite(&goal)?;
         if obstacles.len() > self.settings.max_obstacles {
             return Err(MpcError::TooManyObstacles {
                 given: obstacles.len(),
@@ -348,14 +416,20 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
         for (i, o) in obstacles.iter().enumerate() {
             o.validate(i)?;
         }
+        self.world
+            .set_circles(obstacles)
+            .expect("validated against the same capacity");
+        self.set_target(goal);
+        Ok(())
+    }
+
+    /// The goal itself; a new one starts from an actor roll-out.
+    fn set_target(&mut self, goal: Goal) {
         if self.goal != Some(goal) {
             self.has_plan = false;
             self.set_obstacle_weight(self.settings.obstacle_slack_weight);
         }
         self.goal = Some(goal);
-        self.obstacles[..obstacles.len()].copy_from_slice(obstacles);
-        self.n_obstacles = obstacles.len();
-        Ok(())
     }
 
     /// Moves the target to `goal` and keeps the plan as the next warm start:
@@ -367,9 +441,8 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
     pub fn retarget(&mut self, goal: Goal) -> Result<(), MpcError> {
         let keep = self.has_plan && self.goal.is_some();
         let weight = self.obstacle_weight;
-        let n = self.n_obstacles;
-        let obstacles = self.obstacles;
-        self.set_goal(goal, &obstacles[..n])?;
+        check_goal_finite(&goal)?;
+        self.set_target(goal);
         self.has_plan = keep;
         self.set_obstacle_weight(weight);
         Ok(())

@@ -7,9 +7,9 @@ use std::time::{Duration, Instant};
 use crate::critic::{Derivatives, TerminalDerivatives};
 use crate::model::VelocityCommand;
 use crate::model::{ix, Control, Goal, State};
-use crate::obstacle::{footprint_clearance, PENETRATION_TOLERANCE};
+use crate::obstacle::PENETRATION_TOLERANCE;
 
-use super::constraints::{fill_bounds, fill_obstacles};
+use super::constraints::{fill_bounds, fill_obstacles, ObstacleRows};
 use super::cost::{stage_block, terminal_block, StageCost};
 use super::dynamics::Dynamics;
 use super::layout::{QpLayout, AXLE_POINTS, NU, NX, NZ};
@@ -18,6 +18,8 @@ use super::qp::{QpBackend, QpStatus};
 use super::settings::{MpcError, MpcSettings};
 use super::solution::{FallbackReason, StepStatus};
 use super::{Mpc, Qp, Solution};
+use crate::site::outline::{Body, MAX_OUTLINE_CIRCLES};
+use crate::world::{push_smallest, RowPair, Target};
 
 /// The linear slack penalties in q (constant).
 pub(super) fn fill_slack_costs(layout: &QpLayout, settings: &MpcSettings, q: &mut [f64]) {
@@ -108,13 +110,9 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
         };
         self.solution.initial_state = x_hat;
         // The QP of this tick: rows for the circles within reach of x̂.
-        self.n_active = super::reachable_obstacles(
-            &self.params,
-            &self.settings,
-            &x_hat,
-            &self.obstacles[..self.n_obstacles],
-            &mut self.active,
-        );
+        self.n_reach =
+            super::reachable_obstacles(&self.settings, &self.world, &x_hat, &mut self.active);
+        self.n_active = self.layout_for(self.n_reach);
         self.solution.qp_iterations = 0;
         self.solution.sqp_iterations = 0;
         self.solution.step_norm = 0.0;
@@ -261,15 +259,15 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
     /// [`PENETRATION_TOLERANCE`] inside a circle and deeper than x̂ is (a
     /// machine already inside may plan its way out, not further in).
     fn plan_penetrates(&self, x_hat: &State) -> bool {
-        let obstacles = &self.obstacles[..self.n_obstacles];
-        if obstacles.is_empty() {
+        if self.world.is_empty() {
             return false;
         }
-        let start = footprint_clearance(&self.params, x_hat, obstacles);
+        let start = self.world.clearance(x_hat);
         let floor = (-PENETRATION_TOLERANCE).min(start - PENETRATION_TOLERANCE);
+        let zeros = [0.0; MAX_OUTLINE_CIRCLES];
         self.xs[1..]
             .iter()
-            .any(|x| footprint_clearance(&self.params, x, obstacles) < floor)
+            .any(|x| self.world.excess(x, &zeros, floor).is_some())
     }
 
     /// Builds and solves one QP and takes its step; on failure nothing changes
@@ -303,6 +301,8 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
     /// Fills P, q, A, b at the current plan (the linearisation point) with x̂
     /// as x₀. Returns false if any value is not finite.
     fn build_qp(&mut self, x_hat: &State, goal: &Goal) -> bool {
+        self.select_rows();
+        let row_margins = self.row_margins();
         let s = self.settings;
         let Qp {
             layout: l, data: d, ..
@@ -433,15 +433,17 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
             ..p
         };
         fill_bounds(l, &bounds, &self.xs, &self.us, &mut d.b);
-        let obstacles = &self.active[..self.n_active];
         fill_obstacles(
             l,
-            &self.params,
+            &ObstacleRows {
+                world: &self.world,
+                margins: row_margins,
+                pairs: &self.rows,
+                len: &self.row_len,
+                stride: super::row_stride(&s),
+            },
             s.obstacle_constraint,
             s.cbf_gamma,
-            // In the order of `AxlePoint::ALL` (front, rear).
-            [s.obstacle_margin, s.obstacle_margin_rear],
-            obstacles,
             &self.xs,
             &mut d.a,
             &mut d.b,
@@ -453,6 +455,85 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
 
     /// Applies α·Δ from the QP solution, projects the controls onto their box
     /// (removing interior-point round-off) and records the slacks.
+    /// The QP of a tick with `n_reach` of the goal's circles within reach:
+    /// with a site, the one with every row; else the fewest slots that hold
+    /// every (outline circle, circle) pair (for the default outline: one
+    /// slot per circle, as before the site).
+    fn layout_for(&self, n_reach: usize) -> usize {
+        let max = self.settings.max_obstacles;
+        if self.world.site().is_some() {
+            return max;
+        }
+        let pairs = n_reach * self.world.outline().len();
+        pairs.div_ceil(super::layout::AXLE_POINTS).min(max)
+    }
+
+    /// Each outline circle's margin [m]: its body's, plus its own extra.
+    fn row_margins(&self) -> [f64; MAX_OUTLINE_CIRCLES] {
+        let s = &self.settings;
+        let mut m = self.circle_margins;
+        for (mi, c) in m.iter_mut().zip(self.world.outline().circles()) {
+            *mi += match c.body {
+                Body::Front => s.obstacle_margin,
+                Body::Rear => s.obstacle_margin_rear,
+            };
+        }
+        m
+    }
+
+    /// Chooses each row k's (outline circle, target) pairs at x̄_{k+1}
+    /// (DESIGN §17). Without a site, when every pair of the goal's circles
+    /// within reach has a slot, all of them in a fixed order (circle j, then
+    /// outline circle: the rows of before the site, for the default
+    /// outline); otherwise the pairs of least excess over their margins,
+    /// the site's features nearest the stage's outline among them.
+    /// Allocation-free.
+    fn select_rows(&mut self) {
+        let stride = super::row_stride(&self.settings);
+        let slots = super::layout::AXLE_POINTS * self.qps[self.n_active].layout.n_obs;
+        let circles = self.world.outline().len();
+        let fixed = self.world.site().is_none() && self.n_reach * circles <= slots;
+        let margins = self.row_margins();
+        let body = [
+            self.settings.obstacle_margin,
+            self.settings.obstacle_margin_rear,
+        ];
+        let reach = self.settings.obstacle_reach(&self.params);
+        for k in 0..self.settings.horizon {
+            let out = &mut self.rows[k * stride..k * stride + slots];
+            let mut len = 0;
+            if fixed {
+                for &j in &self.active[..self.n_reach] {
+                    for c in 0..circles {
+                        out[len] = RowPair {
+                            circle: c,
+                            target: Target::Circle(j),
+                            excess: 0.0,
+                        };
+                        len += 1;
+                    }
+                }
+            } else {
+                let x = &self.xs[k + 1];
+                for &j in &self.active[..self.n_reach] {
+                    for (c, m) in margins[..circles].iter().enumerate() {
+                        let target = Target::Circle(j);
+                        let (h, _) = self.world.row(x, c, target);
+                        let pair = RowPair {
+                            circle: c,
+                            target,
+                            excess: h - m,
+                        };
+                        push_smallest(out, &mut len, pair);
+                    }
+                }
+                self.world
+                    .site_rows(x, body, reach, &mut self.near, out, &mut len);
+            }
+            self.row_len[k] = len;
+        }
+    }
+
     /// Exact penalty for the obstacle rows (DESIGN §14, issue 26): the L1
     /// weight is exact only while it exceeds the multipliers of the hard rows
     /// (Nocedal & Wright, Thm 17.3). A QP whose slack went beyond the planned

@@ -11,7 +11,7 @@
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 
-use super::world::World;
+use super::world::CheckedWorld;
 
 /// Where the grid lies this plan.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -112,7 +112,7 @@ impl ObstacleHeuristic {
     /// the whole square against each circle alone leaves it open), while a
     /// free front axle lies in a blocked cell only within 0.2 × resolution of
     /// the margin. Allocation-free.
-    pub fn compute(&mut self, frame: GridFrame, world: &World, goal: [f64; 2]) {
+    pub fn compute(&mut self, frame: GridFrame, world: &CheckedWorld, goal: [f64; 2]) {
         debug_assert_eq!(frame.n, self.frame.n);
         self.frame = frame;
         let n = frame.n;
@@ -121,10 +121,7 @@ impl ObstacleHeuristic {
         // Blocked cells are marked −1 before the search.
         for (k, d) in self.dist.iter_mut().enumerate() {
             let c = frame.centre((k % n, k / n));
-            let blocked = world
-                .obstacles()
-                .iter()
-                .any(|o| (c[0] - o.x).hypot(c[1] - o.y) + inset < o.radius + margin);
+            let blocked = world.front_axle_blocked(c, margin - inset);
             *d = if blocked { -1.0 } else { f32::INFINITY };
         }
         self.heap.clear();
@@ -209,8 +206,8 @@ mod tests {
     use crate::obstacle::Obstacle;
 
     /// A wall x = 0, |y| ≤ 3.2 of circles overlapping by 0.4 m, no margin.
-    fn wall_world() -> World {
-        let mut world = World::new(MachineParams::default(), 32, 0.0);
+    fn wall_world() -> CheckedWorld {
+        let mut world = CheckedWorld::new(MachineParams::default(), 32, 0.0);
         let wall: Vec<Obstacle> = (-4..=4)
             .map(|k| Obstacle::new(0.0, 0.8 * k as f64, 0.6))
             .collect();

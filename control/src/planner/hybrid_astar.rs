@@ -34,7 +34,7 @@ use super::grid::{GridFrame, ObstacleHeuristic};
 use super::primitives::{self, compose, Primitive};
 use super::queue::Open;
 use super::rollout::{roll_out, Arrival};
-use super::world::World;
+use super::world::CheckedWorld;
 use super::{PathPose, SearchSettings};
 
 /// Why a search ended without a route.
@@ -81,7 +81,7 @@ pub(super) fn shot_steps(dist: f64, dt: f64) -> usize {
 /// sample, at the primitive's articulation). Articulating from the node's
 /// `beta` to the primitive's swings the rear axle about the joint at the
 /// start pose, so the start pose is checked with the new β too.
-pub fn primitive_free(world: &World, pose: &[f64; 3], beta: f64, prim: &Primitive) -> bool {
+pub fn primitive_free(world: &CheckedWorld, pose: &[f64; 3], beta: f64, prim: &Primitive) -> bool {
     if (prim.beta - beta).abs() > 1e-9 && !world.pose_free(pose[0], pose[1], pose[2], prim.beta) {
         return false;
     }
@@ -188,7 +188,7 @@ impl HybridAStar {
     /// which must have room for `max_nodes` poses. Allocation-free.
     pub fn search(
         &mut self,
-        world: &World,
+        world: &CheckedWorld,
         start: &State,
         goal: &Goal,
         mut actor: Option<(&Actor, &mut ActorWorkspace)>,
@@ -326,7 +326,7 @@ impl HybridAStar {
     }
 
     /// Adds the successors of node `k`; true when the node pool is full.
-    fn expand(&mut self, k: usize, world: &World, goal: &Goal, frame: GridFrame) -> bool {
+    fn expand(&mut self, k: usize, world: &CheckedWorld, goal: &Goal, frame: GridFrame) -> bool {
         let s = self.settings;
         let n = self.nodes[k];
         let (beta_dot_max, v_max) = (self.params.beta_dot_max, self.params.v_max);

@@ -7,7 +7,7 @@
 //! Why: the MPC's horizon is 2 s and its critic knows no obstacles, so behind
 //! an obstacle it sits in a local minimum.
 //!
-//! Pieces: [`settings`] (declared once, grouped), [`World`] (the circles,
+//! Pieces: [`settings`] (declared once, grouped), [`CheckedWorld`] (the circles,
 //! both axle points, a margin), the actor [`rollout`] ("is anything in the
 //! way?", goal shots), [`HybridAStar`] over (x, y, θ) with the model's
 //! [`primitives`], [`route`] (path → subgoals), [`path_geometry`] (cusps,
@@ -43,7 +43,7 @@ pub use service::{
     mark_tick_thread, on_tick_thread, InlineRoutes, PlanDelay, PlannerThread, RouteService,
 };
 pub use settings::{FollowingSettings, NavigatorSettings, SearchSettings, StallSettings};
-pub use world::World;
+pub use world::CheckedWorld;
 
 use crate::model::Goal;
 use crate::obstacle::BadObstacle;

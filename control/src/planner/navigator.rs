@@ -15,7 +15,7 @@ use crate::Actor;
 use super::path_geometry;
 use super::route_planner::{retry_approach, PlanJob, PlanKind, Route, RoutePlanner};
 use super::service::{InlineRoutes, PlanDelay, RouteService};
-use super::world::World;
+use super::world::CheckedWorld;
 use super::{AbortReason, NavError, NavStep, NavigatorSettings, PathPose, PlanOutcome, PlanReport};
 
 /// The critic's cost of a metre when there is no critic or its fit fails
@@ -63,7 +63,7 @@ pub struct Navigator {
     settings: NavigatorSettings,
     /// The goal's circles: the tick's own geometric tests (line of sight,
     /// open ground).
-    world: World,
+    world: CheckedWorld,
     routes: Box<dyn RouteService>,
     /// The job buffers when no plan is out (`None`: one is being planned).
     spare: Option<Box<PlanJob>>,
@@ -76,7 +76,6 @@ pub struct Navigator {
     /// The machine's projection onto the route's path.
     path_index: usize,
     goal: Option<Goal>,
-    obstacles_len: usize,
     checker: ProgressChecker,
     /// The target of the checker's window on the last tick: an approach only
     /// counts on a window that was already running (a replan's new target
@@ -147,16 +146,15 @@ impl Navigator {
         let s = &settings.search;
         Ok(Self {
             params,
-            world: World::new(params, s.max_obstacles, s.clearance_margin),
+            world: CheckedWorld::new(params, s.max_obstacles, s.clearance_margin),
             routes,
-            spare: Some(Box::new(PlanJob::new(s))),
+            spare: Some(Box::new(PlanJob::new(&params, s))),
             wanted: None,
             goal_seq: 0,
             route: Route::with_capacity(s),
             route_index: 0,
             path_index: 0,
             goal: None,
-            obstacles_len: 0,
             checker: ProgressChecker::new(settings.stall.progress),
             window_target: None,
             clocks_pending: false,
@@ -205,13 +203,11 @@ impl Navigator {
         }
         self.clear();
         self.world.set(obstacles)?;
-        if let Err(conflict) =
-            crate::goal_check::check_goal(&self.params, Some(start), &goal, obstacles)
+        if let Err(conflict) = crate::goal_check::check_goal(self.world.world(), Some(start), &goal)
         {
             self.world.clear();
             return Err(conflict.into());
         }
-        self.obstacles_len = obstacles.len();
         self.goal = Some(goal);
         self.clocks_pending = true;
         if self.world.is_empty() {
@@ -336,9 +332,7 @@ impl Navigator {
         r.stamp = now;
         r.start = *x;
         r.goal = goal;
-        r.obstacles.clear();
-        r.obstacles
-            .extend_from_slice(&self.world.obstacles()[..self.obstacles_len]);
+        r.world.copy_from(self.world.world());
         self.routes.submit(job);
         // An inline planner answers in the same tick when its delay is 0.
         if let Some(job) = self.routes.poll(now) {
@@ -449,6 +443,17 @@ impl Navigator {
         self.routes.take_time_on_caller()
     }
 
+    /// The site the next plans keep off (DESIGN §17; the route being
+    /// followed stays until the next plan).
+    pub fn set_site(&mut self, site: Option<std::sync::Arc<crate::site::SiteIndex>>) {
+        self.world.set_site(site);
+    }
+
+    /// The machine's outline every plan's checks use.
+    pub fn set_outline(&mut self, outline: crate::site::Outline) {
+        self.world.set_outline(outline);
+    }
+
     /// Forgets the goal and the route (an answer still out is dropped when it
     /// comes back).
     pub fn clear(&mut self) {
@@ -458,7 +463,7 @@ impl Navigator {
         self.route.clear();
         self.route_index = 0;
         self.path_index = 0;
-        self.obstacles_len = 0;
+        self.world.clear();
         self.checker = ProgressChecker::new(self.settings.stall.progress);
         self.window_target = None;
         self.clocks_pending = false;

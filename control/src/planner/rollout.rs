@@ -10,7 +10,7 @@
 use crate::actor::{Actor, ActorWorkspace};
 use crate::model::{env_step, goal_distance, ix, Goal, MachineParams, State};
 
-use super::world::World;
+use super::world::CheckedWorld;
 
 /// When a roll-out counts as arrived.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -58,7 +58,7 @@ pub fn roll_out(
     params: &MachineParams,
     actor: &Actor,
     ws: &mut ActorWorkspace,
-    world: &World,
+    world: &CheckedWorld,
     start: &State,
     goal: &Goal,
     arrival: Arrival,

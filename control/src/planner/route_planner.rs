@@ -13,12 +13,12 @@ use std::time::{Duration, Instant};
 
 use crate::actor::{Actor, ActorWorkspace};
 use crate::model::{ix, Goal, MachineParams, State};
-use crate::obstacle::Obstacle;
+use crate::world::World;
 
 use super::hybrid_astar::{self, HybridAStar, SearchStats};
 use super::rollout::{roll_out, Arrival};
 use super::route::subgoals_from_path;
-use super::world::World;
+use super::world::CheckedWorld;
 use super::{FollowingSettings, NavError, PathPose, PlanOutcome, PlanReport, SearchSettings};
 
 /// What is asked of the planner.
@@ -43,8 +43,9 @@ pub struct PlanRequest {
     pub stamp: f64,
     pub start: State,
     pub goal: Goal,
-    /// The circles (within `SearchSettings::max_obstacles`).
-    pub obstacles: Vec<Obstacle>,
+    /// The world to plan in (the site, the goal's circles within
+    /// `SearchSettings::max_obstacles`, the outline).
+    pub world: World,
 }
 
 /// A planned route: the path (empty when direct or a retry) and the targets
@@ -99,7 +100,7 @@ pub struct PlanJob {
 }
 
 impl PlanJob {
-    pub fn new(s: &SearchSettings) -> Self {
+    pub fn new(params: &MachineParams, s: &SearchSettings) -> Self {
         Self {
             request: PlanRequest {
                 goal_seq: 0,
@@ -107,7 +108,7 @@ impl PlanJob {
                 stamp: 0.0,
                 start: State::zeros(),
                 goal: Goal::new(0.0, 0.0, 0.0),
-                obstacles: Vec::with_capacity(s.max_obstacles),
+                world: World::with_axle_circles(*params, s.max_obstacles),
             },
             route: Route::with_capacity(s),
         }
@@ -120,7 +121,7 @@ pub struct RoutePlanner {
     search_settings: SearchSettings,
     following: FollowingSettings,
     approach_distance: f64,
-    world: World,
+    world: CheckedWorld,
     search: HybridAStar,
     actor: Option<(Actor, ActorWorkspace)>,
 }
@@ -139,7 +140,7 @@ impl RoutePlanner {
         Ok(Self {
             params,
             search: HybridAStar::new(params, s),
-            world: World::new(params, s.max_obstacles, s.clearance_margin),
+            world: CheckedWorld::new(params, s.max_obstacles, s.clearance_margin),
             actor: actor.map(|a| {
                 let ws = ActorWorkspace::new(&a);
                 (a, ws)
@@ -166,12 +167,11 @@ impl RoutePlanner {
             replan: request.kind != PlanKind::First,
         };
         // The navigator validated the circles when the goal was set.
-        if self.world.set(&request.obstacles).is_ok() {
-            report.outcome = match request.kind {
-                PlanKind::First | PlanKind::Replan => self.route(request, route, &mut report),
-                PlanKind::Retry => self.retry(&request.start, &request.goal, route),
-            };
-        }
+        self.world.copy_from(&request.world);
+        report.outcome = match request.kind {
+            PlanKind::First | PlanKind::Replan => self.route(request, route, &mut report),
+            PlanKind::Retry => self.retry(&request.start, &request.goal, route),
+        };
         report.duration = t0.elapsed();
         route.report = report;
     }
@@ -361,7 +361,7 @@ pub(super) fn retry_approach(
 /// Both axle points keep the margin at the poses along the straight line
 /// from `from` to `to`, `spacing` apart, heading along the line and
 /// unarticulated, plus both end poses.
-fn straight_corridor_free(world: &World, start: &State, goal: &Goal, spacing: f64) -> bool {
+fn straight_corridor_free(world: &CheckedWorld, start: &State, goal: &Goal, spacing: f64) -> bool {
     let from = [start[ix::X], start[ix::Y]];
     let (dx, dy) = (goal.x - from[0], goal.y - from[1]);
     let heading = dy.atan2(dx);

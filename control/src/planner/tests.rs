@@ -98,7 +98,7 @@ fn assert_path_clear(nav: &Navigator, obstacles: &[Obstacle], margin: f64) {
 #[test]
 fn the_world_sees_an_obstacle_only_the_rear_axle_touches() {
     let p = params();
-    let mut world = World::new(p, 4, 0.1);
+    let mut world = CheckedWorld::new(p, 4, 0.1);
     let rear = AxlePoint::Rear.position(&p, &at_rest(0.0, 0.0, 0.3));
     world.set(&[Obstacle::new(rear[0], rear[1], 0.2)]).unwrap();
     assert!(!world.pose_free(0.0, 0.0, 0.3, 0.0));
@@ -115,7 +115,7 @@ fn primitive_checks_catch_the_rear_axle_along_the_arc_and_in_the_swing() {
         .iter()
         .find(|q| q.beta == 0.0 && q.direction == 1)
         .unwrap();
-    let mut world = World::new(p, 4, 0.0);
+    let mut world = CheckedWorld::new(p, 4, 0.0);
     // Driving straight ahead 0.6 m, the rear axle passes x = −0.9 (it starts
     // at −1.2); the front axle never comes within a metre of it.
     world.set(&[Obstacle::new(-0.9, 0.0, 0.1)]).unwrap();
@@ -344,7 +344,10 @@ fn goals_and_starts_in_collision_are_rejected() {
     assert!(
         matches!(
             e,
-            NavError::Collision(GoalConflict::GoalInCollision { index: 0, .. })
+            NavError::Collision(GoalConflict::GoalInCollision {
+                target: crate::world::Target::Circle(0),
+                ..
+            })
         ),
         "{e}"
     );
@@ -360,7 +363,10 @@ fn goals_and_starts_in_collision_are_rejected() {
     assert!(
         matches!(
             e,
-            NavError::Collision(GoalConflict::MachineInCollision { index: 0, .. })
+            NavError::Collision(GoalConflict::MachineInCollision {
+                target: crate::world::Target::Circle(0),
+                ..
+            })
         ),
         "{e}"
     );

@@ -1,65 +1,81 @@
-//! The obstacles a plan is checked against: both axle points of the footprint
-//! ([`footprint_clearance`], DESIGN §10) outside every circle by a margin.
+//! What a plan is checked against: the one world ([`crate::world::World`]:
+//! the site, the goal's circles, the machine's outline) and the clearance
+//! margin every check of the route keeps.
 //!
-//! Why a margin on top of the already inflated radii: the route is followed by
-//! the MPC, not tracked exactly, and the plan's samples are discrete; the
-//! margin is what the MPC's own deviation from the route may use up.
+//! Why a margin on top of the outline: the route is followed by the MPC, not
+//! tracked exactly, and the plan's samples are discrete; the margin is what
+//! the MPC's own deviation from the route may use up.
+
+use std::sync::Arc;
 
 use crate::model::{MachineParams, State};
-use crate::obstacle::{footprint_clearance, Obstacle};
+use crate::obstacle::Obstacle;
+use crate::site::{Outline, SiteIndex, MAX_OUTLINE_CIRCLES};
+use crate::world::{World, WorldError};
 
 use super::NavError;
 
-/// A fixed-capacity set of circles and the clearance margin of every check.
+/// The world and the clearance margin of every check.
 #[derive(Debug, Clone)]
-pub struct World {
-    params: MachineParams,
-    obstacles: Vec<Obstacle>,
-    capacity: usize,
+pub struct CheckedWorld {
+    world: World,
     margin: f64,
 }
 
-impl World {
-    /// Room for `capacity` circles, allocated once.
+impl CheckedWorld {
+    /// Room for `capacity` circles, allocated once; the default outline.
     pub fn new(params: MachineParams, capacity: usize, margin: f64) -> Self {
         Self {
-            params,
-            obstacles: Vec::with_capacity(capacity),
-            capacity,
+            world: World::with_axle_circles(params, capacity),
             margin,
         }
     }
 
-    /// Replaces the circles (validated; within the capacity, so no allocation).
+    /// Replaces the goal's circles (validated; within the capacity, so no
+    /// allocation).
     pub fn set(&mut self, obstacles: &[Obstacle]) -> Result<(), NavError> {
-        if obstacles.len() > self.capacity {
-            return Err(NavError::TooManyObstacles {
-                given: obstacles.len(),
-                max: self.capacity,
-            });
-        }
-        for (i, o) in obstacles.iter().enumerate() {
-            o.validate(i).map_err(NavError::BadObstacle)?;
-        }
-        self.obstacles.clear();
-        self.obstacles.extend_from_slice(obstacles);
-        Ok(())
+        self.world.set_circles(obstacles).map_err(|e| match e {
+            WorldError::TooManyObstacles { given, max } => {
+                NavError::TooManyObstacles { given, max }
+            }
+            WorldError::BadObstacle(b) => NavError::BadObstacle(b),
+        })
     }
 
+    /// Becomes `world` (no allocation while the outline stays).
+    pub fn copy_from(&mut self, world: &World) {
+        self.world.copy_from(world);
+    }
+
+    pub fn set_site(&mut self, site: Option<Arc<SiteIndex>>) {
+        self.world.set_site(site);
+    }
+
+    pub fn set_outline(&mut self, outline: Outline) {
+        self.world.set_outline(outline);
+    }
+
+    /// Forgets the goal's circles (the site stays).
     pub fn clear(&mut self) {
-        self.obstacles.clear();
+        self.world.clear_circles();
     }
 
+    pub fn world(&self) -> &World {
+        &self.world
+    }
+
+    /// The goal's circles.
     pub fn obstacles(&self) -> &[Obstacle] {
-        &self.obstacles
+        self.world.circles()
     }
 
+    /// Nothing to keep off (no site, no circles).
     pub fn is_empty(&self) -> bool {
-        self.obstacles.is_empty()
+        self.world.is_empty()
     }
 
     pub fn params(&self) -> &MachineParams {
-        &self.params
+        self.world.params()
     }
 
     pub fn margin(&self) -> f64 {
@@ -67,43 +83,44 @@ impl World {
     }
 
     /// The margin of the following checks (a plan lowers it when an endpoint
-    /// already lies closer to a circle).
+    /// already lies closer to something).
     pub fn set_margin(&mut self, margin: f64) {
         self.margin = margin;
     }
 
-    /// Smallest distance of either axle point to a circle's edge for the
-    /// front-axle pose (x, y, θ) at articulation β (+∞ without circles).
+    /// The outline's least clearance for the front-axle pose (x, y, θ) at
+    /// articulation β (+∞ in an empty world).
     pub fn pose_clearance(&self, x: f64, y: f64, theta: f64, beta: f64) -> f64 {
         self.state_clearance(&State::new(x, y, theta, beta, 0.0, 0.0))
     }
 
     pub fn state_clearance(&self, s: &State) -> f64 {
-        footprint_clearance(&self.params, s, &self.obstacles)
+        self.world.clearance(s)
     }
 
-    /// Both axle points keep at least the margin.
+    /// The outline keeps at least the margin.
     pub fn pose_free(&self, x: f64, y: f64, theta: f64, beta: f64) -> bool {
-        self.pose_clearance(x, y, theta, beta) >= self.margin
+        self.state_free(&State::new(x, y, theta, beta, 0.0, 0.0))
     }
 
     pub fn state_free(&self, s: &State) -> bool {
-        self.state_clearance(s) >= self.margin
+        // Only what comes nearer than the margin is searched for.
+        self.world
+            .excess(s, &[self.margin; MAX_OUTLINE_CIRCLES], 0.0)
+            .is_none()
     }
 
-    /// The straight segment between two points keeps `extra` from every
-    /// circle (a point test, for cheap line-of-sight filters).
+    /// The disc the outline surely covers around the front axle, swept along
+    /// a–b, keeps `extra` from everything (a cheap line-of-sight filter).
     pub fn segment_clear(&self, a: [f64; 2], b: [f64; 2], extra: f64) -> bool {
-        let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
-        let len2 = dx * dx + dy * dy;
-        self.obstacles.iter().all(|o| {
-            let t = if len2 > 0.0 {
-                (((o.x - a[0]) * dx + (o.y - a[1]) * dy) / len2).clamp(0.0, 1.0)
-            } else {
-                0.0
-            };
-            let (cx, cy) = (a[0] + t * dx, a[1] + t * dy);
-            (cx - o.x).hypot(cy - o.y) >= o.radius + extra
-        })
+        let r = self.world.outline().front_axle_radius();
+        self.world.segment_clear(a, b, r, extra)
+    }
+
+    /// Whether the front axle's disc at `p` comes nearer than `below` to
+    /// anything (what the grid heuristic blocks a cell by).
+    pub fn front_axle_blocked(&self, p: [f64; 2], below: f64) -> bool {
+        let r = self.world.outline().front_axle_radius();
+        self.world.disc_clearance(p, r, below) < below
     }
 }
