@@ -9,6 +9,8 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use control::planner::PlanOutcome;
 use control::scenario::Scenario;
+use control::site::{Site, SiteIndex};
+use std::sync::Arc;
 
 use crate::plots::{self, method_color, Track};
 use crate::results::{self, MethodSummary, ResultRow};
@@ -22,6 +24,8 @@ pub struct Evaluation {
     /// Wall time of the whole evaluation [s].
     pub wall_s: f64,
     pub jobs: usize,
+    /// The site the scenarios ran in (drawn under the trajectories).
+    pub site: Option<Arc<SiteIndex>>,
 }
 
 /// Runs `scenarios` under `cfg` and summarises.
@@ -40,6 +44,7 @@ pub fn evaluate(cfg: &EvalConfig, nets: &Networks, scenarios: &[Scenario]) -> Re
         summaries,
         wall_s,
         jobs: cfg.jobs,
+        site: cfg.site.clone(),
     })
 }
 
@@ -320,7 +325,8 @@ pub fn write_outputs(
         let tdir = dir.join("trajectories");
         std::fs::create_dir_all(&tdir)?;
         for s in &ev.runs {
-            scenario_svg(s, &tdir.join(format!("{}.svg", s.scenario.name)))?;
+            let site = ev.site.as_ref().map(|i| i.site());
+            scenario_svg(s, site, &tdir.join(format!("{}.svg", s.scenario.name)))?;
         }
     }
     let methods: Vec<&str> = ev.summaries.iter().map(|m| m.method.as_str()).collect();
@@ -332,7 +338,7 @@ pub fn write_outputs(
 }
 
 /// One scenario with every method's path.
-pub fn scenario_svg(s: &ScenarioRuns, path: &Path) -> Result<()> {
+pub fn scenario_svg(s: &ScenarioRuns, site: Option<&Site>, path: &Path) -> Result<()> {
     let tracks: Vec<Track> = s
         .runs
         .iter()
@@ -346,7 +352,7 @@ pub fn scenario_svg(s: &ScenarioRuns, path: &Path) -> Result<()> {
             routes: r.navigation.as_ref().map_or(&[][..], |n| &n.routes[..]),
         })
         .collect();
-    plots::trajectory_svg(path, &s.scenario.name, &[&s.scenario], &tracks)
+    plots::trajectory_svg(path, &s.scenario.name, &[&s.scenario], site, &tracks)
 }
 
 /// All scenarios and one method's trajectories in one figure (paper Fig. 6).
@@ -367,6 +373,7 @@ pub fn overview_svg(ev: &Evaluation, method: &str, path: &Path) -> Result<()> {
         path,
         &format!("{method}: all scenarios"),
         &scenarios,
+        ev.site.as_ref().map(|i| i.site()),
         &tracks,
     )
 }

@@ -27,10 +27,12 @@ use control::mpc::{MpcSettings, ObstacleConstraint, QpSolver};
 use control::planner::{NavigatorSettings, PlanDelay};
 use control::plant::PlantConfig;
 use control::scenario;
+use control::site::{Outline, Site, SiteIndex};
 use control::MachineParams;
 use sim::eval;
 use sim::robustness::{self, PerturbationOptions};
 use sim::runner::{EvalConfig, Method, Networks};
+use std::sync::Arc;
 
 #[derive(Parser)]
 #[command(
@@ -293,6 +295,14 @@ enum Command {
         /// for obstacles200), so t / T* is reported without solving the bound again.
         #[arg(long, value_name = "FILE")]
         t_star: Option<PathBuf>,
+        /// A site file (DESIGN §17): its features and bounds apply to every
+        /// scenario, on top of the scenario's own circles.
+        #[arg(long, value_name = "FILE")]
+        site: Option<PathBuf>,
+        /// The machine's outline: axle-circles (default), avant635,
+        /// large-loader, large-loader-axles.
+        #[arg(long, value_name = "NAME", value_parser = parse_outline)]
+        outline: Option<Outline>,
         #[command(flatten)]
         perturbations: Perturbations,
         #[command(flatten)]
@@ -373,6 +383,21 @@ fn load_scenarios(path: &Path) -> Result<Vec<scenario::Scenario>> {
     Ok(scenario::parse(&text, &path.display().to_string())?)
 }
 
+/// A site file (JSON, DESIGN §17), validated.
+fn load_site(path: &Path) -> Result<Site> {
+    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+    Site::parse(&bytes).with_context(|| format!("site file {}", path.display()))
+}
+
+fn parse_outline(name: &str) -> Result<Outline, String> {
+    Outline::named(name).ok_or_else(|| {
+        format!(
+            "unknown outline {name:?} (one of {})",
+            Outline::NAMES.join(", ")
+        )
+    })
+}
+
 fn networks(c: &Common) -> Result<Networks> {
     match Networks::load(&c.weights) {
         Ok(n) => Ok(n),
@@ -425,6 +450,8 @@ fn main() -> Result<()> {
             navigator_overrides,
             plan_delay,
             t_star,
+            site,
+            outline,
             perturbations,
             envelope,
             common,
@@ -438,6 +465,12 @@ fn main() -> Result<()> {
             let mut cfg = base_config(&common, &nets)?;
             cfg.methods = Method::parse_list(&methods)?;
             cfg.duration = duration;
+            if let Some(path) = &site {
+                cfg.site = Some(Arc::new(SiteIndex::new(load_site(path)?)));
+            }
+            if let Some(o) = outline {
+                cfg.outline = o;
+            }
             // Unset options keep the daemon's defaults (the same `MpcSettings::default()`).
             let d = MpcSettings::default();
             cfg.mpc = MpcSettings {

@@ -7,6 +7,8 @@ use std::path::Path;
 use anyhow::{anyhow, Result};
 use control::model::{Goal, State};
 use control::scenario::Scenario;
+use control::site::{FeatureKind, Shape, Site};
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
 /// Colours of the methods, in a fixed order.
@@ -75,6 +77,71 @@ fn circle(x: f64, y: f64, r: f64) -> Vec<(f64, f64)> {
         .collect()
 }
 
+/// A site's bounds (outline), obstacles (grey) and keep-outs (red, hatched
+/// by transparency) under the trajectories.
+fn draw_site<DB: DrawingBackend>(
+    chart: &mut ChartContext<'_, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
+    site: &Site,
+) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    let mut ring = site.bounds().vertices().to_vec();
+    ring.push(ring[0]);
+    chart
+        .draw_series(std::iter::once(PathElement::new(
+            ring.iter().map(|p| (p[0], p[1])).collect::<Vec<_>>(),
+            BLACK.stroke_width(1),
+        )))
+        .map_err(err)?;
+    for f in site.features() {
+        let color = match f.kind {
+            FeatureKind::Obstacle => RGBColor(140, 140, 140).mix(0.6),
+            FeatureKind::KeepOut => RGBColor(214, 39, 40).mix(0.35),
+        };
+        match &f.shape {
+            Shape::Circle(c) => chart
+                .draw_series(std::iter::once(Polygon::new(
+                    circle(c.center[0], c.center[1], c.radius),
+                    color.filled(),
+                )))
+                .map(|_| ()),
+            Shape::Polygon(g) => chart
+                .draw_series(std::iter::once(Polygon::new(
+                    g.vertices()
+                        .iter()
+                        .map(|p| (p[0], p[1]))
+                        .collect::<Vec<_>>(),
+                    color.filled(),
+                )))
+                .map(|_| ()),
+            Shape::Polyline(l) => {
+                // A capsule chain: a disc at each vertex, a quad per segment.
+                let r = l.half_width();
+                let v = l.vertices();
+                let mut shapes: Vec<Vec<(f64, f64)>> =
+                    v.iter().map(|p| circle(p[0], p[1], r)).collect();
+                for s in v.windows(2) {
+                    let (dx, dy) = (s[1][0] - s[0][0], s[1][1] - s[0][1]);
+                    let n = dx.hypot(dy).max(1e-9);
+                    let (nx, ny) = (-dy / n * r, dx / n * r);
+                    shapes.push(vec![
+                        (s[0][0] + nx, s[0][1] + ny),
+                        (s[1][0] + nx, s[1][1] + ny),
+                        (s[1][0] - nx, s[1][1] - ny),
+                        (s[0][0] - nx, s[0][1] - ny),
+                    ]);
+                }
+                chart
+                    .draw_series(shapes.into_iter().map(|p| Polygon::new(p, color.filled())))
+                    .map(|_| ())
+            }
+        }
+        .map_err(err)?;
+    }
+    Ok(())
+}
+
 fn err<E: std::fmt::Display>(e: E) -> anyhow::Error {
     anyhow!("plotting: {e}")
 }
@@ -85,11 +152,19 @@ pub fn trajectory_svg(
     path: &Path,
     title: &str,
     scenarios: &[&Scenario],
+    site: Option<&Site>,
     tracks: &[Track],
 ) -> Result<()> {
     let (w, h) = (720u32, 640u32);
     let mut xs: Vec<f64> = Vec::new();
     let mut ys: Vec<f64> = Vec::new();
+    // Several scenarios: the whole site; one: what it needs (the site's
+    // features are clipped to the frame).
+    if let (Some(site), true) = (site, scenarios.len() > 1) {
+        let b = site.bounds().aabb();
+        xs.extend([b.min[0], b.max[0]]);
+        ys.extend([b.min[1], b.max[1]]);
+    }
     for sc in scenarios {
         xs.extend([sc.start[0], sc.goal.x]);
         ys.extend([sc.start[1], sc.goal.y]);
@@ -148,6 +223,9 @@ pub fn trajectory_svg(
         .light_line_style(WHITE)
         .draw()
         .map_err(err)?;
+    if let Some(site) = site {
+        draw_site(&mut chart, site)?;
+    }
     for sc in scenarios {
         for o in &sc.obstacles {
             chart

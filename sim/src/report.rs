@@ -408,7 +408,7 @@ pub fn paper(
             });
         }
         let file = format!("highlighted_{}.svg", sc.name);
-        plots::trajectory_svg(&assets.join(&file), &sc.name, &[sc], &tracks)?;
+        plots::trajectory_svg(&assets.join(&file), &sc.name, &[sc], None, &tracks)?;
         let _ = writeln!(md, "![{}](results/{file})\n", sc.name);
     }
     if !worksite.is_empty() {
@@ -574,7 +574,7 @@ fn worksite_study(
         }
         shown.push(k);
         let file = format!("worksite_{}.svg", s.scenario.name);
-        eval::scenario_svg(s, &assets.join(&file))?;
+        eval::scenario_svg(s, None, &assets.join(&file))?;
         let _ = writeln!(md, "![{}](results/{file})\n", s.scenario.name);
     }
     Ok(())

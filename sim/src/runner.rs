@@ -43,6 +43,9 @@ use indicatif::{ProgressBar, ProgressStyle};
 use crate::clearance::ClearanceMeter;
 use crate::ocp::{self, BaselineSettings, Guess, MinTimeSettings};
 use crate::results::ResultRow;
+use control::site::{Outline, SiteIndex};
+use control::world::{default_outline, World};
+use std::sync::Arc;
 
 /// How long a run with [`EvalConfig::end_at_rest`] must stay converged and at rest [s].
 pub const AT_REST_FOR: f64 = 1.0;
@@ -241,6 +244,12 @@ pub struct EvalConfig {
     /// The safety envelope after the MPC (DESIGN §14), as the daemon runs it;
     /// its tolerances also widen the MPC's planned clearances.
     pub envelope: EnvelopeSettings,
+    /// The site every scenario runs in (DESIGN §17: `--site`), on top of the
+    /// scenario's own circles.
+    pub site: Option<Arc<SiteIndex>>,
+    /// The machine's outline (`--outline`; default: a circle of the
+    /// half-width at each axle).
+    pub outline: Outline,
     /// Worker threads.
     pub jobs: usize,
     pub progress: bool,
@@ -270,6 +279,8 @@ impl Default for EvalConfig {
             navigator: Some(NavigatorSettings::default()),
             plan_delay: PlanDelay::Fixed(MpcSettings::default().dt),
             envelope: EnvelopeSettings::default(),
+            site: None,
+            outline: default_outline(),
             jobs: std::thread::available_parallelism().map_or(2, |n| n.get()),
             progress: true,
         }
@@ -434,13 +445,10 @@ pub fn pilot(cfg: &EvalConfig, nets: &Networks) -> Result<Pilot<Critic>> {
         .navigator
         .as_ref()
         .map_or_else(ProgressSettings::default, |s| s.stall.progress);
-    Ok(Pilot::new(
-        cfg.params,
-        mpc,
-        navigator,
-        cfg.envelope,
-        progress,
-    )?)
+    let mut pilot = Pilot::new(cfg.params, mpc, navigator, cfg.envelope, progress)?;
+    pilot.set_outline(cfg.outline.clone());
+    pilot.set_site(cfg.site.clone());
+    Ok(pilot)
 }
 
 /// The MPC (the pilot) in closed loop with the plant.
@@ -454,7 +462,7 @@ pub fn run_mpc(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run> 
     let steps = (cfg.duration / dt).round() as usize;
     let mut states = Vec::with_capacity(steps + 1);
     let mut solve_ms = Vec::with_capacity(steps);
-    let mut clearance = ClearanceMeter::new(*plant.params(), &sc.obstacles);
+    let mut clearance = meter(cfg, *plant.params(), sc);
     clearance.observe(&plant.state());
     let mut rest = RestCounter::new(cfg, dt);
     let mut aborted = false;
@@ -570,7 +578,7 @@ pub fn run_actor(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run
     let steps = (cfg.duration / dt).round() as usize;
     let mut states = Vec::with_capacity(steps + 1);
     let mut solve_ms = Vec::with_capacity(steps);
-    let mut clearance = ClearanceMeter::new(*plant.params(), &sc.obstacles);
+    let mut clearance = meter(cfg, *plant.params(), sc);
     clearance.observe(&plant.state());
     let mut rest = RestCounter::new(cfg, dt);
     for k in 0..=steps {
@@ -674,7 +682,7 @@ fn plan_clearance(
     controls: &[Control],
     dt: f64,
 ) -> Option<f64> {
-    let mut meter = ClearanceMeter::new(cfg.params, &sc.obstacles);
+    let mut meter = meter(cfg, cfg.params, sc);
     for (k, x) in states.iter().enumerate() {
         match controls.get(k) {
             Some(u) if k + 1 < states.len() => meter.observe_interval(x, u, dt),
@@ -682,6 +690,57 @@ fn plan_clearance(
         }
     }
     meter.finish()
+}
+
+/// Features farther than this from the start–goal segment are left out of
+/// the bound's problem [m] (leaving constraints out keeps it a lower bound).
+const BOUND_FEATURE_REACH: f64 = 10.0;
+
+/// The scenario the minimum-time bound is solved for (DESIGN §17): with a
+/// site, its features near the start–goal segment added as circles, each
+/// its inscribed circle ([`control::site::Shape::inscribed_circle`]) grown
+/// by the disc the outline surely covers around each axle. Every point of
+/// such a circle is inside the feature or within that disc, so any motion of
+/// the machine that keeps its outline off the feature keeps its axle points
+/// off the circle: the problem is a relaxation and T* stays a lower bound.
+/// The site's bounds are left out (a relaxation too).
+pub fn bound_scenario(cfg: &EvalConfig, sc: &Scenario) -> Scenario {
+    let mut out = sc.clone();
+    let Some(site) = &cfg.site else {
+        return out;
+    };
+    let o = &cfg.outline;
+    let axle_disc = o
+        .axle_radius(control::site::Body::Front)
+        .min(o.axle_radius(control::site::Body::Rear));
+    let a = [
+        sc.start[control::model::ix::X],
+        sc.start[control::model::ix::Y],
+    ];
+    let b = [sc.goal.x, sc.goal.y];
+    for f in site.site().features() {
+        let c = f.shape.inscribed_circle();
+        let (_, d) = control::site::geometry::closest_on_segment(c.center, a, b);
+        if d - c.radius <= BOUND_FEATURE_REACH {
+            out.obstacles.push(control::Obstacle::new(
+                c.center[0],
+                c.center[1],
+                c.radius + axle_disc,
+            ));
+        }
+    }
+    out
+}
+
+/// The clearance meter of a run: the site of `cfg` and the scenario's
+/// circles, against the outline on the machine `params`.
+fn meter(cfg: &EvalConfig, params: MachineParams, sc: &Scenario) -> ClearanceMeter {
+    let mut world = World::new(params, cfg.outline.clone(), sc.obstacles.len());
+    world
+        .set_circles(&sc.obstacles)
+        .expect("a scenario's circles are validated when parsed");
+    world.set_site(cfg.site.clone());
+    ClearanceMeter::new(world)
 }
 
 fn tracing_note(msg: &str) {
@@ -720,7 +779,8 @@ pub fn run_min_time(cfg: &EvalConfig, sc: &Scenario, others: &[(Method, Run)]) -
         tolerance: cfg.tolerance,
         ..cfg.min_time
     };
-    let r = ocp::solve_min_time(&cfg.params, sc, &s, &guesses);
+    let bound_sc = bound_scenario(cfg, sc);
+    let r = ocp::solve_min_time(&cfg.params, &bound_sc, &s, &guesses);
     let solve_ms = vec![r.solve_time.as_secs_f64() * 1e3];
     let (states, dt) = match &r.plan {
         Some(p) => (p.states.clone(), p.dt),

@@ -322,6 +322,54 @@ fn at_horizon_40_the_envelope_keeps_out_of_circles_the_plan_cuts_into() {
     }
 }
 
+/// A site (DESIGN §17) is the world of every layer: the goal lies behind a
+/// berm polygon (non-convex, an L) and a keep-out the straight path crosses;
+/// with the default outline and the Avant's truer one the pilot goes around
+/// both, and the clearance measured against the site's features stays
+/// outside. Ignoring the site would drive straight through the berm (the
+/// straight line meets it).
+#[test]
+fn the_pilot_drives_around_a_sites_features() {
+    use control::site::{Outline, Site, SiteIndex};
+    let site = Site::parse(
+        br#"{"format": "wlnav-site-v1", "id": "test-berm", "version": 1,
+             "bounds": [[-6, -12], [30, -12], [30, 12], [-6, 12]],
+             "obstacles": [{"id": "berm", "polygon": [[5, -4], [7, -4], [7, 2], [9, 2], [9, 4], [5, 4]]}],
+             "keepout": [{"id": "office", "polygon": [[11, -1.5], [13, -1.5], [13, 1.5], [11, 1.5]]}]}"#,
+    )
+    .unwrap();
+    let index = std::sync::Arc::new(SiteIndex::new(site));
+    let sc = Scenario {
+        name: "behind-berm".into(),
+        start: State::zeros(),
+        goal: Goal::new(16.0, 0.0, 0.0),
+        obstacles: vec![],
+    };
+    // The straight path crosses the berm.
+    let berm = &index.site().features()[0].shape;
+    assert!((0..=160).any(|k| berm.signed_distance([0.1 * k as f64, 0.0]) < 0.0));
+    let nets = committed();
+    for outline in [control::world::default_outline(), Outline::avant635()] {
+        let cfg = EvalConfig {
+            params: nets.machine,
+            methods: vec![Method::Mpc],
+            site: Some(index.clone()),
+            outline: outline.clone(),
+            duration: 60.0,
+            jobs: 1,
+            progress: false,
+            ..Default::default()
+        };
+        let ev = sim::eval::evaluate(&cfg, &nets, std::slice::from_ref(&sc)).unwrap();
+        let row = &ev.rows[0];
+        assert!(row.success, "{outline:?}: not reached: {row:?}");
+        let c = row.min_clearance.unwrap();
+        assert!(c > -0.005 && c < 2.0, "{outline:?}: clearance {c}");
+        let nav = ev.runs[0].runs[0].1.navigation.as_ref().unwrap();
+        assert!(nav.routes[0].len() > 1, "no route around the berm");
+    }
+}
+
 /// The min-time bound with obstacles is a bound (issue 14, item 7): on
 /// blocked scenarios (the project's `c_obstacles` and two of
 /// `obstacles200.csv`), no method evaluated beside it (MPC and actor with the

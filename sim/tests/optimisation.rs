@@ -113,7 +113,9 @@ fn trajectory_clearance(
     dt: f64,
     obstacles: &[Obstacle],
 ) -> f64 {
-    let mut meter = ClearanceMeter::new(*p, obstacles);
+    let mut world = control::world::World::with_axle_circles(*p, obstacles.len());
+    world.set_circles(obstacles).unwrap();
+    let mut meter = ClearanceMeter::new(world);
     for (k, x) in states.iter().enumerate() {
         match controls.get(k) {
             Some(u) if k + 1 < states.len() => meter.observe_interval(x, u, dt),

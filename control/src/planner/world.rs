@@ -10,7 +10,7 @@ use std::sync::Arc;
 
 use crate::model::{MachineParams, State};
 use crate::obstacle::Obstacle;
-use crate::site::{Outline, SiteIndex, MAX_OUTLINE_CIRCLES};
+use crate::site::{Body, Outline, SiteIndex, MAX_OUTLINE_CIRCLES};
 use crate::world::{World, WorldError};
 
 use super::NavError;
@@ -113,14 +113,14 @@ impl CheckedWorld {
     /// The disc the outline surely covers around the front axle, swept along
     /// a–b, keeps `extra` from everything (a cheap line-of-sight filter).
     pub fn segment_clear(&self, a: [f64; 2], b: [f64; 2], extra: f64) -> bool {
-        let r = self.world.outline().front_axle_radius();
+        let r = self.world.outline().axle_radius(Body::Front);
         self.world.segment_clear(a, b, r, extra)
     }
 
     /// Whether the front axle's disc at `p` comes nearer than `below` to
     /// anything (what the grid heuristic blocks a cell by).
     pub fn front_axle_blocked(&self, p: [f64; 2], below: f64) -> bool {
-        let r = self.world.outline().front_axle_radius();
+        let r = self.world.outline().axle_radius(Body::Front);
         self.world.disc_clearance(p, r, below) < below
     }
 }

@@ -252,6 +252,27 @@ impl Outline {
         )
     }
 
+    /// The outlines by name: `axle-circles` (the default: a circle of
+    /// 0.65 m at each axle, [`crate::world::default_outline`]), `avant635`,
+    /// `large-loader`, `large-loader-axles` (a circle of 0.9 m at each axle).
+    pub fn named(name: &str) -> Option<Self> {
+        match name {
+            "axle-circles" => Some(crate::world::default_outline()),
+            "avant635" => Some(Self::avant635()),
+            "large-loader" => Some(Self::large_loader()),
+            "large-loader-axles" => Self::axle_circles(0.9).ok(),
+            _ => None,
+        }
+    }
+
+    /// The names [`Outline::named`] knows.
+    pub const NAMES: [&'static str; 4] = [
+        "axle-circles",
+        "avant635",
+        "large-loader",
+        "large-loader-axles",
+    ];
+
     fn axial(half_width: f64, spec: &[(Body, f64, f64)]) -> Self {
         Self {
             half_width,
@@ -275,14 +296,15 @@ impl Outline {
         self.half_width
     }
 
-    /// The radius of the largest disc around the front axle that the front
-    /// body's circles cover (0 if none covers the axle): what a test of the
-    /// front axle's position alone may assume of the machine (the route
-    /// search's grid heuristic). The default outline's: its half-width.
-    pub fn front_axle_radius(&self) -> f64 {
+    /// The radius of the largest disc around `body`'s axle that the body's
+    /// circles cover (0 if none covers the axle): what a test of an axle's
+    /// position alone may assume of the machine (the route search's grid
+    /// heuristic, the minimum-time bound). The default outline's: its
+    /// half-width.
+    pub fn axle_radius(&self, body: Body) -> f64 {
         self.circles
             .iter()
-            .filter(|c| c.body == Body::Front)
+            .filter(|c| c.body == body)
             .map(|c| c.radius - c.offset[0].hypot(c.offset[1]))
             .fold(0.0, f64::max)
     }
