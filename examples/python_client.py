@@ -84,9 +84,9 @@ class GoalReply(ctypes.Structure):
 
 
 class Telemetry(ctypes.Structure):
-    """2 728 bytes, 8-byte aligned; read with `field()` at msg.rs's offsets."""
+    """2 816 bytes, 8-byte aligned; read with `field()` at msg.rs's offsets."""
 
-    _fields_ = [("raw", ctypes.c_uint64 * (2728 // 8))]
+    _fields_ = [("raw", ctypes.c_uint64 * (2816 // 8))]
 
     @staticmethod
     def type_name() -> str:
@@ -97,7 +97,7 @@ class Telemetry(ctypes.Structure):
 
 
 # The sizes msg.rs asserts: a mismatch would only show as "incompatible type" on open.
-for t, size in [(Pose2, 24), (Obstacle, 24), (GoalRequest, 232), (GoalReply, 152), (Telemetry, 2728)]:
+for t, size in [(Pose2, 24), (Obstacle, 24), (GoalRequest, 232), (GoalReply, 152), (Telemetry, 2816)]:
     assert ctypes.sizeof(t) == size and ctypes.alignment(t) == 8, t
 
 

@@ -12,7 +12,7 @@ use shm_ipc::{GoalReply, GoalRequest, Pose2, RejectCode, Telemetry};
 
 use super::follow::{GoalStatus, GoalTracker};
 use super::view::{self, mode_name};
-use super::{exit, signal, Cli, GoalArgs, RequestArgs, SimpleRequest, WatchArgs};
+use super::{exit, signal, Cli, GoalArgs, RequestArgs, SimpleRequest, StatusArgs, WatchArgs};
 
 /// Writes one line to stdout; false if stdout is gone (`wlnav watch | head`), so callers
 /// stop quietly instead of panicking on a broken pipe.
@@ -380,6 +380,7 @@ pub fn simple_request(cli: &Cli, a: &RequestArgs, what: SimpleRequest) -> anyhow
         }
         SimpleRequest::Cancel => connect(cli)?.cancel(timeout),
         SimpleRequest::Resume => connect(cli)?.resume(timeout),
+        SimpleRequest::ReloadSite => connect(cli)?.reload_site(timeout),
     };
     let reply = match result {
         Ok(r) => r,
@@ -391,6 +392,32 @@ pub fn simple_request(cli: &Cli, a: &RequestArgs, what: SimpleRequest) -> anyhow
     } else {
         exit::REJECTED
     })
+}
+
+/// `wlnav status`: the next telemetry sample as one line, then the site in force.
+pub fn status(cli: &Cli, a: &StatusArgs) -> anyhow::Result<u8> {
+    let timeout = Duration::from_secs_f64(a.timeout);
+    let Some(client) = connect_waiting(cli, timeout)? else {
+        return Ok(exit::INTERRUPTED);
+    };
+    let sub = client.subscribe_telemetry()?;
+    let start = Instant::now();
+    while start.elapsed() < timeout && !signal::requested() {
+        match sub.recv_timeout(Duration::from_millis(200)) {
+            Ok(Some(t)) => {
+                emit(&view::line(&t));
+                emit(&view::site_text(&t));
+                return Ok(exit::OK);
+            }
+            Ok(None) | Err(IpcError::Interrupted) => continue,
+            Err(e) => return Err(e.into()),
+        }
+    }
+    eprintln!(
+        "wlnav: no telemetry for {:.0} s (is wlnavd running?)",
+        a.timeout
+    );
+    Ok(exit::ERROR)
 }
 
 /// `wlnav watch [--table] [--count N]`.

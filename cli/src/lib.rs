@@ -116,6 +116,11 @@ pub enum Command {
     Stop(RequestArgs),
     /// Release an operator stop: goals are accepted again
     Resume(RequestArgs),
+    /// The daemon's site (DESIGN §17)
+    #[command(subcommand)]
+    Site(SiteCommand),
+    /// One telemetry sample: mode, goal, faults, and the site in force
+    Status(StatusArgs),
     /// Show telemetry live, one line per tick (or a table with --table)
     Watch(WatchArgs),
     /// Record telemetry to an MCAP file (JSON schema; opens in Foxglove)
@@ -155,6 +160,22 @@ pub struct GoalArgs {
     pub reply_timeout: f64,
 }
 
+/// `wlnav site …`.
+#[derive(Debug, Subcommand)]
+pub enum SiteCommand {
+    /// Reload the daemon's site file: swapped at a tick boundary; a broken file is
+    /// rejected with what is wrong and the old site stays
+    Reload(RequestArgs),
+}
+
+/// `wlnav status`.
+#[derive(Debug, Clone, Args)]
+pub struct StatusArgs {
+    /// Give up if no telemetry arrives for this long [s]
+    #[arg(long, default_value_t = 3.0, value_parser = args::parse_seconds)]
+    pub timeout: f64,
+}
+
 /// The requests without arguments.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum SimpleRequest {
@@ -164,6 +185,8 @@ pub enum SimpleRequest {
     Stop,
     /// `wlnav resume`
     Resume,
+    /// `wlnav site reload`
+    ReloadSite,
 }
 
 impl SimpleRequest {
@@ -173,6 +196,7 @@ impl SimpleRequest {
             Self::Cancel => "cancel",
             Self::Stop => "stop",
             Self::Resume => "resume",
+            Self::ReloadSite => "site reload",
         }
     }
 }
@@ -222,6 +246,10 @@ pub fn run(cli: Cli) -> u8 {
         Command::Cancel(a) => commands::simple_request(&cli, a, SimpleRequest::Cancel),
         Command::Stop(a) => commands::simple_request(&cli, a, SimpleRequest::Stop),
         Command::Resume(a) => commands::simple_request(&cli, a, SimpleRequest::Resume),
+        Command::Site(SiteCommand::Reload(a)) => {
+            commands::simple_request(&cli, a, SimpleRequest::ReloadSite)
+        }
+        Command::Status(a) => commands::status(&cli, a),
         Command::Watch(a) => commands::watch(&cli, a),
         Command::Record(a) => record::run(&cli, a),
         Command::Demo(a) => demo::run(&cli, a),

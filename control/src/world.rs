@@ -145,7 +145,7 @@ impl World {
     }
 
     pub fn set_outline(&mut self, outline: Outline) {
-        self.outline = outline;
+        self.outline.clone_from(&outline);
     }
 
     /// Replaces the goal's circles (validated; within the capacity, so no
@@ -169,13 +169,12 @@ impl World {
         self.circles.clear();
     }
 
-    /// Becomes `other` (site, circles, outline; no allocation when the
-    /// outlines are equal and the capacity suffices).
+    /// Becomes `other` (site, circles, outline; no allocation: an outline's
+    /// buffer holds any outline, and circles beyond the capacity are dropped,
+    /// which `set_circles` never lets in).
     pub fn copy_from(&mut self, other: &World) {
         self.params = other.params;
-        if self.outline != other.outline {
-            self.outline = other.outline.clone();
-        }
+        self.outline.clone_from(&other.outline);
         self.site = other.site.clone();
         self.circles.clear();
         let n = other.circles.len().min(self.circles.capacity());

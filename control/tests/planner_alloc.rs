@@ -145,4 +145,71 @@ fn the_global_layer_and_the_pilot_do_not_allocate() {
         "the wall is planned around"
     );
     assert_eq!(after - before, 0, "{} allocations (pilot)", after - before);
+
+    // The pilot in the ≥ 500-feature site with the Avant 635's outline (DESIGN
+    // §17): rows from the site's index, the envelope through it, the route
+    // planned in it; a reload (another index) swapped in mid-goal. Free poses
+    // are found before counting.
+    let pit = std::sync::Arc::new(control::site::SiteIndex::new(
+        control::site::Site::parse(
+            control::site::generate::large_pit(40, 520)
+                .to_json()
+                .as_bytes(),
+        )
+        .unwrap(),
+    ));
+    let reloaded = std::sync::Arc::new((*pit).clone());
+    let mut world = control::world::World::new(p, control::site::Outline::avant635(), 0);
+    world.set_site(Some(pit.clone()));
+    let b = pit.site().bounds().aabb();
+    let free = |x: f64, y: f64| world.clearance(&State::new(x, y, 0.0, 0.0, 0.0, 0.0)) > 2.0;
+    let (x0, y0) = (0..400)
+        .map(|k| {
+            (
+                b.min[0] + 5.0 + (k % 20) as f64 * 3.0,
+                b.min[1] + 5.0 + (k / 20) as f64 * 3.0,
+            )
+        })
+        .find(|&(x, y)| free(x, y) && free(x + 10.0, y))
+        .expect("a free pose in the pit");
+    let mpc = Mpc::new(p, critic.clone(), Some(trained().0), MpcSettings::default()).unwrap();
+    let mut pilot = Pilot::new(
+        p,
+        mpc,
+        Some(navigator("delayed", true)),
+        EnvelopeSettings::default(),
+        Default::default(),
+    )
+    .unwrap();
+    pilot.set_outline(control::site::Outline::avant635());
+    pilot.set_site(Some(pit.clone()));
+    let start = State::new(x0, y0, 0.0, 0.0, 0.0, 0.0);
+    let before = common::allocations();
+    pilot
+        .set_goal(&start, Goal::new(x0 + 10.0, y0, 0.0), &[], 0.0)
+        .unwrap();
+    let mut drove = 0;
+    for k in 0..60 {
+        if k == 30 {
+            pilot.set_site(Some(reloaded.clone()));
+        }
+        let now = k as f64 * 0.2;
+        let x = State::new(x0 + 0.1 * k as f64, y0, 0.0, 0.0, 0.0, 0.5);
+        let command = match pilot.step(&x, now, Instant::now()).unwrap() {
+            PilotDecision::Drive(s) => {
+                drove += usize::from(s.solution.is_some());
+                s.command
+            }
+            PilotDecision::Abort(_) | PilotDecision::Stop { .. } => VelocityCommand::ZERO,
+        };
+        pilot.sent(now, command);
+    }
+    let after = common::allocations();
+    assert!(drove > 50, "drove {drove} ticks");
+    assert_eq!(
+        after - before,
+        0,
+        "{} allocations (pilot in the pit)",
+        after - before
+    );
 }

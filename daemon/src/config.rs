@@ -41,6 +41,10 @@
 //! [ipc]
 //! prefix = "wlnav"
 //! workspace = { x_min = -50.0, x_max = 50.0, y_min = -50.0, y_max = 50.0 }
+//! [site]
+//! file = ""            # a wlnav-site-v1 JSON or a Nav2 map YAML (DESIGN §17); "" = no site
+//! [outline]            # the machine's covering circles (DESIGN §17)
+//! preset = "axle-circles"  # or avant635, large-loader, large-loader-axles; or circles + half_width
 //! [sim]                # the simulated machine (can.backend = "sim")
 //! time_scale = 1.0
 //! [sim.plant]          # control::PlantConfig: delay, tau_beta_dot, tau_v, noise, seed
@@ -127,6 +131,10 @@ pub struct Config {
     pub ipc: IpcSection,
     /// The simulated machine.
     pub sim: SimConfig,
+    /// The site file (DESIGN §17).
+    pub site: SiteConfig,
+    /// The machine's outline (DESIGN §17).
+    pub outline: OutlineConfig,
     /// Which keys the configuration text set (not a setting).
     #[serde(skip)]
     pub given: KeysGiven,
@@ -147,6 +155,64 @@ pub struct KeysGiven {
     pub machine: bool,
     /// `mpc.dt`.
     pub dt: bool,
+}
+
+/// `[site]`: the site every goal is driven in (DESIGN §17).
+#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SiteConfig {
+    /// A `wlnav-site-v1` JSON file, or a ROS / Nav2 `map_server` YAML (its
+    /// image beside it); relative to the configuration file. Empty: no site
+    /// (the goals' circles only).
+    pub file: PathBuf,
+}
+
+impl SiteConfig {
+    /// The file, if one is configured.
+    pub fn path(&self) -> Option<&Path> {
+        (!self.file.as_os_str().is_empty()).then_some(self.file.as_path())
+    }
+}
+
+/// `[outline]`: the machine's outline as covering circles (DESIGN §17). Either
+/// `preset` (`axle-circles`, the default: a circle of the half-width at each
+/// axle, today's model; `avant635`; `large-loader`; `large-loader-axles`), or
+/// `circles` (`{ body = "front" | "rear", offset = [forward, left], radius }`)
+/// with `half_width` (what a goal's wire circles include in their radius).
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct OutlineConfig {
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub preset: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub circles: Option<Vec<control::site::OutlineCircle>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub half_width: Option<f64>,
+}
+
+impl OutlineConfig {
+    /// The outline this section names.
+    pub fn outline(&self) -> Result<control::site::Outline, ConfigError> {
+        use control::site::Outline;
+        match (&self.preset, &self.circles, self.half_width) {
+            (None, None, None) => Ok(control::world::default_outline()),
+            (Some(name), None, None) => Outline::named(name).ok_or_else(|| {
+                invalid(
+                    "outline.preset",
+                    format!(
+                        "unknown outline {name:?} (one of {})",
+                        Outline::NAMES.join(", ")
+                    ),
+                )
+            }),
+            (None, Some(circles), Some(hw)) => Outline::new(circles.clone(), hw)
+                .map_err(|e| invalid("outline.circles", e.to_string())),
+            _ => Err(invalid(
+                "outline",
+                "give either `preset`, or `circles` and `half_width`",
+            )),
+        }
+    }
 }
 
 /// `[controller]`.
@@ -656,6 +722,7 @@ impl Config {
         };
         self.weights.critic = resolve(&self.weights.critic);
         self.weights.actor = resolve(&self.weights.actor);
+        self.site.file = resolve(&self.site.file);
         if let Some(b) = bases.first() {
             if !self.can.log.as_os_str().is_empty() && self.can.log.is_relative() {
                 self.can.log = b.join(&self.can.log);
@@ -674,6 +741,7 @@ impl Config {
         self.envelope
             .validate()
             .map_err(|e| invalid_in("envelope", Some(e.name), &e))?;
+        self.outline.outline()?;
         let l = &self.control;
         if let Some(hz) = l.rate_hz {
             return Err(invalid(

@@ -91,6 +91,8 @@ pub struct LoopContext {
 
 /// The loop's state between ticks.
 pub struct ControlLoop {
+    /// The site in force (DESIGN §17).
+    site: Option<std::sync::Arc<control::site::SiteIndex>>,
     ctx: LoopContext,
     controller: Box<dyn Controller>,
     notifier: Notifier,
@@ -188,6 +190,7 @@ impl ControlLoop {
             shutdown_started: None,
             tick: 0,
             seen_data: false,
+            site: None,
         }
     }
 
@@ -247,6 +250,7 @@ impl ControlLoop {
         let mut t = Telemetry::ZERO;
         t.tick = self.tick;
         t.timestamp_ns = shm_ipc::monotonic_now_ns();
+        self.swap_site(&mut t);
         let shutting_down = self.shutting_down(start);
         let inputs = self.read_inputs(start);
         t.state = self.telemetry_state(&inputs);
@@ -310,6 +314,23 @@ impl ControlLoop {
             plan_time: solve.and_then(|s| s.new_plan_time),
             exit,
         }
+    }
+
+    /// A reloaded site, if one waits, goes into force at this tick boundary: the
+    /// goal check and the controller together (DESIGN §17); telemetry names the
+    /// site in force. No allocation.
+    fn swap_site(&mut self, t: &mut Telemetry) {
+        if let Some(site) = self.ctx.goals.site().take() {
+            tracing::info!("{} in force", crate::site::describe(&site));
+            self.controller.set_site(Some(site.clone()));
+            self.ctx.goals.lock().set_site(Some(site.clone()));
+            self.site = Some(site);
+        }
+        t.set_site(
+            self.site
+                .as_ref()
+                .map(|i| (i.site().id(), i.site().version(), i.site().hash())),
+        );
     }
 
     /// Counts and logs (rate-limited) an override by the safety envelope

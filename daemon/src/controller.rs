@@ -19,9 +19,11 @@ use control::envelope::Guarded;
 use control::mpc::{Mpc, MpcSettings, QuadraticCost, StageCost, StepStatus};
 use control::pilot::{Pilot, PilotDecision};
 use control::planner::{self, Navigator, NavigatorSettings, PlannerThread, RoutePlanner};
+use control::site::{Outline, SiteIndex};
 use control::weights::{self, NetworkRole};
 use control::{Actor, Critic, Goal, MachineParams, Obstacle, State, VelocityCommand};
 use shm_ipc::{Pose2, Telemetry};
+use std::sync::Arc;
 use thiserror::Error;
 
 use crate::config::{Config, CostKind};
@@ -161,6 +163,10 @@ pub trait Controller {
     fn compensated_delay(&self) -> Option<f64> {
         None
     }
+    /// The site every layer keeps off from the next step on (DESIGN §17;
+    /// called between ticks, a swap at a tick boundary; `None`: the goals'
+    /// circles only).
+    fn set_site(&mut self, site: Option<Arc<SiteIndex>>);
 }
 
 /// Builds the controller on the control thread.
@@ -179,7 +185,7 @@ impl<C: StageCost> PilotController<C> {
 
     /// The MPC alone under the envelope of `config` (no global layer): for tests.
     pub fn without_navigator(mpc: Mpc<C>, config: &Config) -> Result<Self, ControllerError> {
-        let pilot = Pilot::new(
+        let mut pilot = Pilot::new(
             config.machine,
             mpc,
             None,
@@ -187,6 +193,7 @@ impl<C: StageCost> PilotController<C> {
             config.control.progress(),
         )
         .map_err(err)?;
+        pilot.set_outline(config.outline.outline().map_err(err)?);
         Ok(Self::new(pilot))
     }
 }
@@ -210,6 +217,10 @@ impl<C: StageCost> Controller for PilotController<C> {
 
     fn reset(&mut self) {
         self.pilot.reset();
+    }
+
+    fn set_site(&mut self, site: Option<Arc<SiteIndex>>) {
+        self.pilot.set_site(site);
     }
 
     fn step(
@@ -275,6 +286,9 @@ pub enum LoadError {
     /// The global layer could not be built.
     #[error("controller.planner: {0}")]
     Navigator(String),
+    /// `[outline]` is not a valid outline.
+    #[error("{0}")]
+    Outline(String),
 }
 
 /// The quadratic bring-up cost: position, heading and a constant pull towards the
@@ -311,6 +325,10 @@ pub fn load_controller(config: &Config) -> Result<ControllerFactory, LoadError> 
         navigator: config.navigator_settings(),
         envelope: config.envelope,
         progress: config.control.progress(),
+        outline: config
+            .outline
+            .outline()
+            .map_err(|e| LoadError::Outline(e.to_string()))?,
     };
     if let Some(s) = &parts.navigator {
         s.validate()
@@ -371,7 +389,7 @@ fn controller<C: StageCost + 'static>(
         Some(s) => Some(build_navigator(config.machine, s, networks).map_err(err)?),
         None => None,
     };
-    let pilot = Pilot::new(
+    let mut pilot = Pilot::new(
         config.machine,
         mpc,
         navigator,
@@ -379,6 +397,7 @@ fn controller<C: StageCost + 'static>(
         config.progress,
     )
     .map_err(err)?;
+    pilot.set_outline(config.outline.clone());
     Ok(Box::new(PilotController::new(pilot)))
 }
 
@@ -389,6 +408,7 @@ struct ControllerParts {
     navigator: Option<NavigatorSettings>,
     envelope: control::envelope::EnvelopeSettings,
     progress: control::progress::ProgressSettings,
+    outline: Outline,
 }
 
 /// The start-up self-test: a first solve from rest towards a goal 3 m ahead must

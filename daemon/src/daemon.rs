@@ -13,6 +13,7 @@
 //! [`run`] is what `main` calls; tests call it too, with their own controller and
 //! a [`ShutdownHandle`] instead of signals.
 
+use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 
@@ -29,6 +30,7 @@ use crate::controller::{self, ControllerFactory, LoadError};
 use crate::ipc::{self, SharedGoals};
 use crate::notify::Notifier;
 use crate::sim::{self, SimHandle, SimLog};
+use crate::site::SiteSlot;
 use crate::stats::{self, LoopStats};
 
 /// Start-up and run-time failures that end the daemon with a non-zero exit code.
@@ -55,6 +57,12 @@ pub enum DaemonError {
     /// The control thread panicked.
     #[error("control thread panicked: {0}")]
     Panic(String),
+    /// The site file could not be loaded (the message names the file and what is wrong).
+    #[error("{0}")]
+    Site(String),
+    /// `[outline]`.
+    #[error(transparent)]
+    Config(#[from] crate::config::ConfigError),
 }
 
 /// Requests a controlled stop and exit from outside (tests; signals use it too).
@@ -255,7 +263,18 @@ async fn run_async(
         config.control.can_max_lost,
     ));
 
-    let goals = Arc::new(SharedGoals::new(config.lifecycle_settings()));
+    // The site is loaded whole before anything starts; the first tick puts it
+    // in force (after the start-up self-test's goal, which knows no site).
+    let site = SiteSlot::new(config.site.path().map(Path::to_path_buf));
+    if config.site.path().is_some() {
+        let text = site.reload().map_err(DaemonError::Site)?;
+        tracing::info!("{text}");
+    }
+    let goals = Arc::new(SharedGoals::new(
+        config.lifecycle_settings(),
+        site,
+        config.outline.outline()?,
+    ));
     let stats = Arc::new(Mutex::new(LoopStats::new()));
     let ctx = LoopContext {
         config: config.clone(),

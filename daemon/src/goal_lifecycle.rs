@@ -283,6 +283,8 @@ impl GoalLifecycle {
                 self.operator_stop = true;
             }
             ValidRequest::Resume { .. } => self.operator_stop = false,
+            // Served by the IPC task (crate::site); nothing of the goal changes.
+            ValidRequest::ReloadSite { .. } => {}
         }
         Ok(())
     }

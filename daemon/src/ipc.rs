@@ -29,12 +29,16 @@ use tokio::sync::Notify;
 
 use crate::goal_lifecycle::{GoalLifecycle, LifecycleSettings};
 use crate::log_limit::{LogDecision, LogLimiter};
+use crate::site::SiteSlot;
+use control::site::Outline;
 
 /// The goal lifecycle, shared by the IPC task (requests, answered at once) and the
 /// control thread (one tick at a time), with request counters.
 #[derive(Debug)]
 pub struct SharedGoals {
     lifecycle: Mutex<GoalLifecycle>,
+    /// The site file, and a reloaded site waiting for the next tick.
+    site: SiteSlot,
     requests: AtomicU64,
     rejected: AtomicU64,
 }
@@ -46,9 +50,13 @@ pub fn wire_state(x: &control::State) -> shm_ipc::MachineState {
 
 impl SharedGoals {
     /// No goal yet; goals wait for the first fresh pose and machine state.
-    pub fn new(settings: LifecycleSettings) -> Self {
+    /// `site`: the site file and the outline goals are checked with.
+    pub fn new(settings: LifecycleSettings, site: SiteSlot, outline: Outline) -> Self {
+        let mut lifecycle = GoalLifecycle::new(settings);
+        lifecycle.set_outline(outline);
         Self {
-            lifecycle: Mutex::new(GoalLifecycle::new(settings)),
+            lifecycle: Mutex::new(lifecycle),
+            site,
             requests: AtomicU64::new(0),
             rejected: AtomicU64::new(0),
         }
@@ -58,6 +66,11 @@ impl SharedGoals {
     /// across I/O; a panic elsewhere does not poison it for the loop.
     pub fn lock(&self) -> MutexGuard<'_, GoalLifecycle> {
         self.lifecycle.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// The site file and a reload waiting for the tick.
+    pub fn site(&self) -> &SiteSlot {
+        &self.site
     }
 
     /// Requests served (accepted + rejected).
@@ -156,12 +169,20 @@ pub async fn serve_goals(
             goals.requests.fetch_add(1, Ordering::Relaxed);
             let (valid, reply) = validator.validate_and_reply(req);
             let decided = valid.map_err(|reason| (reason.code(), reason.to_string()));
-            let decided = decided.and_then(|v| {
-                goals
+            let decided = decided.and_then(|v| match v {
+                // Read and validated here, off the tick; in force from the next tick.
+                ValidRequest::ReloadSite { request_id } => match goals.site.reload() {
+                    Ok(text) => {
+                        tracing::info!("request {request_id}: {text} loaded, in force next tick");
+                        Ok(v)
+                    }
+                    Err(e) => Err((RejectCode::Other, format!("site not reloaded: {e}"))),
+                },
+                _ => goals
                     .lock()
                     .on_request(&v, shutting_down)
                     .map(|()| v)
-                    .map_err(|r| (r.code, r.text))
+                    .map_err(|r| (r.code, r.text)),
             });
             match decided {
                 Ok(v) => {

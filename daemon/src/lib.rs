@@ -25,6 +25,7 @@ pub mod pose_gate;
 pub mod realtime;
 pub mod safety;
 pub mod sim;
+pub mod site;
 pub mod stats;
 
 pub use config::Config;

@@ -34,6 +34,9 @@ struct Args {
     /// e.g. critic-weights/avant635; they must be for the configured machine and mpc.dt.
     #[arg(long, value_name = "DIR")]
     weights_dir: Option<PathBuf>,
+    /// The site file (overrides site.file): a wlnav-site-v1 JSON, or a Nav2 map YAML.
+    #[arg(long, value_name = "FILE")]
+    site: Option<PathBuf>,
     /// Log every CAN frame to FILE in candump -L format (overrides can.log).
     #[arg(long, value_name = "FILE")]
     can_log: Option<PathBuf>,
@@ -114,6 +117,12 @@ fn build_config(args: &Args) -> Result<Config, String> {
     if let Some(d) = &args.weights_dir {
         config.weights = WeightsConfig::in_dir(d);
     }
+    if let Some(f) = &args.site {
+        // Relative to where wlnavd was started, as a shell user expects.
+        config.site.file = std::env::current_dir()
+            .map(|d| d.join(f))
+            .unwrap_or_else(|_| f.clone());
+    }
     if let Some(l) = &args.can_log {
         config.can.log = l.clone();
     }
@@ -140,10 +149,19 @@ fn main() -> ExitCode {
         return ExitCode::SUCCESS;
     }
     if args.check_config {
+        if let Some(path) = config.site.path() {
+            match wlnavd::site::load(path) {
+                Ok(index) => println!("{}", wlnavd::site::describe(&index)),
+                Err(e) => {
+                    eprintln!("wlnavd: {e}");
+                    return ExitCode::from(1);
+                }
+            }
+        }
         return match wlnavd::controller::load_controller(&config) {
             Ok(_) => {
                 print!("{}", config.envelope_report());
-                println!("wlnavd: configuration and weights OK");
+                println!("wlnavd: configuration, site and weights OK");
                 ExitCode::SUCCESS
             }
             Err(e) => {

@@ -292,7 +292,7 @@
 //! | 32 | f64 | heading | front-body heading θ_f \[rad\] |
 //! | 40 | f64\[9\] | covariance | row-major 3×3 of (x, y, heading) \[m², m·rad, rad²\] |
 //!
-//! [`Telemetry`] (`wlnav::v2::Telemetry`), 2728 bytes:
+//! [`Telemetry`] (`wlnav::v2::Telemetry`), 2816 bytes:
 //!
 //! | offset | type | field | meaning |
 //! |---|---|---|---|
@@ -327,6 +327,11 @@
 //! | 2712 | f64 | route_age_s | age of the route followed when it arrived \[s\] |
 //! | 2720 | u32 | at_rest | 1: \|v_f\| and \|β̇\| below `loop.rest_speed` (the one "at rest") |
 //! | 2724 | u32 | _reserved | zero |
+//! | 2728 | u64 | site_version | the loaded site's version (DESIGN §17; 0: no site) |
+//! | 2736 | u64 | site_hash | the site file's content hash (FNV-1a 64; 0: no site) |
+//! | 2744 | u32 | site_id_len | valid bytes in `site_id` (≤ 64) |
+//! | 2748 | u32 | _reserved_site | zero |
+//! | 2752 | u8\[64\] | site_id | the loaded site's id, UTF-8, zero-filled |
 //!
 //! ## Goal lifecycle
 //!
@@ -382,7 +387,10 @@
 //!                  uint32_t subgoal_active, route_len;
 //!                  wlnav_pose2 subgoal, route[16];
 //!                  double plan_time_us, route_age_s;
-//!                  uint32_t at_rest, _reserved; } wlnav_telemetry; /* 2728 */
+//!                  uint32_t at_rest, _reserved;
+//!                  uint64_t site_version, site_hash;
+//!                  uint32_t site_id_len, _reserved_site;
+//!                  uint8_t site_id[64]; } wlnav_telemetry; /* 2816 */
 //! ```
 //!
 //! ## Start-up clean-up
@@ -416,7 +424,7 @@ pub use error::{BoxedSource, ClientError, IpcError};
 pub use msg::{
     fault_flags, pose_flags, AbortReason, Command, GoalKind, GoalOutcome, GoalReply, GoalRequest,
     MachineState, Mode, Obstacle, Pose2, PoseEstimate, RejectCode, Telemetry, MAX_OBSTACLES,
-    MAX_ROUTE, MAX_TRAJECTORY, REASON_TEXT_CAPACITY,
+    MAX_ROUTE, MAX_TRAJECTORY, REASON_TEXT_CAPACITY, SITE_ID_CAPACITY,
 };
 pub use validate::{
     heapless_obstacles, normalize_angle, GoalValidator, Num, RejectReason, ValidRequest, Workspace,

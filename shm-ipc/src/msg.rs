@@ -41,8 +41,8 @@ fn write_reason(buf: &mut [u8; REASON_TEXT_CAPACITY], text: &str) -> u32 {
 
 /// The UTF-8 text of `len` bytes of `buf`. Never fails: an out-of-range length is clamped
 /// and invalid UTF-8 from a foreign peer is cut at the first bad byte.
-fn read_reason(buf: &[u8; REASON_TEXT_CAPACITY], len: u32) -> &str {
-    let bytes = &buf[..(len as usize).min(REASON_TEXT_CAPACITY)];
+fn read_reason(buf: &[u8], len: u32) -> &str {
+    let bytes = &buf[..(len as usize).min(buf.len())];
     match core::str::from_utf8(bytes) {
         Ok(s) => s,
         // `valid_up_to` is a char boundary by definition, so this cannot fail.
@@ -181,6 +181,11 @@ pub enum GoalKind {
     /// Release the latch of an operator stop; goals are accepted again. Does not start
     /// anything by itself (the dropped goal stays dropped). Accepted when nothing is latched.
     Resume = 4,
+    /// Reload the daemon's configured site file (DESIGN §17). Accepted once the new file
+    /// is read and valid; it takes effect at the next tick boundary (telemetry's
+    /// `site_version` and `site_hash` show it). Rejected, with what is wrong in the
+    /// file, when it is not: the old site stays. The goal fields are ignored.
+    ReloadSite = 5,
 }
 
 impl GoalKind {
@@ -199,6 +204,7 @@ impl TryFrom<u32> for GoalKind {
             2 => Ok(Self::Cancel),
             3 => Ok(Self::Stop),
             4 => Ok(Self::Resume),
+            5 => Ok(Self::ReloadSite),
             other => Err(other),
         }
     }
@@ -250,6 +256,11 @@ impl GoalRequest {
     /// A resume request (releases an operator stop).
     pub const fn resume(request_id: u64) -> Self {
         Self::empty(request_id, GoalKind::Resume)
+    }
+
+    /// A request to reload the daemon's site file.
+    pub const fn reload_site(request_id: u64) -> Self {
+        Self::empty(request_id, GoalKind::ReloadSite)
     }
 
     const fn empty(request_id: u64, kind: GoalKind) -> Self {
@@ -641,7 +652,7 @@ impl TryFrom<u32> for AbortReason {
 /// Bits of [`Telemetry::fault_flags`].
 pub mod fault_flags;
 
-/// Published on `{prefix}/v2/telemetry` by the daemon once per control tick. 2728 bytes,
+/// Published on `{prefix}/v2/telemetry` by the daemon once per control tick. 2816 bytes,
 /// alignment 8.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
@@ -712,7 +723,20 @@ pub struct Telemetry {
     pub at_rest: u32,
     /// Zero (keeps the size a multiple of 8).
     pub _reserved: u32,
+    /// The loaded site's `version` (DESIGN §17; 0 with no site).
+    pub site_version: u64,
+    /// The loaded site file's content hash (64-bit FNV-1a of its bytes; 0 with no site).
+    pub site_hash: u64,
+    /// Valid bytes in [`Telemetry::site_id`] (≤ 64; 0 with no site).
+    pub site_id_len: u32,
+    /// Zero (keeps `site_id` 8-byte aligned).
+    pub _reserved_site: u32,
+    /// The loaded site's `id`, UTF-8, `site_id_len` bytes, rest zero.
+    pub site_id: [u8; SITE_ID_CAPACITY],
 }
+
+/// Bytes of [`Telemetry::site_id`] (a site id is at most 64 bytes, DESIGN §17).
+pub const SITE_ID_CAPACITY: usize = 64;
 
 impl Telemetry {
     /// All zeros, mode [`Mode::Startup`].
@@ -751,7 +775,32 @@ impl Telemetry {
         route_age_s: 0.0,
         at_rest: 0,
         _reserved: 0,
+        site_version: 0,
+        site_hash: 0,
+        site_id_len: 0,
+        _reserved_site: 0,
+        site_id: [0; SITE_ID_CAPACITY],
     };
+
+    /// Sets the site fields (`None`: no site). An id longer than
+    /// [`SITE_ID_CAPACITY`] bytes is cut at a character boundary.
+    pub fn set_site(&mut self, site: Option<(&str, u64, u64)>) {
+        self.site_id = [0; SITE_ID_CAPACITY];
+        let (id, version, hash) = site.unwrap_or(("", 0, 0));
+        let mut end = id.len().min(SITE_ID_CAPACITY);
+        while !id.is_char_boundary(end) {
+            end -= 1;
+        }
+        self.site_id[..end].copy_from_slice(&id.as_bytes()[..end]);
+        self.site_id_len = end as u32;
+        self.site_version = version;
+        self.site_hash = hash;
+    }
+
+    /// The site's id ("" with no site). Never fails: see [`GoalReply::reason_text`].
+    pub fn site_id(&self) -> &str {
+        read_reason(&self.site_id, self.site_id_len)
+    }
 
     /// The decoded mode, or the unknown wire code.
     pub fn mode(&self) -> Result<Mode, u32> {
@@ -890,7 +939,7 @@ const _: () = assert!(offset_of!(PoseEstimate, y) == 24);
 const _: () = assert!(offset_of!(PoseEstimate, heading) == 32);
 const _: () = assert!(offset_of!(PoseEstimate, covariance) == 40);
 
-const _: () = assert!(size_of::<Telemetry>() == 2728 && align_of::<Telemetry>() == 8);
+const _: () = assert!(size_of::<Telemetry>() == 2816 && align_of::<Telemetry>() == 8);
 const _: () = assert!(offset_of!(Telemetry, tick) == 0);
 const _: () = assert!(offset_of!(Telemetry, timestamp_ns) == 8);
 const _: () = assert!(offset_of!(Telemetry, goal_request_id) == 16);
@@ -921,3 +970,7 @@ const _: () = assert!(offset_of!(Telemetry, route) == 2320);
 const _: () = assert!(offset_of!(Telemetry, plan_time_us) == 2704);
 const _: () = assert!(offset_of!(Telemetry, route_age_s) == 2712);
 const _: () = assert!(offset_of!(Telemetry, at_rest) == 2720);
+const _: () = assert!(offset_of!(Telemetry, site_version) == 2728);
+const _: () = assert!(offset_of!(Telemetry, site_hash) == 2736);
+const _: () = assert!(offset_of!(Telemetry, site_id_len) == 2744);
+const _: () = assert!(offset_of!(Telemetry, site_id) == 2752);

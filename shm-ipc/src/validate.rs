@@ -238,6 +238,11 @@ pub enum ValidRequest {
         /// The request id
         request_id: u64,
     },
+    /// Reload the configured site file.
+    ReloadSite {
+        /// The request id
+        request_id: u64,
+    },
 }
 
 impl ValidRequest {
@@ -247,7 +252,8 @@ impl ValidRequest {
             Self::SetGoal { request_id, .. }
             | Self::Cancel { request_id }
             | Self::Stop { request_id }
-            | Self::Resume { request_id } => *request_id,
+            | Self::Resume { request_id }
+            | Self::ReloadSite { request_id } => *request_id,
         }
     }
 }
@@ -319,6 +325,7 @@ impl GoalValidator {
             GoalKind::Cancel => return Ok(ValidRequest::Cancel { request_id }),
             GoalKind::Stop => return Ok(ValidRequest::Stop { request_id }),
             GoalKind::Resume => return Ok(ValidRequest::Resume { request_id }),
+            GoalKind::ReloadSite => return Ok(ValidRequest::ReloadSite { request_id }),
             GoalKind::SetGoal => {}
         }
         let obstacles = req.obstacles().ok_or(RejectReason::TooManyObstacles {

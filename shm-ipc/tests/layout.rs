@@ -45,7 +45,7 @@ fn sizes_alignments_and_offsets() {
         (size_of::<PoseEstimate>(), align_of::<PoseEstimate>()),
         (112, 8)
     );
-    assert_eq!((size_of::<Telemetry>(), align_of::<Telemetry>()), (2728, 8));
+    assert_eq!((size_of::<Telemetry>(), align_of::<Telemetry>()), (2816, 8));
 
     // No implicit padding: the sizes are the sums of the fields.
     assert_eq!(
@@ -84,6 +84,10 @@ fn sizes_alignments_and_offsets() {
     assert_eq!(offset_of!(Telemetry, plan_time_us), 2704);
     assert_eq!(offset_of!(Telemetry, route_age_s), 2712);
     assert_eq!(offset_of!(Telemetry, at_rest), 2720);
+    assert_eq!(offset_of!(Telemetry, site_version), 2728);
+    assert_eq!(offset_of!(Telemetry, site_hash), 2736);
+    assert_eq!(offset_of!(Telemetry, site_id_len), 2744);
+    assert_eq!(offset_of!(Telemetry, site_id), 2752);
 }
 
 #[test]

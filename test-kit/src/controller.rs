@@ -12,7 +12,9 @@
 use std::time::{Duration, Instant};
 
 use control::mpc::Obstacle;
+use control::site::SiteIndex;
 use control::{Goal, State, VelocityCommand};
+use std::sync::Arc;
 use wlnavd::controller::{Controller, ControllerError, Step};
 
 /// What a test controller changes; each default forwards to `inner`.
@@ -47,6 +49,9 @@ pub trait Hooks {
         inner.sent(now, command)
     }
     /// `Controller::compensated_delay`.
+    fn set_site(&mut self, inner: &mut dyn Controller, site: Option<Arc<SiteIndex>>) {
+        inner.set_site(site)
+    }
     fn compensated_delay(&self, inner: &dyn Controller) -> Option<f64> {
         inner.compensated_delay()
     }
@@ -99,6 +104,9 @@ impl<H: Hooks> Controller for Forwarding<H> {
     fn compensated_delay(&self) -> Option<f64> {
         self.hooks.compensated_delay(self.inner.as_ref())
     }
+    fn set_site(&mut self, site: Option<Arc<SiteIndex>>) {
+        self.hooks.set_site(self.inner.as_mut(), site)
+    }
 }
 
 /// Sleeps `d` (times `WLNAV_TIMING_SCALE`): for hooks that stall.
@@ -140,6 +148,9 @@ mod tests {
             self.0.borrow_mut().push("compensated_delay");
             Some(0.37)
         }
+        fn set_site(&mut self, _: Option<Arc<SiteIndex>>) {
+            self.0.borrow_mut().push("set_site");
+        }
     }
 
     #[test]
@@ -158,9 +169,17 @@ mod tests {
             },
         );
         assert_eq!(c.compensated_delay(), Some(0.37));
+        c.set_site(None);
         assert_eq!(
             *calls.borrow(),
-            ["set_goal", "reset", "step", "sent", "compensated_delay"]
+            [
+                "set_goal",
+                "reset",
+                "step",
+                "sent",
+                "compensated_delay",
+                "set_site"
+            ]
         );
     }
 }

@@ -443,10 +443,14 @@ impl Navigator {
         self.routes.take_time_on_caller()
     }
 
-    /// The site the next plans keep off (DESIGN §17; the route being
-    /// followed stays until the next plan).
+    /// The site the next plans keep off (DESIGN §17).
+    /// A goal being driven is planned again in the new world (its route
+    /// stays followed until the answer arrives).
     pub fn set_site(&mut self, site: Option<std::sync::Arc<crate::site::SiteIndex>>) {
         self.world.set_site(site);
+        if self.goal.is_some() && self.aborted.is_none() {
+            self.wanted = Some(PlanKind::Replan);
+        }
     }
 
     /// The machine's outline every plan's checks use.

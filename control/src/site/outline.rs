@@ -65,8 +65,10 @@ pub enum OutlineError {
     BadHalfWidth(f64),
 }
 
-/// The machine's outline as covering circles.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+/// The machine's outline as covering circles. Its buffer always has room
+/// for [`MAX_OUTLINE_CIRCLES`], so that `clone_from` (a world taking another
+/// world's outline, e.g. on the planner thread) never allocates.
+#[derive(Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, try_from = "OutlineDoc", into = "OutlineDoc")]
 pub struct Outline {
     circles: Vec<OutlineCircle>,
@@ -81,6 +83,28 @@ pub struct Outline {
 struct OutlineDoc {
     circles: Vec<OutlineCircle>,
     half_width: f64,
+}
+
+fn full_capacity(circles: &[OutlineCircle]) -> Vec<OutlineCircle> {
+    let mut v = Vec::with_capacity(MAX_OUTLINE_CIRCLES.max(circles.len()));
+    v.extend_from_slice(circles);
+    v
+}
+
+impl Clone for Outline {
+    fn clone(&self) -> Self {
+        Self {
+            circles: full_capacity(&self.circles),
+            half_width: self.half_width,
+        }
+    }
+
+    /// No allocation (the buffer has room for every outline).
+    fn clone_from(&mut self, source: &Self) {
+        self.circles.clear();
+        self.circles.extend_from_slice(&source.circles);
+        self.half_width = source.half_width;
+    }
 }
 
 impl TryFrom<OutlineDoc> for Outline {
@@ -163,7 +187,7 @@ impl Outline {
             }
         }
         Ok(Self {
-            circles,
+            circles: full_capacity(&circles),
             half_width,
         })
     }
@@ -274,16 +298,17 @@ impl Outline {
     ];
 
     fn axial(half_width: f64, spec: &[(Body, f64, f64)]) -> Self {
+        let circles: Vec<OutlineCircle> = spec
+            .iter()
+            .map(|&(body, x, radius)| OutlineCircle {
+                body,
+                offset: [x, 0.0],
+                radius,
+            })
+            .collect();
         Self {
             half_width,
-            circles: spec
-                .iter()
-                .map(|&(body, x, radius)| OutlineCircle {
-                    body,
-                    offset: [x, 0.0],
-                    radius,
-                })
-                .collect(),
+            circles: full_capacity(&circles),
         }
     }
 

@@ -8,6 +8,7 @@ mod faults;
 mod outcomes;
 mod process;
 mod realtime;
+mod site;
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;

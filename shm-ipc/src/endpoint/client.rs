@@ -201,6 +201,13 @@ impl Client {
         self.request(&GoalRequest::resume(self.next_request_id()), timeout)
     }
 
+    /// Asks the daemon to reload its site file: accepted once the new file is
+    /// read and valid (in force from the daemon's next tick), rejected with
+    /// what is wrong while the old site stays.
+    pub fn reload_site(&self, timeout: Duration) -> Result<GoalReply, ClientError> {
+        self.request(&GoalRequest::reload_site(self.next_request_id()), timeout)
+    }
+
     /// Publishes a pose estimate (the publisher is created on first use) and wakes the
     /// daemon.
     pub fn publish_pose(&self, pose: &PoseEstimate) -> Result<(), IpcError> {
