@@ -29,6 +29,7 @@
 
 pub mod generate;
 pub mod geometry;
+pub mod goals;
 pub mod index;
 pub mod nav2;
 pub mod outline;
