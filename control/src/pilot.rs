@@ -189,9 +189,9 @@ impl<C: StageCost> Pilot<C> {
         }
     }
 
-    /// The machine's outline for every layer; the MPC's rows get each
-    /// circle's envelope margin beyond its body's, so that it plans outside
-    /// what the envelope guards.
+    /// The machine's outline for every layer; the MPC's rows and the route's
+    /// checks get each circle's envelope margin beyond its body's, so that
+    /// they plan outside what the envelope guards.
     pub fn set_outline(&mut self, outline: Outline) {
         let settings = self.assumptions.stated();
         let per_circle = settings.circle_margins(&self.params, &outline);
@@ -204,12 +204,13 @@ impl<C: StageCost> Pilot<C> {
                     Body::Rear => rear,
                 };
         }
-        self.mpc
-            .set_outline(outline.clone(), &extra[..outline.len()]);
+        let extra = &extra[..outline.len()];
+        self.mpc.set_outline(outline.clone(), extra);
         if let Some(nav) = &mut self.navigator {
-            nav.set_outline(outline.clone());
+            nav.set_outline(outline.clone(), extra);
         }
         self.world.set_outline(outline);
+        self.world.set_extra_margins(extra);
     }
 
     /// The world the envelope checks (site, circles, outline).

@@ -81,6 +81,11 @@ pub enum WorldError {
 pub struct World {
     params: MachineParams,
     outline: Outline,
+    /// What each outline circle keeps beyond a check's own margin [m]: the
+    /// envelope's per-circle margin beyond its body's (0 for the default
+    /// outline), so that the route and the MPC plan outside what the
+    /// envelope guards ([`World::set_extra_margins`]).
+    extra: [f64; MAX_OUTLINE_CIRCLES],
     site: Option<Arc<SiteIndex>>,
     circles: Vec<Obstacle>,
 }
@@ -92,6 +97,7 @@ impl Clone for World {
         Self {
             params: self.params,
             outline: self.outline.clone(),
+            extra: self.extra,
             site: self.site.clone(),
             circles,
         }
@@ -104,6 +110,7 @@ impl World {
         Self {
             params,
             outline,
+            extra: [0.0; MAX_OUTLINE_CIRCLES],
             site: None,
             circles: Vec::with_capacity(capacity),
         }
@@ -144,8 +151,23 @@ impl World {
         self.site = site;
     }
 
+    /// The outline (its extra margins back to 0).
     pub fn set_outline(&mut self, outline: Outline) {
         self.outline.clone_from(&outline);
+        self.extra = [0.0; MAX_OUTLINE_CIRCLES];
+    }
+
+    /// Each outline circle's extra margin (module docs of the field; one
+    /// entry per circle, missing ones 0).
+    pub fn set_extra_margins(&mut self, extra: &[f64]) {
+        self.extra = [0.0; MAX_OUTLINE_CIRCLES];
+        for (e, x) in self.extra.iter_mut().zip(extra) {
+            *e = *x;
+        }
+    }
+
+    pub fn extra_margins(&self) -> &[f64; MAX_OUTLINE_CIRCLES] {
+        &self.extra
     }
 
     /// Replaces the goal's circles (validated; within the capacity, so no
@@ -175,6 +197,7 @@ impl World {
     pub fn copy_from(&mut self, other: &World) {
         self.params = other.params;
         self.outline.clone_from(&other.outline);
+        self.extra = other.extra;
         self.site = other.site.clone();
         self.circles.clear();
         let n = other.circles.len().min(self.circles.capacity());
@@ -243,6 +266,67 @@ impl World {
                         clearance: hit.clearance,
                     });
                 }
+            }
+        }
+        best
+    }
+
+    /// The site's features whose signed distance from `p` is at most
+    /// `radius`, written into `buf`: `Some(n)` when they are all there
+    /// (fewer than `buf.len()`), `None` when there may be more (or no site).
+    /// What [`World::excess_among`] takes: one index query for a region,
+    /// then exact distances to the few features in it.
+    pub fn features_near(&self, p: P2, radius: f64, buf: &mut [Near]) -> Option<usize> {
+        let site = self.site.as_ref()?;
+        let n = site.nearest(p, radius, buf);
+        (n < buf.len()).then_some(n)
+    }
+
+    /// [`World::excess`] with the site's features limited to `near` (from
+    /// [`World::features_near`]; `None`: all of them, through the index).
+    /// The bounds and the goal's circles are always checked.
+    pub fn excess_among(
+        &self,
+        x: &State,
+        margins: &[f64],
+        cutoff: f64,
+        near: Option<&[Near]>,
+    ) -> Option<Contact> {
+        let (Some(near), Some(site)) = (near, &self.site) else {
+            return self.excess(x, margins, cutoff);
+        };
+        let n = self.outline.len();
+        let placed = self.place(x);
+        let mut best: Option<Contact> = None;
+        let mut bound = cutoff;
+        let mut consider = |target: Target, circle: usize, e: f64| {
+            if e < bound {
+                bound = e;
+                best = Some(Contact {
+                    target,
+                    circle,
+                    clearance: e,
+                });
+            }
+        };
+        for (i, c) in placed[..n].iter().enumerate() {
+            let m = margins[i];
+            for nr in near {
+                let shape = &site.site().features()[nr.feature].shape;
+                consider(
+                    Target::Feature(nr.feature),
+                    i,
+                    shape.clearance(c.center, c.radius) - m,
+                );
+            }
+            let inside = -site.site().bounds().signed_distance(c.center) - c.radius - m;
+            consider(Target::Bounds, i, inside);
+            for (j, o) in self.circles.iter().enumerate() {
+                consider(
+                    Target::Circle(j),
+                    i,
+                    self.circle_clearance(c.center, c.radius, o) - m,
+                );
             }
         }
         best

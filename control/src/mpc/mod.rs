@@ -65,7 +65,7 @@ use crate::delay_estimate::DelayEstimator;
 use crate::gain::GainEstimator;
 use crate::model::{Control, Goal, MachineParams, State, VelocityCommand};
 use crate::site::index::Near;
-use crate::site::outline::{Outline, MAX_OUTLINE_CIRCLES};
+use crate::site::outline::Outline;
 use crate::site::SiteIndex;
 use crate::world::{RowPair, World};
 use std::sync::Arc;
@@ -101,9 +101,6 @@ pub struct Mpc<C: StageCost, D: Dynamics = Rk4Model, B: QpBackend = QpSolverBack
     path_hint: usize,
     /// The site, the goal's circles and the outline (DESIGN §17).
     world: World,
-    /// Extra margin of each outline circle beyond its body's [m]
-    /// ([`Mpc::set_outline`]).
-    circle_margins: [f64; MAX_OUTLINE_CIRCLES],
     /// Each row k's (outline circle, target) pairs: `rows[k · row_stride ..]`,
     /// `row_len[k]` of them (DESIGN §17: the nearest, a bounded count).
     rows: Vec<RowPair>,
@@ -264,7 +261,6 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
             path_cost: PathCost::new(),
             path_hint: 0,
             world: World::with_axle_circles(params, settings.max_obstacles),
-            circle_margins: [0.0; MAX_OUTLINE_CIRCLES],
             rows: vec![RowPair::default(); n * row_stride(&settings)],
             row_len: vec![0; n],
             near: vec![Near::default(); row_stride(&settings)],
@@ -317,11 +313,8 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
     /// per-circle margins less its per-body ones, so that the MPC plans
     /// outside what the envelope guards.
     pub fn set_outline(&mut self, outline: Outline, extra: &[f64]) {
-        self.circle_margins = [0.0; MAX_OUTLINE_CIRCLES];
-        for (m, e) in self.circle_margins.iter_mut().zip(extra) {
-            *m = *e;
-        }
         self.world.set_outline(outline);
+        self.world.set_extra_margins(extra);
     }
 
     /// The last tick's result.

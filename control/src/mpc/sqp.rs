@@ -471,7 +471,7 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
     /// Each outline circle's margin [m]: its body's, plus its own extra.
     fn row_margins(&self) -> [f64; MAX_OUTLINE_CIRCLES] {
         let s = &self.settings;
-        let mut m = self.circle_margins;
+        let mut m = *self.world.extra_margins();
         for (mi, c) in m.iter_mut().zip(self.world.outline().circles()) {
             *mi += match c.body {
                 Body::Front => s.obstacle_margin,

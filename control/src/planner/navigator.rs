@@ -453,9 +453,10 @@ impl Navigator {
         }
     }
 
-    /// The machine's outline every plan's checks use.
-    pub fn set_outline(&mut self, outline: crate::site::Outline) {
-        self.world.set_outline(outline);
+    /// The machine's outline every plan's checks use, each circle's extra
+    /// margin `extra[i]` ([`crate::world::World::set_extra_margins`]).
+    pub fn set_outline(&mut self, outline: crate::site::Outline, extra: &[f64]) {
+        self.world.set_outline(outline, extra);
     }
 
     /// Forgets the goal and the route (an answer still out is dropped when it

@@ -58,7 +58,9 @@ pub struct SearchSettings {
     /// (measured: `docs/global-layer.md`).
     pub plan_every_goal: bool,
     /// Half the side of the square searched, centred between start and goal
-    /// [m]. Default 14.
+    /// [m]. Default 20: a site's goals lie up to 30 m away, and the way round
+    /// a berm can leave a 28 m square (issue 40: quarry `goal021` had no route
+    /// at 14); obstacles200's 200 runs are identical at 14 and 20.
     pub workspace_half_size: f64,
     /// Side of a grid cell [m]. Default 0.3.
     pub grid_resolution: f64,
@@ -111,7 +113,7 @@ impl Default for SearchSettings {
             clearance_margin: 0.15,
             direct_margin: 0.3,
             plan_every_goal: true,
-            workspace_half_size: 14.0,
+            workspace_half_size: 20.0,
             grid_resolution: 0.3,
             heading_bins: 72,
             primitive_length: 0.6,

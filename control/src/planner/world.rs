@@ -10,7 +10,7 @@ use std::sync::Arc;
 
 use crate::model::{MachineParams, State};
 use crate::obstacle::Obstacle;
-use crate::site::{Body, Outline, SiteIndex, MAX_OUTLINE_CIRCLES};
+use crate::site::{Body, Outline, SiteIndex};
 use crate::world::{World, WorldError};
 
 use super::NavError;
@@ -51,8 +51,10 @@ impl CheckedWorld {
         self.world.set_site(site);
     }
 
-    pub fn set_outline(&mut self, outline: Outline) {
+    /// The outline and each circle's extra margin ([`World::set_extra_margins`]).
+    pub fn set_outline(&mut self, outline: Outline, extra: &[f64]) {
         self.world.set_outline(outline);
+        self.world.set_extra_margins(extra);
     }
 
     /// Forgets the goal's circles (the site stays).
@@ -103,11 +105,15 @@ impl CheckedWorld {
         self.state_free(&State::new(x, y, theta, beta, 0.0, 0.0))
     }
 
+    /// Every outline circle keeps the margin plus its extra (the MPC plans
+    /// each circle that much wider: a route it could not follow would stall).
     pub fn state_free(&self, s: &State) -> bool {
-        // Only what comes nearer than the margin is searched for.
-        self.world
-            .excess(s, &[self.margin; MAX_OUTLINE_CIRCLES], 0.0)
-            .is_none()
+        let mut margins = *self.world.extra_margins();
+        for m in &mut margins {
+            *m += self.margin;
+        }
+        // Only what comes nearer than the margins is searched for.
+        self.world.excess(s, &margins, 0.0).is_none()
     }
 
     /// The disc the outline surely covers around the front axle, swept along

@@ -600,4 +600,35 @@ mod tests {
         assert_eq!(o.place(&p, &x, &mut buf), 5);
         assert!((buf[0].center[0] + 0.3).abs() < 1e-12 && buf[4].radius == 0.73);
     }
+
+    /// The truer outlines cover the default outline's axle discs of their
+    /// half-width (points on and inside the discs, every articulation): a
+    /// motion free for the truer outline is free for the default one, so the
+    /// default's minimum-time bound is a lower bound for them too
+    /// (scripts/measure-sites.sh).
+    #[test]
+    fn truer_outlines_cover_their_axle_discs() {
+        let p = MachineParams::default();
+        for (outline, hw) in [(Outline::avant635(), 0.65), (Outline::large_loader(), 0.9)] {
+            for beta in [-0.6, 0.0, 0.6] {
+                let x = State::new(0.0, 0.0, 0.3, beta, 0.0, 0.0);
+                let centres = [
+                    [x[crate::model::ix::X], x[crate::model::ix::Y]],
+                    AxlePoint::Rear.position(&p, &x),
+                ];
+                for c in centres {
+                    for k in 0..72 {
+                        for r in [0.5 * hw, hw] {
+                            let a = k as f64 * std::f64::consts::PI / 36.0;
+                            let q = [c[0] + r * a.cos(), c[1] + r * a.sin()];
+                            let covered = outline.world_circles(&p, &x).any(|w| {
+                                (q[0] - w.center[0]).hypot(q[1] - w.center[1]) <= w.radius + 1e-9
+                            });
+                            assert!(covered, "{q:?} (β {beta}) outside the outline");
+                        }
+                    }
+                }
+            }
+        }
+    }
 }

@@ -251,3 +251,41 @@ fn segment_clear_never_passes_a_blocked_segment() {
     }
     assert!(blocked > 50, "{blocked}");
 }
+
+/// The region query and the exact distances to the features in it give the
+/// index's answer wherever it is below what the region covers.
+#[test]
+fn excess_among_the_features_near_is_the_index_answer_within_reach() {
+    let p = MachineParams::default();
+    let idx = site(4, 400, 80.0);
+    let mut rng = ChaCha8Rng::seed_from_u64(21);
+    let mut compared = 0;
+    for outline in [default_outline(), Outline::avant635()] {
+        let mut w = World::new(p, outline.clone(), 8);
+        w.set_site(Some(idx.clone()));
+        let margins: Vec<f64> = (0..outline.len()).map(|i| 0.1 + 0.02 * i as f64).collect();
+        let extent = (0..outline.len())
+            .map(|i| outline.lever_arm(i, &p) + outline.circles()[i].radius + margins[i])
+            .fold(0.0, f64::max);
+        let mut near = [Near::default(); 48];
+        for _ in 0..300 {
+            let x = random_state(&mut rng, 80.0);
+            let reach = rng.gen_range(3.0..8.0);
+            let Some(n) = w.features_near([x[0], x[1]], reach, &mut near) else {
+                continue;
+            };
+            let cap = reach - extent;
+            let full = w.excess(&x, &margins, cap).map(|c| c.clearance);
+            let local = w
+                .excess_among(&x, &margins, cap, Some(&near[..n]))
+                .map(|c| c.clearance);
+            match (full, local) {
+                (Some(a), Some(b)) => assert!((a - b).abs() < 1e-9, "{a} vs {b}"),
+                (None, None) => {}
+                other => panic!("{other:?} (reach {reach}, cap {cap})"),
+            }
+            compared += 1;
+        }
+    }
+    assert!(compared > 300, "{compared}");
+}
