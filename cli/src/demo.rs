@@ -25,7 +25,7 @@ use super::commands::{
 };
 use super::daemon_process::{locate_wlnavd, unique_prefix, DaemonProcess};
 use super::follow::{GoalStatus, GoalTracker};
-use super::plot::{write_svg, LegTrace};
+use super::plot::{write_svg, LegTrace, SiteDrawing};
 use super::record::{record, RecordLimits};
 use super::{args, exit, signal, Cli};
 
@@ -41,33 +41,15 @@ pub struct Leg {
     pub obstacles: &'static [Obstacle],
 }
 
-/// A pile across the way out of the dump point: three circles of 0.8 m, 4 m ahead along the
-/// dump heading (−60°), 1 m apart across it; the global layer routes around them.
-const PILE: [Obstacle; 3] = [
-    Obstacle {
-        x: 5.134,
-        y: -6.794,
-        r: 0.8,
-    },
-    Obstacle {
-        x: 6.000,
-        y: -6.294,
-        r: 0.8,
-    },
-    Obstacle {
-        x: 6.866,
-        y: -5.794,
-        r: 0.8,
-    },
-];
-
 /// A short V-pattern loading cycle from the origin (heading 0): forward into the pile face
 /// 5 m ahead, back out to the apex of the V while turning the nose 60° to the right, then
 /// forward 5 m along the new heading to the dump point (truck); then on to the next face,
-/// 8 m on, behind a pile (the work-site capability: the global layer's route around it).
-/// Each leg is 4–8 m, inside the goal distances the critic was trained on (2.5–10 m). The
-/// pile leg was checked in the simulator first (`wlnav-sim eval`, same start, ideal
-/// plant: reached in 11.4 s around the pile's upper end, clearance ≥ 0.21 m).
+/// 8 m on, behind a pile of the demo's site (`sim/sites/demo.json`: the pile a polygon
+/// across the way out of the dump point, a wall, an office keep-out; the global layer
+/// routes around the pile). Each leg is 4–8 m, inside the goal distances the critic was
+/// trained on (2.5–10 m). Checked in the simulator first (`wlnav-sim eval --site
+/// sim/sites/demo.json`, the same legs, ideal plant: 4/4, the pile leg in 10.6 s around
+/// the pile, clearance ≥ 0.25 m).
 pub const LOADING_CYCLE: [Leg; 4] = [
     Leg {
         name: "drive to the pile face",
@@ -87,9 +69,28 @@ pub const LOADING_CYCLE: [Leg; 4] = [
     Leg {
         name: "around a pile to a face",
         goal: Pose2::new(8.0, -9.758, -std::f64::consts::FRAC_PI_3),
-        obstacles: &PILE,
+        obstacles: &[],
     },
 ];
+
+/// The demo's site file: `sim/sites/demo.json` of the repository (found from this
+/// executable, `target/{debug,release}/wlnav`, or the working directory), or
+/// `<prefix>/share/wlnav/sites/demo.json` of an installed package.
+pub fn locate_demo_site() -> Option<PathBuf> {
+    let mut candidates = Vec::new();
+    if let Ok(exe) = std::env::current_exe() {
+        let dirs: Vec<&std::path::Path> = exe.ancestors().skip(1).take(3).collect();
+        for d in &dirs {
+            candidates.push(d.join("sim/sites/demo.json"));
+            candidates.push(d.join("share/wlnav/sites/demo.json"));
+        }
+    }
+    if let Ok(d) = std::env::current_dir() {
+        candidates.push(d.join("sim/sites/demo.json"));
+    }
+    candidates.push(PathBuf::from("/usr/share/wlnav/sites/demo.json"));
+    candidates.into_iter().find(|p| p.is_file())
+}
 
 /// `wlnav demo` options.
 #[derive(Debug, Clone, Args)]
@@ -119,6 +120,9 @@ pub struct DemoArgs {
     /// Also record all telemetry of the run to this MCAP file
     #[arg(long)]
     pub record: Option<PathBuf>,
+    /// The site wlnavd drives in [default: the demo's, sim/sites/demo.json]
+    #[arg(long, value_name = "FILE")]
+    pub site: Option<PathBuf>,
 }
 
 /// What happened on one leg.
@@ -181,8 +185,20 @@ pub fn run(cli: &Cli, a: &DemoArgs) -> anyhow::Result<u8> {
     let config = IpcConfig::new(prefix.clone());
     let started = Instant::now();
     let mut cost = a.cost.clone();
+    let site = a.site.clone().or_else(locate_demo_site);
+    let drawn_site = match &site {
+        Some(path) => Some(SiteDrawing::load(path)?),
+        None => {
+            emit("  NOTE     the demo's site file (sim/sites/demo.json) was not found: no site");
+            None
+        }
+    };
     let (mut daemon, first, client, sub) = loop {
         let mut extra: Vec<OsString> = Vec::new();
+        if let Some(path) = &site {
+            extra.push("--site".into());
+            extra.push(path.into());
+        }
         if let Some(cost) = &cost {
             extra.push("--cost".into());
             extra.push(cost.into());
@@ -251,6 +267,14 @@ pub fn run(cli: &Cli, a: &DemoArgs) -> anyhow::Result<u8> {
         start.heading.to_degrees()
     ));
     emit(&format!("  cost     {cost_text}"));
+    if let (Some(path), Some(d)) = (&site, &drawn_site) {
+        emit(&format!(
+            "  site     {} (`{}`: {} features; wlnavd --site)",
+            path.display(),
+            d.id,
+            d.features
+        ));
+    }
 
     // Optional recording on its own thread, with its own subscription.
     let rec_stop = Arc::new(AtomicBool::new(false));
@@ -324,6 +348,7 @@ pub fn run(cli: &Cli, a: &DemoArgs) -> anyhow::Result<u8> {
                     return;
                 }
                 trace.path.push((t.state.x_f, t.state.y_f));
+                trace.end = Some([t.state.x_f, t.state.y_f, t.state.theta_f, t.state.beta]);
                 if trace.route.is_empty() && t.route().len() > 1 {
                     trace.route = t.route().iter().map(|p| (p.x, p.y)).collect();
                     let via: String = t.route()[..t.route().len() - 1]
@@ -426,10 +451,12 @@ pub fn run(cli: &Cli, a: &DemoArgs) -> anyhow::Result<u8> {
         ),
         start,
         &traces,
+        drawn_site.as_ref(),
     ) {
         Ok(()) => {
             emit(&format!(
-                "  picture  {} (driven path, planned horizons every 1 s, obstacles, route)",
+                "  picture  {} (the site, driven path, planned horizons every 1 s, the machine's \
+                 outline where each leg ended, route)",
                 a.out.display()
             ));
         }

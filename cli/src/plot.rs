@@ -36,6 +36,100 @@ pub struct LegTrace {
     /// The global layer's first route for the leg (subgoals, then the goal) [m]; empty
     /// when the way was direct.
     pub route: Vec<(f64, f64)>,
+    /// The machine where the leg ended: front axle x, y, heading θ, articulation β.
+    pub end: Option<[f64; 4]>,
+}
+
+/// The demo machine's geometry for drawing its outline: the Avant 635 (DESIGN §2: L_f =
+/// L_r = 0.6 m) with wlnavd's default outline, a circle of the half-width (0.65 m) at each
+/// axle (DESIGN §17). The client speaks only the wire, which carries no geometry.
+const DEMO_L_F: f64 = 0.6;
+const DEMO_L_R: f64 = 0.6;
+const DEMO_HALF_WIDTH: f64 = 0.65;
+
+/// The default outline's circles (front axle, rear axle) for a machine state.
+fn outline_circles(end: [f64; 4]) -> [(f64, f64); 2] {
+    let [x, y, th, beta] = end;
+    let rear = (
+        x - DEMO_L_F * th.cos() - DEMO_L_R * (th - beta).cos(),
+        y - DEMO_L_F * th.sin() - DEMO_L_R * (th - beta).sin(),
+    );
+    [(x, y), rear]
+}
+
+/// A site file's shapes, read for drawing only (the daemon validates the file; a shape
+/// this cannot read is left out of the picture).
+#[derive(Debug, Clone, Default)]
+pub struct SiteDrawing {
+    /// The site's id.
+    pub id: String,
+    /// The bounds' ring.
+    pub bounds: Vec<(f64, f64)>,
+    /// Filled shapes: (outline, keep-out?); a polyline is several.
+    pub shapes: Vec<(Vec<(f64, f64)>, bool)>,
+    /// The features drawn (obstacles and keep-outs).
+    pub features: usize,
+}
+
+impl SiteDrawing {
+    /// Reads a `wlnav-site-v1` file (DESIGN §17).
+    pub fn load(path: &Path) -> anyhow::Result<Self> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| anyhow!("site file {}: {e}", path.display()))?;
+        let v: serde_json::Value = serde_json::from_str(&text)
+            .map_err(|e| anyhow!("site file {}: {e}", path.display()))?;
+        let ring = |v: &serde_json::Value| -> Vec<(f64, f64)> {
+            v.as_array()
+                .map(|a| {
+                    a.iter()
+                        .filter_map(|p| Some((p.get(0)?.as_f64()?, p.get(1)?.as_f64()?)))
+                        .collect()
+                })
+                .unwrap_or_default()
+        };
+        let mut d = SiteDrawing {
+            id: v["id"].as_str().unwrap_or_default().to_owned(),
+            bounds: ring(&v["bounds"]),
+            shapes: Vec::new(),
+            features: 0,
+        };
+        for (list, keepout) in [("obstacles", false), ("keepout", true)] {
+            for f in v[list].as_array().into_iter().flatten() {
+                let shapes_before = d.shapes.len();
+                if let Some(c) = f["circle"].as_array() {
+                    let c: Vec<f64> = c.iter().filter_map(|x| x.as_f64()).collect();
+                    if c.len() == 3 {
+                        d.shapes.push((circle_points(c[0], c[1], c[2]), keepout));
+                    }
+                } else if f["polygon"].is_array() {
+                    d.shapes.push((ring(&f["polygon"]), keepout));
+                } else if f["polyline"].is_array() {
+                    let line = ring(&f["polyline"]);
+                    let r = 0.5 * f["width"].as_f64().unwrap_or(0.0);
+                    // A capsule chain: a disc at each vertex, a quad per segment.
+                    for &(x, y) in &line {
+                        d.shapes.push((circle_points(x, y, r), keepout));
+                    }
+                    for s in line.windows(2) {
+                        let (dx, dy) = (s[1].0 - s[0].0, s[1].1 - s[0].1);
+                        let n = dx.hypot(dy).max(1e-9);
+                        let (nx, ny) = (-dy / n * r, dx / n * r);
+                        d.shapes.push((
+                            vec![
+                                (s[0].0 + nx, s[0].1 + ny),
+                                (s[1].0 + nx, s[1].1 + ny),
+                                (s[1].0 - nx, s[1].1 - ny),
+                                (s[0].0 - nx, s[0].1 - ny),
+                            ],
+                            keepout,
+                        ));
+                    }
+                }
+                d.features += usize::from(d.shapes.len() > shapes_before);
+            }
+        }
+        Ok(d)
+    }
 }
 
 /// A circle of radius `r` about (`x`, `y`) as a polygon in data coordinates (plotters'
@@ -49,8 +143,9 @@ fn circle_points(x: f64, y: f64, r: f64) -> Vec<(f64, f64)> {
         .collect()
 }
 
-/// Axis ranges with equal metres per pixel on both axes, and the picture size.
-fn layout(points: &[(f64, f64)]) -> ((f64, f64), (f64, f64), (u32, u32)) {
+/// Axis ranges with equal metres per pixel on both axes, and the picture size; the top
+/// `legend_px` pixels of the plot are left free of data for the legend.
+fn layout(points: &[(f64, f64)], legend_px: f64) -> ((f64, f64), (f64, f64), (u32, u32)) {
     let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
     for &(x, y) in points
         .iter()
@@ -70,19 +165,23 @@ fn layout(points: &[(f64, f64)]) -> ((f64, f64), (f64, f64), (u32, u32)) {
     let (extra_w, extra_h) = (90.0, 120.0);
     let width = 900.0;
     let px_per_m = (width - extra_w) / (x1 - x0);
-    let mut height = (y1 - y0) * px_per_m + extra_h;
+    let mut height = (y1 - y0) * px_per_m + extra_h + legend_px;
     if height > 900.0 {
         // Too tall: keep the height, widen the x range instead.
         height = 900.0;
-        let px_per_m = (height - extra_h) / (y1 - y0);
+        let px_per_m = (height - extra_h - legend_px) / (y1 - y0);
+        y1 += legend_px / px_per_m;
         let want = (width - extra_w) / px_per_m;
         let grow = (want - (x1 - x0)) / 2.0;
         (x0, x1) = (x0 - grow, x1 + grow);
     } else if height < 360.0 {
+        y1 += legend_px / px_per_m;
         height = 360.0;
         let want = (height - extra_h) / px_per_m;
         let grow = (want - (y1 - y0)) / 2.0;
         (y0, y1) = (y0 - grow, y1 + grow);
+    } else {
+        y1 += legend_px / px_per_m;
     }
     ((x0, x1), (y0, y1), (width as u32, height as u32))
 }
@@ -90,8 +189,17 @@ fn layout(points: &[(f64, f64)]) -> ((f64, f64), (f64, f64), (u32, u32)) {
 /// Writes the picture: each leg's obstacles (grey discs) and planned route (dashed, through
 /// its subgoals), driven path (thick), planned horizons (thin, faint), goal (dot and a
 /// heading tick 0.5 m long), and the start pose.
-pub fn write_svg(path: &Path, title: &str, start: Pose2, legs: &[LegTrace]) -> anyhow::Result<()> {
+pub fn write_svg(
+    path: &Path,
+    title: &str,
+    start: Pose2,
+    legs: &[LegTrace],
+    site: Option<&SiteDrawing>,
+) -> anyhow::Result<()> {
     let mut all: Vec<(f64, f64)> = vec![(start.x, start.y)];
+    if let Some(site) = site {
+        all.extend(site.shapes.iter().flat_map(|(s, _)| s.iter().copied()));
+    }
     for leg in legs {
         all.extend(&leg.path);
         all.extend(leg.horizons.iter().flatten());
@@ -100,7 +208,9 @@ pub fn write_svg(path: &Path, title: &str, start: Pose2, legs: &[LegTrace]) -> a
             all.extend([(x - r, y - r), (x + r, y + r)]);
         }
     }
-    let ((x0, x1), (y0, y1), size) = layout(&all);
+    // The legend's rows (one per leg and the key) at about 19 px each, and its frame.
+    let legend_px = 19.0 * (legs.len() + 1) as f64 + 16.0;
+    let ((x0, x1), (y0, y1), size) = layout(&all, legend_px);
     let err = |e: DrawingAreaErrorKind<_>| anyhow!("cannot draw {}: {e}", path.display());
 
     let root = SVGBackend::new(path, size).into_drawing_area();
@@ -120,8 +230,38 @@ pub fn write_svg(path: &Path, title: &str, start: Pose2, legs: &[LegTrace]) -> a
         .draw()
         .map_err(err)?;
 
+    if let Some(site) = site {
+        let mut ring = site.bounds.clone();
+        if let Some(&first) = ring.first() {
+            ring.push(first);
+        }
+        chart
+            .draw_series([PathElement::new(ring, BLACK.stroke_width(1))])
+            .map_err(err)?;
+        for (shape, keepout) in &site.shapes {
+            let color = if *keepout {
+                RGBColor(214, 39, 40).mix(0.35)
+            } else {
+                RGBColor(140, 140, 140).mix(0.6)
+            };
+            chart
+                .draw_series([Polygon::new(shape.clone(), color.filled())])
+                .map_err(err)?;
+        }
+    }
     for (i, leg) in legs.iter().enumerate() {
         let color = LEG_COLORS[i % LEG_COLORS.len()];
+        if let Some(end) = leg.end {
+            // The machine's outline where the leg ended.
+            for (x, y) in outline_circles(end) {
+                chart
+                    .draw_series([PathElement::new(
+                        circle_points(x, y, DEMO_HALF_WIDTH),
+                        color.stroke_width(1),
+                    )])
+                    .map_err(err)?;
+            }
+        }
         for &(x, y, r) in &leg.obstacles {
             chart
                 .draw_series([Polygon::new(
@@ -207,7 +347,7 @@ pub fn write_svg(path: &Path, title: &str, start: Pose2, legs: &[LegTrace]) -> a
         )])
         .map_err(err)?
         .label(
-            "start (black); ticks: goal headings; faint: planned horizons; dashed: route; grey: obstacles",
+            "start (black); ticks: goal headings; faint: planned horizons; dashed: route; grey: obstacles; red: keep-outs; rings: the outline at each leg's end",
         )
         .legend(|(x, y)| Rectangle::new([(x + 6, y - 4), (x + 14, y + 4)], BLACK.filled()));
     chart
