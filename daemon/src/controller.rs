@@ -167,6 +167,14 @@ pub trait Controller {
     /// called between ticks, a swap at a tick boundary; `None`: the goals'
     /// circles only).
     fn set_site(&mut self, site: Option<Arc<SiteIndex>>);
+
+    /// Whether a route plan is being computed off the tick right now (an
+    /// answer waiting to be taken does not count). The loop never waits on
+    /// it; a test that must not depend on the planner thread's speed waits
+    /// for it to fall before the next step (sim/tests/daemon_wiring.rs).
+    fn planner_working(&self) -> bool {
+        false
+    }
 }
 
 /// Builds the controller on the control thread.
@@ -270,6 +278,10 @@ impl<C: StageCost> Controller for PilotController<C> {
 
     fn compensated_delay(&self) -> Option<f64> {
         Some(self.pilot.compensated_delay())
+    }
+
+    fn planner_working(&self) -> bool {
+        self.pilot.navigator().is_some_and(|n| n.planner_working())
     }
 }
 

@@ -48,12 +48,17 @@ pub trait Hooks {
     fn sent(&mut self, inner: &mut dyn Controller, now: f64, command: VelocityCommand) {
         inner.sent(now, command)
     }
-    /// `Controller::compensated_delay`.
+    /// `Controller::set_site`.
     fn set_site(&mut self, inner: &mut dyn Controller, site: Option<Arc<SiteIndex>>) {
         inner.set_site(site)
     }
+    /// `Controller::compensated_delay`.
     fn compensated_delay(&self, inner: &dyn Controller) -> Option<f64> {
         inner.compensated_delay()
+    }
+    /// `Controller::planner_working`.
+    fn planner_working(&self, inner: &dyn Controller) -> bool {
+        inner.planner_working()
     }
 }
 
@@ -107,6 +112,9 @@ impl<H: Hooks> Controller for Forwarding<H> {
     fn set_site(&mut self, site: Option<Arc<SiteIndex>>) {
         self.hooks.set_site(self.inner.as_mut(), site)
     }
+    fn planner_working(&self) -> bool {
+        self.hooks.planner_working(self.inner.as_ref())
+    }
 }
 
 /// Sleeps `d` (times `WLNAV_TIMING_SCALE`): for hooks that stall.
@@ -151,6 +159,10 @@ mod tests {
         fn set_site(&mut self, _: Option<Arc<SiteIndex>>) {
             self.0.borrow_mut().push("set_site");
         }
+        fn planner_working(&self) -> bool {
+            self.0.borrow_mut().push("planner_working");
+            true
+        }
     }
 
     #[test]
@@ -170,6 +182,7 @@ mod tests {
         );
         assert_eq!(c.compensated_delay(), Some(0.37));
         c.set_site(None);
+        assert!(c.planner_working());
         assert_eq!(
             *calls.borrow(),
             [
@@ -178,7 +191,8 @@ mod tests {
                 "step",
                 "sent",
                 "compensated_delay",
-                "set_site"
+                "set_site",
+                "planner_working"
             ]
         );
     }
