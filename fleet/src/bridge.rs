@@ -127,7 +127,6 @@ pub async fn run(options: Options, shutdown: impl Future<Output = ()>) -> anyhow
     let id = options.identity.clone();
     let topics = Topics::new(&config.interface_name, &id);
     let limits = Limits::default();
-    let obstacles = config.obstacles().context("site obstacles")?;
     let mut ids = HeaderIds::default();
 
     let client_id = config
@@ -168,7 +167,6 @@ pub async fn run(options: Options, shutdown: impl Future<Output = ()>) -> anyhow
         limits: limits.clone(),
         map_id: config.map_id.clone(),
         first_node_range: config.first_node_range,
-        obstacles,
         machine: config.machine.clone(),
     };
     let mut vehicle = Vehicle::new(settings, shm_ipc::monotonic_now_ns());

@@ -1,23 +1,23 @@
-//! The bridge's configuration file (`--config FILE`, TOML) and the site file it names.
+//! The bridge's configuration file (`--config FILE`, TOML).
 //!
-//! Every key is optional; see `systemd/wlnav-fleet.toml` for a commented example.
+//! Every key is optional; see `systemd/wlnav-fleet.toml` for a commented example. The site
+//! (its obstacles, and its id, the mapId orders must be on) is the daemon's, not the
+//! bridge's: `[site] file` of `wlnavd` (docs/guide/sites.md). The bridge's own site file
+//! (`site_file`, `obstacles`) is gone; a configuration that still has those keys is refused
+//! saying so.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use serde::Deserialize;
-use shm_ipc::Obstacle;
 
 /// Settings from `--config FILE`.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct Config {
-    /// The map the machine's localization works in: `agvPosition.mapId`, and the only mapId
-    /// an order's nodes may have.
+    /// The map orders must be on while the daemon has **no** site (its telemetry's
+    /// `site_id` empty): then `agvPosition.mapId` and the only mapId an order's nodes may
+    /// have. With a site loaded, the site's id is the map and this key is not used.
     pub map_id: String,
-    /// A site file with obstacle circles per mapId (see [`Site`]); none: no obstacles.
-    pub site_file: Option<PathBuf>,
-    /// Circles given inline, for the map `map_id` (added to the site file's).
-    pub obstacles: Vec<Circle>,
     /// How far [m] the machine may be from a new order's first node (or its
     /// allowedDeviationXY if larger); further is a noRouteError.
     pub first_node_range: f64,
@@ -39,8 +39,6 @@ impl Default for Config {
     fn default() -> Self {
         Self {
             map_id: "site".into(),
-            site_file: None,
-            obstacles: Vec::new(),
             first_node_range: 1.0,
             state_interval: 30.0,
             daemon_timeout: 1.5,
@@ -94,49 +92,38 @@ impl Default for MachineInfo {
     }
 }
 
-/// One circle: centre and radius [m] (radius already inflated by the machine's half-width,
-/// as on the wire).
-#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Circle {
-    /// Centre x [m].
-    pub x: f64,
-    /// Centre y [m].
-    pub y: f64,
-    /// Radius [m].
-    pub r: f64,
-}
-
-/// A site file: obstacle circles per mapId.
-///
-/// ```toml
-/// [maps.site]
-/// obstacles = [ { x = 3.0, y = 0.0, r = 0.6 }, { x = 8.0, y = 2.0, r = 1.0 } ]
-/// ```
-#[derive(Debug, Clone, Default, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Site {
-    /// mapId → its circles.
-    #[serde(default)]
-    pub maps: std::collections::BTreeMap<String, SiteMap>,
-}
-
-/// The circles of one map.
-#[derive(Debug, Clone, Default, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct SiteMap {
-    /// Circles.
-    #[serde(default)]
-    pub obstacles: Vec<Circle>,
-}
+/// Keys the bridge's configuration once had, and why they are gone: a configuration with
+/// one of them is refused with this text rather than serde's bare "unknown field".
+const REMOVED_KEYS: [(&str, &str); 2] = [
+    (
+        "site_file",
+        "the bridge has no site file any more: the site (obstacles, and its id, the mapId \
+         orders must be on) is the daemon's, `[site] file` in wlnavd's configuration or \
+         `wlnavd --site FILE` (docs/guide/sites.md); remove the key",
+    ),
+    (
+        "obstacles",
+        "the bridge sends no obstacle circles any more: put them in the daemon's site \
+         (`[site] file` in wlnavd's configuration or `wlnavd --site FILE`, \
+         docs/guide/sites.md); remove the key",
+    ),
+];
 
 impl Config {
     /// Reads and checks a configuration file.
     pub fn load(path: &Path) -> anyhow::Result<Self> {
         let text = std::fs::read_to_string(path)
             .map_err(|e| anyhow::anyhow!("cannot read {}: {e}", path.display()))?;
-        let config: Self =
-            toml::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+        Self::parse(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
+    }
+
+    /// Parses and checks a configuration's text.
+    pub fn parse(text: &str) -> anyhow::Result<Self> {
+        let table: toml::Table = toml::from_str(text)?;
+        for (key, why) in REMOVED_KEYS {
+            anyhow::ensure!(!table.contains_key(key), "`{key}`: {why}");
+        }
+        let config: Self = toml::from_str(text)?;
         config.check()?;
         Ok(config)
     }
@@ -161,48 +148,8 @@ impl Config {
             !self.interface_name.is_empty() && !self.interface_name.contains(['/', '+', '#']),
             "interface_name must be one topic level"
         );
-        check_circles(&self.obstacles, "obstacles")?;
         Ok(())
     }
-
-    /// The circles of the machine's map: the site file's plus the inline ones.
-    pub fn obstacles(&self) -> anyhow::Result<Vec<Obstacle>> {
-        let mut circles = self.obstacles.clone();
-        if let Some(path) = &self.site_file {
-            let site = Site::load(path)?;
-            if let Some(map) = site.maps.get(&self.map_id) {
-                circles.extend_from_slice(&map.obstacles);
-            }
-        }
-        Ok(circles
-            .iter()
-            .map(|c| Obstacle::new(c.x, c.y, c.r))
-            .collect())
-    }
-}
-
-impl Site {
-    /// Reads and checks a site file.
-    pub fn load(path: &Path) -> anyhow::Result<Self> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| anyhow::anyhow!("cannot read site file {}: {e}", path.display()))?;
-        let site: Self =
-            toml::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
-        for (id, map) in &site.maps {
-            check_circles(&map.obstacles, &format!("maps.{id}.obstacles"))?;
-        }
-        Ok(site)
-    }
-}
-
-fn check_circles(circles: &[Circle], what: &str) -> anyhow::Result<()> {
-    for (i, c) in circles.iter().enumerate() {
-        anyhow::ensure!(
-            c.x.is_finite() && c.y.is_finite() && c.r.is_finite() && c.r > 0.0,
-            "{what}[{i}]: centre must be finite and radius > 0"
-        );
-    }
-    Ok(())
 }
 
 #[cfg(test)]
@@ -217,38 +164,40 @@ mod tests {
     }
 
     #[test]
-    fn site_file_and_inline_circles_are_merged() {
+    fn bad_and_unknown_keys_are_refused() {
+        assert_eq!(Config::parse("map_id = \"yard\"\n").unwrap().map_id, "yard");
+        assert!(Config::parse("state_interval = 60\n").is_err());
+        assert!(Config::parse("map_id = \"\"\n").is_err());
+        let e = Config::parse("no_such_key = 1\n").unwrap_err().to_string();
+        assert!(e.contains("no_such_key"), "{e}");
+        let e = Config::parse("[machine]\nwheels = 4\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("wheels"), "{e}");
+    }
+
+    #[test]
+    fn the_removed_site_keys_say_where_the_site_is_now() {
+        for text in [
+            "site_file = \"/etc/wlnav/site.toml\"\n",
+            "obstacles = [{ x = 1.0, y = 1.0, r = 0.5 }]\n",
+        ] {
+            let e = Config::parse(text).unwrap_err().to_string();
+            let key = text.split(' ').next().unwrap();
+            assert!(
+                e.contains(&format!("`{key}`"))
+                    && e.contains("[site] file")
+                    && e.contains("--site"),
+                "{e}"
+            );
+        }
+        // Through a file: the path is named too.
         let dir = std::env::temp_dir().join(format!("wlnav-fleet-cfg-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
-        let site = dir.join("site.toml");
-        std::fs::write(
-            &site,
-            "[maps.yard]\nobstacles = [{ x = 3.0, y = 0.0, r = 0.6 }]\n[maps.other]\nobstacles = [{ x = 9.0, y = 9.0, r = 1.0 }]\n",
-        )
-        .unwrap();
-        let cfg_path = dir.join("fleet.toml");
-        std::fs::write(
-            &cfg_path,
-            format!(
-                "map_id = \"yard\"\nsite_file = {:?}\nobstacles = [{{ x = 1.0, y = 1.0, r = 0.5 }}]\n",
-                site
-            ),
-        )
-        .unwrap();
-        let cfg = Config::load(&cfg_path).unwrap();
-        let obs = cfg.obstacles().unwrap();
-        assert_eq!(obs.len(), 2);
-        assert!(obs.contains(&Obstacle::new(3.0, 0.0, 0.6)));
-        std::fs::write(
-            &site,
-            "[maps.yard]\nobstacles = [{ x = 3.0, y = 0.0, r = -1.0 }]\n",
-        )
-        .unwrap();
-        assert!(cfg.obstacles().is_err());
-        std::fs::write(&cfg_path, "state_interval = 60\n").unwrap();
-        assert!(Config::load(&cfg_path).is_err());
-        std::fs::write(&cfg_path, "no_such_key = 1\n").unwrap();
-        assert!(Config::load(&cfg_path).is_err());
+        let path = dir.join("fleet.toml");
+        std::fs::write(&path, "map_id = \"yard\"\nsite_file = \"site.toml\"\n").unwrap();
+        let e = Config::load(&path).unwrap_err().to_string();
+        assert!(e.contains("fleet.toml") && e.contains("[site] file"), "{e}");
         std::fs::remove_dir_all(&dir).ok();
     }
 }

@@ -98,7 +98,7 @@ pub fn factsheet(
         "protocolFeatures": {
             "optionalParameters": [
                 {"parameter": "order.nodes.nodePosition", "support": "REQUIRED",
-                 "description": "The machine has no map of its own: every node needs a position."},
+                 "description": "Every node needs a position; its mapId must be the daemon's site id, as agvPosition.mapId reports it."},
                 {"parameter": "order.nodes.nodePosition.allowedDeviationXY", "support": "SUPPORTED",
                  "description": "> 0 on an intermediate node: passed without stopping within it. 0 or absent: the daemon's own reach test (the machine stops)."},
                 {"parameter": "order.nodes.nodePosition.allowedDeviationTheta", "support": "SUPPORTED"},

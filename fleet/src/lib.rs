@@ -19,11 +19,14 @@
 //! * [`vda`]: the messages, the project's own serde types, checked against the official
 //!   JSON schemas in `fleet/schemas/` by the tests.
 //! * [`order`]: pure order logic: validation, the accept / update / reject flow, stitching,
-//!   node traversal, obstacles per goal.
+//!   node traversal, the map orders must be on (the daemon's site, [`order::VehicleMap`]).
 //! * [`vehicle`]: the vehicle's state machine: events in, effects out (requests for the
 //!   daemon, state to publish); no I/O.
 //! * [`bridge`]: the thin I/O layer (rumqttc, the daemon thread).
-//! * [`config`]: the configuration file and the site file (obstacle circles per mapId).
+//! * [`config`]: the configuration file. The site (obstacles, map id) is the daemon's
+//!   (DESIGN §17): goals go without circles, and an order's nodes must be on the daemon's
+//!   site (`nodePosition.mapId` = the site's id; the configured `map_id` while the daemon
+//!   has none).
 //!
 //! How an order becomes goals: the released nodes are driven one at a time, each as a
 //! goal of the daemon. An intermediate node with `allowedDeviationXY` > 0 (and, if it has a

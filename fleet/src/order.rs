@@ -1,8 +1,9 @@
 //! Order logic, pure: checking an incoming message, deciding accept / update / reject
 //! (VDA 5050 2.0.0 §6.6, "order handling" flow), stitching updates onto the last base
-//! node, and node traversal. No I/O here; `vehicle.rs` drives it.
+//! node, node traversal, and the map orders must be on ([`VehicleMap`]). No I/O here;
+//! `vehicle.rs` drives it.
 
-use shm_ipc::{normalize_angle, Obstacle, Pose2, MAX_OBSTACLES};
+use shm_ipc::{normalize_angle, Pose2, Telemetry};
 
 use crate::vda::{self, Edge, ErrorLevel, InstantActions, Node, Order, OrderIds};
 
@@ -38,6 +39,69 @@ pub struct Identity {
     /// `serialNumber` in topics and headers.
     pub serial_number: String,
 }
+
+/// The map an order's nodes must be on (their `nodePosition.mapId`), and the one
+/// `agvPosition.mapId` reports: the daemon's site, read from its newest telemetry sample
+/// (DESIGN §17: the site is the daemon's, the bridge has none of its own).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum VehicleMap {
+    /// The daemon's loaded site: its id and version.
+    Site {
+        /// The site's `id`.
+        id: String,
+        /// The site's `version`.
+        version: u64,
+    },
+    /// The daemon has no site (telemetry's `site_id_len` is 0): the configuration's
+    /// `map_id` is the fallback, so the bridge works with a site-less daemon.
+    Configured(String),
+    /// No telemetry has arrived yet: the map is not known, every order is refused.
+    Unknown,
+}
+
+impl VehicleMap {
+    /// The map for the newest telemetry sample `newest` (`None`: none yet) and the
+    /// configuration's `map_id` (`configured`, used only while the daemon has no site).
+    pub fn from_telemetry(newest: Option<&Telemetry>, configured: &str) -> Self {
+        match newest {
+            None => Self::Unknown,
+            Some(t) if t.site_id_len == 0 => Self::Configured(configured.to_owned()),
+            Some(t) => Self::Site {
+                id: t.site_id().to_owned(),
+                version: t.site_version,
+            },
+        }
+    }
+
+    /// The map's id (`None` before any telemetry).
+    pub fn id(&self) -> Option<&str> {
+        match self {
+            Self::Site { id, .. } | Self::Configured(id) => Some(id),
+            Self::Unknown => None,
+        }
+    }
+
+    /// Whether node `node_id` with `nodePosition.mapId` = `map_id` is on this map; if not,
+    /// why (naming both ids). Unknown (no telemetry yet) is never a match.
+    pub fn check_node(&self, node_id: &str, map_id: &str) -> Result<(), String> {
+        match self {
+            Self::Site { id, .. } | Self::Configured(id) if id == map_id => Ok(()),
+            Self::Site { id, version } => Err(format!(
+                "node {node_id}: mapId {map_id:?}, but the daemon's site is {id:?} \
+                 (version {version})"
+            )),
+            Self::Configured(id) => Err(format!(
+                "node {node_id}: mapId {map_id:?}, but the vehicle's map is {id:?} (the \
+                 configuration's map_id: wlnavd has no site loaded)"
+            )),
+            Self::Unknown => Err(NO_TELEMETRY_YET.to_owned()),
+        }
+    }
+}
+
+/// Why an order is refused before the daemon's first telemetry sample.
+pub const NO_TELEMETRY_YET: &str = "no telemetry from wlnavd yet: the daemon's site (the map \
+     an order's nodes must be on) and the machine's position are not known";
 
 /// A validation error, with `topic` and whatever of the header could be read as references.
 fn validation(topic: &str, what: impl Into<String>, refs: &[(&str, &str)]) -> vda::Error {
@@ -118,15 +182,17 @@ pub fn parse_order(
     payload: &[u8],
     id: &Identity,
     limits: &Limits,
-    map_id: &str,
+    map: &VehicleMap,
 ) -> Result<Order, vda::Error> {
     let order: Order = parse_checked("order", payload, id, limits)?;
-    check_order(&order, limits, map_id)?;
+    check_order(&order, limits, map)?;
     Ok(order)
 }
 
-/// The structural checks of an order (after parsing).
-pub fn check_order(order: &Order, limits: &Limits, map_id: &str) -> Result<(), vda::Error> {
+/// The structural checks of an order (after parsing), and that its nodes are on `map`.
+/// Before any telemetry (`map` unknown) a well-formed order is a `noRouteError`
+/// ([`NO_TELEMETRY_YET`]), a node on another map a `validationError` naming both ids.
+pub fn check_order(order: &Order, limits: &Limits, map: &VehicleMap) -> Result<(), vda::Error> {
     let header_id = order.header.header_id.to_string();
     let update_id = order.ids.order_update_id.to_string();
     let base_refs = [
@@ -240,14 +306,13 @@ pub fn check_order(order: &Order, limits: &Limits, map_id: &str) -> Result<(), v
                 &refs,
             ));
         }
-        if p.map_id != map_id {
-            return Err(fail(
-                format!(
-                    "node {}: mapId {:?}, but the vehicle is on map {map_id:?}",
-                    n.node_id, p.map_id
-                ),
-                &refs,
-            ));
+        if *map != VehicleMap::Unknown {
+            if let Err(why) = map.check_node(&n.node_id, &p.map_id) {
+                return Err(fail(
+                    why,
+                    &[("nodeId", n.node_id.as_str()), ("mapId", p.map_id.as_str())],
+                ));
+            }
         }
         if let Some(a) = n.actions.first() {
             return Err(fail(
@@ -312,6 +377,14 @@ pub fn check_order(order: &Order, limits: &Limits, map_id: &str) -> Result<(), v
         if e.max_speed.is_some_and(|v| !v.is_finite() || v < 0.0) {
             return Err(fail(format!("edge {}: bad maxSpeed", e.edge_id), &refs));
         }
+    }
+    if *map == VehicleMap::Unknown {
+        return Err(vda::Error::new(
+            "noRouteError",
+            ErrorLevel::Warning,
+            NO_TELEMETRY_YET,
+            &base_refs,
+        ));
     }
     Ok(())
 }
@@ -402,7 +475,7 @@ pub struct Target {
     pub allowed_xy: f64,
     /// Allowed heading deviation [rad], `None` when any heading will do.
     pub allowed_theta: Option<f64>,
-    /// The node's map (obstacles are that map's).
+    /// The node's map: a goal is sent only while it is the daemon's ([`VehicleMap`]).
     pub map_id: String,
 }
 
@@ -633,42 +706,6 @@ pub fn passed(target: &Target, pose: Pose2) -> bool {
     d <= target.allowed_xy && heading_ok
 }
 
-/// The site's circles to send with a goal from `from` to `goal`: all of them when they fit
-/// in one request ([`MAX_OBSTACLES`]), else the ones nearest the straight way (distance of
-/// the circle's edge to the segment), which is what the daemon's planner meets first.
-pub fn obstacles_for_goal(site: &[Obstacle], from: Pose2, goal: Pose2) -> Vec<Obstacle> {
-    if site.len() <= MAX_OBSTACLES {
-        return site.to_vec();
-    }
-    let mut by_distance: Vec<(f64, Obstacle)> = site
-        .iter()
-        .map(|o| {
-            (
-                segment_distance((from.x, from.y), (goal.x, goal.y), (o.x, o.y)) - o.r,
-                *o,
-            )
-        })
-        .collect();
-    by_distance.sort_by(|a, b| a.0.total_cmp(&b.0));
-    by_distance
-        .into_iter()
-        .take(MAX_OBSTACLES)
-        .map(|(_, o)| o)
-        .collect()
-}
-
-/// Distance of point `p` to the segment `a`–`b`.
-fn segment_distance(a: (f64, f64), b: (f64, f64), p: (f64, f64)) -> f64 {
-    let (dx, dy) = (b.0 - a.0, b.1 - a.1);
-    let len2 = dx * dx + dy * dy;
-    let t = if len2 > 0.0 {
-        (((p.0 - a.0) * dx + (p.1 - a.1) * dy) / len2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    (p.0 - (a.0 + t * dx)).hypot(p.1 - (a.1 + t * dy))
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -706,8 +743,25 @@ mod tests {
                "orderUpdateId": update, "nodes": ns, "edges": es})
     }
 
+    /// The map of a daemon without a site: the configuration's default `map_id`.
+    fn fallback() -> VehicleMap {
+        VehicleMap::Configured("site".into())
+    }
+
+    /// A telemetry sample of a daemon with site `id` version `version` (`None`: no site).
+    fn sample(site: Option<(&str, u64)>) -> Telemetry {
+        let mut t = Telemetry::ZERO;
+        t.set_site(site.map(|(id, version)| (id, version, 0xfeed)));
+        t
+    }
+
     fn parse(v: &serde_json::Value) -> Result<Order, vda::Error> {
-        parse_order(v.to_string().as_bytes(), &id(), &Limits::default(), "site")
+        parse_order(
+            v.to_string().as_bytes(),
+            &id(),
+            &Limits::default(),
+            &fallback(),
+        )
     }
 
     /// A valid order.
@@ -751,7 +805,7 @@ mod tests {
     #[test]
     fn hostile_orders_are_validation_errors() {
         let limits = Limits::default();
-        let p = |b: &[u8]| parse_order(b, &id(), &limits, "site");
+        let p = |b: &[u8]| parse_order(b, &id(), &limits, &fallback());
         assert_eq!(err_type(p(b"{nonsense")).0, "validationError");
         assert_eq!(err_type(p(b"")).0, "validationError");
         // NaN is not JSON; a number beyond f64 is refused by the parser.
@@ -1004,15 +1058,101 @@ mod tests {
     }
 
     #[test]
-    fn obstacles_nearest_the_way_when_too_many() {
-        let site: Vec<Obstacle> = (0..12)
-            .map(|i| Obstacle::new(i as f64, if i % 2 == 0 { 1.0 } else { 20.0 }, 0.5))
-            .collect();
-        let few = obstacles_for_goal(&site[..3], Pose2::default(), Pose2::new(10.0, 0.0, 0.0));
-        assert_eq!(few.len(), 3);
-        let chosen = obstacles_for_goal(&site, Pose2::default(), Pose2::new(10.0, 0.0, 0.0));
-        assert_eq!(chosen.len(), MAX_OBSTACLES);
-        // All six near the way are in.
-        assert_eq!(chosen.iter().filter(|o| o.y == 1.0).count(), 6);
+    fn the_map_is_the_daemons_site_else_the_configured_one_else_unknown() {
+        // A site loaded: its id, whatever the configuration says.
+        let quarry = sample(Some(("quarry", 3)));
+        let map = VehicleMap::from_telemetry(Some(&quarry), "site");
+        assert_eq!(
+            map,
+            VehicleMap::Site {
+                id: "quarry".into(),
+                version: 3
+            }
+        );
+        assert_eq!(map.id(), Some("quarry"));
+        // No site (site_id_len 0): the configuration's map_id.
+        let bare = sample(None);
+        assert_eq!(bare.site_id_len, 0);
+        let map = VehicleMap::from_telemetry(Some(&bare), "site");
+        assert_eq!(map, VehicleMap::Configured("site".into()));
+        assert_eq!(map.id(), Some("site"));
+        // No telemetry yet.
+        let map = VehicleMap::from_telemetry(None, "site");
+        assert_eq!((map.clone(), map.id()), (VehicleMap::Unknown, None));
+    }
+
+    #[test]
+    fn a_node_must_be_on_the_daemons_site() {
+        let quarry = VehicleMap::from_telemetry(Some(&sample(Some(("quarry", 3)))), "site");
+        assert_eq!(quarry.check_node("n1", "quarry"), Ok(()));
+        assert_eq!(
+            quarry.check_node("n2", "north").unwrap_err(),
+            "node n2: mapId \"north\", but the daemon's site is \"quarry\" (version 3)"
+        );
+        // The configured map_id is not a way around the site.
+        assert!(quarry
+            .check_node("n3", "site")
+            .unwrap_err()
+            .contains("the daemon's site is \"quarry\""));
+        // Without a site: the configured map_id, and the text says so.
+        let bare = VehicleMap::from_telemetry(Some(&sample(None)), "site");
+        assert_eq!(bare.check_node("n1", "site"), Ok(()));
+        let e = bare.check_node("n2", "quarry").unwrap_err();
+        assert!(
+            e.contains("mapId \"quarry\"")
+                && e.contains("\"site\"")
+                && e.contains("wlnavd has no site"),
+            "{e}"
+        );
+        // Before telemetry nothing matches.
+        assert!(VehicleMap::Unknown
+            .check_node("n1", "site")
+            .unwrap_err()
+            .contains("no telemetry"));
+    }
+
+    #[test]
+    fn orders_are_checked_against_the_map() {
+        let limits = Limits::default();
+        let nodes: [N; 3] = [
+            A,
+            ("n2", 2, true, 3.0, 0.0, 0.0),
+            ("n3", 4, false, 6.0, 0.0, 0.0),
+        ];
+        let on = |maps: [&str; 3]| {
+            let mut v = order_json("o", 0, &nodes);
+            for (i, m) in maps.iter().enumerate() {
+                v["nodes"][i]["nodePosition"]["mapId"] = json!(m);
+            }
+            v.to_string().into_bytes()
+        };
+        let quarry = VehicleMap::from_telemetry(Some(&sample(Some(("quarry", 3)))), "site");
+        let check = |payload: &[u8], map: &VehicleMap| parse_order(payload, &id(), &limits, map);
+        assert!(check(&on(["quarry"; 3]), &quarry).is_ok());
+        // One node elsewhere, a horizon node too: refused, naming the node and both ids.
+        let e = check(&on(["quarry", "quarry", "north"]), &quarry).unwrap_err();
+        assert_eq!(e.error_type, "validationError");
+        assert_eq!(
+            e.error_description.as_deref(),
+            Some("node n3: mapId \"north\", but the daemon's site is \"quarry\" (version 3)")
+        );
+        assert!(e
+            .error_references
+            .iter()
+            .any(|r| r.reference_key == "nodeId" && r.reference_value == "n3"));
+        // The configuration's map_id counts only without a site.
+        assert!(check(&on(["site"; 3]), &quarry).is_err());
+        assert!(check(&on(["site"; 3]), &fallback()).is_ok());
+        assert!(check(&on(["quarry"; 3]), &fallback()).is_err());
+        // Before any telemetry: a well-formed order is refused as such; a malformed one is
+        // still a validationError.
+        let e = check(&on(["quarry"; 3]), &VehicleMap::Unknown).unwrap_err();
+        assert_eq!(e.error_type, "noRouteError");
+        assert!(e
+            .error_description
+            .unwrap()
+            .contains("no telemetry from wlnavd yet"));
+        let e = check(b"{", &VehicleMap::Unknown).unwrap_err();
+        assert_eq!(e.error_type, "validationError");
     }
 }

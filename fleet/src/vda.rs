@@ -117,7 +117,7 @@ pub struct Node {
     pub node_description: Option<String>,
     /// Base (true) or horizon (false).
     pub released: bool,
-    /// Where the node is (required by this vehicle: it has no map of its own).
+    /// Where the node is (required by this vehicle; its mapId must be the daemon's site id).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub node_position: Option<NodePosition>,
     /// Actions at the node (required by the schema, may be empty).

@@ -8,12 +8,12 @@ use std::collections::HashSet;
 use std::time::Duration;
 
 use shm_ipc::{
-    fault_flags, AbortReason, GoalOutcome, GoalReply, GoalRequest, Mode, Obstacle, Pose2,
-    RejectCode, Telemetry,
+    fault_flags, AbortReason, GoalOutcome, GoalReply, GoalRequest, Mode, Pose2, RejectCode,
+    Telemetry,
 };
 
 use crate::config::MachineInfo;
-use crate::order::{self, Decision, Identity, Limits, OrderBook, Target};
+use crate::order::{self, Decision, Identity, Limits, OrderBook, Target, VehicleMap};
 use crate::vda::{
     self, ActionState, ActionStatus, AgvPosition, BatteryState, EStop, EdgeState, ErrorLevel,
     Header, NodeState, OperatingMode, SafetyState, State, Velocity,
@@ -50,12 +50,11 @@ pub struct VehicleSettings {
     pub identity: Identity,
     /// Message limits.
     pub limits: Limits,
-    /// The machine's map.
+    /// The map while the daemon has no site (the configuration's `map_id`); with a site
+    /// the site's id is the map ([`VehicleMap`]).
     pub map_id: String,
     /// See [`crate::config::Config::first_node_range`].
     pub first_node_range: f64,
-    /// The site's circles on the machine's map.
-    pub obstacles: Vec<Obstacle>,
     /// Factsheet and battery values.
     pub machine: MachineInfo,
 }
@@ -147,6 +146,13 @@ impl Vehicle {
         Some(Pose2::new(t.state.x_f, t.state.y_f, t.state.theta_f))
     }
 
+    /// The map orders must be on now: the daemon's site as its newest telemetry sample
+    /// names it (kept while the daemon is away), else the configured `map_id`; unknown
+    /// before the first sample.
+    pub fn map(&self) -> VehicleMap {
+        VehicleMap::from_telemetry(self.telemetry.as_ref(), &self.settings.map_id)
+    }
+
     fn at_rest(&self) -> bool {
         self.telemetry
             .as_ref()
@@ -160,7 +166,7 @@ impl Vehicle {
             payload,
             &self.settings.identity,
             &self.settings.limits,
-            &self.settings.map_id,
+            &self.map(),
         ) {
             Ok(o) => o,
             Err(e) => {
@@ -200,6 +206,13 @@ impl Vehicle {
             }
             Decision::New => {
                 tracing::info!(order_id = %order.ids.order_id, nodes = order.nodes.len(), "new order");
+                // A goal of the previous order the daemon may still drive (one the bridge
+                // stopped sending after, e.g. when the site changed): replaced by the new
+                // order's first goal, its end expected. (Goals are matched by sequenceId,
+                // which the new order numbers afresh.)
+                if let Some(g) = self.goal.take() {
+                    self.expected_end.insert(g.request_id);
+                }
                 self.actions.clear();
                 self.kept_errors.clear();
                 self.distance_since_last_node = 0.0;
@@ -594,14 +607,39 @@ impl Vehicle {
                 break;
             }
             self.retry_at = None;
-            effects.push(Effect::Daemon(self.goal_request(&target, pose)));
+            if let Err(why) = self.map().check_node(&target.node_id, &target.map_id) {
+                // The daemon's site changed its id while the order ran (a reload, or a
+                // daemon restarted with another site): no goal on a map the daemon no
+                // longer has. A goal it already drives is its own business (it plans it
+                // again in the new world); the order stops at its last traversed node.
+                self.book.failed = true;
+                let order_id = self.book.ids.order_id.clone();
+                let last = self.book.last_node_id.clone();
+                self.keep_error(vda::Error::new(
+                    "noRouteError",
+                    ErrorLevel::Warning,
+                    format!(
+                        "{why}: the site changed while order {order_id} ran; no goal is sent \
+                         for node {}, the order stops at node {last}",
+                        target.node_id
+                    ),
+                    &[
+                        ("orderId", &order_id),
+                        ("nodeId", &target.node_id),
+                        ("mapId", &target.map_id),
+                    ],
+                ));
+                effects.push(Effect::PublishState);
+                break;
+            }
+            effects.push(Effect::Daemon(self.goal_request(&target)));
             break;
         }
         effects
     }
 
-    fn goal_request(&mut self, target: &Target, from: Pose2) -> GoalRequest {
-        let obstacles = order::obstacles_for_goal(&self.settings.obstacles, from, target.goal);
+    /// The goal for `target`, without circles: the daemon's site is the world.
+    fn goal_request(&mut self, target: &Target) -> GoalRequest {
         let id = self.next_request_id();
         if let Some(old) = self.goal.replace(SentGoal {
             request_id: id,
@@ -618,8 +656,7 @@ impl Vehicle {
             pass_through = target.pass_through,
             "goal"
         );
-        GoalRequest::set_goal(id, target.goal, &obstacles)
-            .expect("obstacles_for_goal keeps within MAX_OBSTACLES")
+        GoalRequest::set_goal(id, target.goal, &[]).expect("no circles are within the limit")
     }
 
     fn position(&self) -> Option<AgvPosition> {
@@ -628,7 +665,8 @@ impl Vehicle {
             x: t.state.x_f,
             y: t.state.y_f,
             theta: shm_ipc::normalize_angle(t.state.theta_f),
-            map_id: self.settings.map_id.clone(),
+            // With telemetry the map is known: the site's id, else the configured one.
+            map_id: self.map().id().unwrap_or_default().to_owned(),
             map_description: None,
             position_initialized: self.daemon_ok && t.fault_flags & fault_flags::POSE_STALE == 0,
             localization_score: None,
@@ -783,7 +821,6 @@ mod tests {
                 limits: Limits::default(),
                 map_id: "site".into(),
                 first_node_range: 1.0,
-                obstacles: vec![Obstacle::new(3.0, 2.0, 0.5)],
                 machine: MachineInfo::default(),
             },
             100,
@@ -812,11 +849,21 @@ mod tests {
     }
 
     fn order(order_id: &str, update: u64, nodes: &[(&str, u64, f64, f64, f64)]) -> Vec<u8> {
+        order_on("site", order_id, update, nodes)
+    }
+
+    /// An order whose nodes are all on map `map`.
+    fn order_on(
+        map: &str,
+        order_id: &str,
+        update: u64,
+        nodes: &[(&str, u64, f64, f64, f64)],
+    ) -> Vec<u8> {
         let ns: Vec<_> = nodes
             .iter()
             .map(|(id, seq, x, y, dev)| {
                 json!({"nodeId": id, "sequenceId": seq, "released": true, "actions": [],
-                "nodePosition": {"x": x, "y": y, "mapId": "site", "allowedDeviationXY": dev}})
+                "nodePosition": {"x": x, "y": y, "mapId": map, "allowedDeviationXY": dev}})
             })
             .collect();
         let es: Vec<_> = nodes
@@ -895,7 +942,8 @@ mod tests {
         );
         let g = goals(&fx);
         assert_eq!(g.len(), 1);
-        assert_eq!((g[0].goal.x, g[0].obstacle_count), (3.0, 1));
+        // Without circles: the daemon's site is the world.
+        assert_eq!((g[0].goal.x, g[0].obstacle_count), (3.0, 0));
         assert!(v
             .on_reply(g[0].request_id, Ok(GoalReply::accept(g[0].request_id)), T)
             .is_empty());
@@ -1269,5 +1317,130 @@ mod tests {
         let s = v.state(header());
         assert_eq!(status(&s, "p3"), Some(ActionStatus::Finished));
         assert_eq!(s.paused, Some(false));
+    }
+
+    /// `telemetry` on site `id` version `version`.
+    fn on_site(x: f64, v: f64, mode: Mode, id: &str, version: u64) -> Telemetry {
+        let mut t = telemetry(x, 0.0, v, mode);
+        t.set_site(Some((id, version, 0xfeed)));
+        t
+    }
+
+    fn descriptions(s: &State, ty: &str) -> Vec<String> {
+        s.errors
+            .iter()
+            .filter(|e| e.error_type == ty)
+            .map(|e| e.error_description.clone().unwrap_or_default())
+            .collect()
+    }
+
+    #[test]
+    fn orders_are_refused_before_telemetry_and_off_the_daemons_site() {
+        let ab = [("A", 0, 0.0, 0.0, 0.0), ("B", 2, 3.0, 0.0, 0.0)];
+        let mut v = vehicle();
+        // No telemetry yet: refused, whatever the map.
+        assert!(goals(&v.on_order(&order("o", 0, &ab), T)).is_empty());
+        let s = v.state(header());
+        assert!(
+            descriptions(&s, "noRouteError")[0].contains("no telemetry from wlnavd yet"),
+            "{:?}",
+            s.errors
+        );
+        assert!(s.agv_position.is_none());
+        // The daemon's site is "quarry": an order on the configured map_id ("site") is
+        // refused naming both ids; one on "quarry" is driven, and agvPosition says "quarry".
+        v.on_telemetry(&on_site(0.0, 0.0, Mode::Idle, "quarry", 3), T);
+        assert!(goals(&v.on_order(&order("o", 0, &ab), T)).is_empty());
+        let s = v.state(header());
+        assert_eq!(
+            descriptions(&s, "validationError"),
+            ["node A: mapId \"site\", but the daemon's site is \"quarry\" (version 3)"]
+        );
+        assert_eq!(s.agv_position.unwrap().map_id, "quarry");
+        let g = goals(&v.on_order(&order_on("quarry", "o", 0, &ab), T));
+        assert_eq!(g.len(), 1);
+        assert_eq!(v.book().ids.order_id, "o");
+        // A daemon without a site: the configured map_id again.
+        let mut v = vehicle();
+        v.on_telemetry(&telemetry(0.0, 0.0, 0.0, Mode::Idle), T);
+        assert_eq!(v.state(header()).agv_position.unwrap().map_id, "site");
+        assert!(goals(&v.on_order(&order_on("quarry", "o", 0, &ab), T)).is_empty());
+        assert!(
+            descriptions(&v.state(header()), "validationError")[0].contains("wlnavd has no site")
+        );
+        assert_eq!(goals(&v.on_order(&order("o", 0, &ab), T)).len(), 1);
+    }
+
+    #[test]
+    fn a_site_reload_with_another_id_stops_the_order_before_its_next_goal() {
+        let abc = [
+            ("A", 0, 0.0, 0.0, 0.0),
+            ("B", 2, 3.0, 0.0, 0.5),
+            ("C", 4, 6.0, 0.0, 0.0),
+        ];
+        // A new version of the same site: nothing changes, C's goal is sent.
+        let mut v = vehicle();
+        v.on_telemetry(&on_site(0.0, 0.0, Mode::Idle, "quarry", 3), T);
+        assert_eq!(
+            goals(&v.on_order(&order_on("quarry", "o", 0, &abc), T)).len(),
+            1
+        );
+        let fx = v.on_telemetry(&on_site(2.7, 0.8, Mode::Tracking, "quarry", 4), T);
+        assert_eq!(goals(&fx)[0].goal.x, 6.0);
+
+        // Another site: updates for the old map are refused; the goal the daemon drives
+        // is its own (not cancelled); once B is passed no goal goes out for C.
+        let mut v = vehicle();
+        v.on_telemetry(&on_site(0.0, 0.0, Mode::Idle, "quarry", 3), T);
+        let g = goals(&v.on_order(&order_on("quarry", "o", 0, &abc), T));
+        assert_eq!(g.len(), 1);
+        let fx = v.on_telemetry(&on_site(1.0, 0.8, Mode::Tracking, "yard", 1), T);
+        assert!(goals(&fx).is_empty(), "{fx:?}");
+        let up = [("C", 4, 6.0, 0.0, 0.0), ("D", 6, 9.0, 0.0, 0.0)];
+        assert!(goals(&v.on_order(&order_on("quarry", "o", 1, &up), T)).is_empty());
+        assert_eq!(
+            descriptions(&v.state(header()), "validationError"),
+            ["node C: mapId \"quarry\", but the daemon's site is \"yard\" (version 1)"]
+        );
+        let fx = v.on_telemetry(&on_site(2.7, 0.8, Mode::Tracking, "yard", 1), T);
+        assert!(goals(&fx).is_empty(), "a goal on the old map: {fx:?}");
+        let s = v.state(header());
+        assert_eq!(s.last_node_id, "B");
+        assert_eq!(s.agv_position.as_ref().unwrap().map_id, "yard");
+        let stop = descriptions(&s, "noRouteError");
+        assert_eq!(stop.len(), 1, "{:?}", s.errors);
+        assert!(
+            stop[0].starts_with(
+                "node C: mapId \"quarry\", but the daemon's site is \"yard\" (version 1): \
+                 the site changed while order o ran"
+            ),
+            "{}",
+            stop[0]
+        );
+        assert!(!v.book().is_active());
+        // Nothing more is sent for the old order; a new one on the new site is driven.
+        v.on_telemetry(&on_site(3.2, 0.0, Mode::Idle, "yard", 1), T);
+        assert!(goals(&v.on_telemetry(&on_site(3.2, 0.0, Mode::Idle, "yard", 1), T)).is_empty());
+        let g2 = goals(&v.on_order(
+            &order_on(
+                "yard",
+                "o2",
+                0,
+                &[("X", 0, 3.2, 0.0, 0.0), ("Y", 2, 5.0, 0.0, 0.0)],
+            ),
+            T,
+        ));
+        assert_eq!(g2[0].goal.x, 5.0);
+        // The old goal (B's, which the daemon drove on) ends preempted: expected, no error.
+        let mut t = on_site(3.3, 0.2, Mode::Tracking, "yard", 1);
+        t.set_outcome(
+            g[0].request_id,
+            GoalOutcome::Preempted,
+            AbortReason::None,
+            1,
+            "newer goal",
+        );
+        v.on_telemetry(&t, T);
+        assert!(v.state(header()).errors.is_empty());
     }
 }

@@ -11,6 +11,19 @@ use serde_json::Value;
 
 const LONG: Duration = Duration::from_secs(60);
 
+/// The id of [`SITE`].
+const SITE_ID: &str = "e2e-quarry";
+
+/// The daemon's site in the rejection test: bounds around the origin, a pile at (5, 5),
+/// and a closed square wall around (-6, 0) (inner side 4.6 m; the machine, 1.2 m between
+/// its axles, 0.65 m outline circles, fits inside at its centre).
+const SITE: &str = r#"{"format": "wlnav-site-v1", "id": "e2e-quarry", "version": 7,
+  "bounds": [[-12, -9], [16, -9], [16, 9], [-12, 9]],
+  "obstacles": [
+    {"id": "pile", "circle": [5, 5, 0.35]},
+    {"id": "wall", "polyline": [[-8.5, -2.5], [-3.5, -2.5], [-3.5, 2.5], [-8.5, 2.5], [-8.5, -2.5]],
+     "width": 0.4}]}"#;
+
 fn node_count(s: &Value) -> usize {
     s["nodeStates"].as_array().map_or(0, Vec::len)
 }
@@ -200,39 +213,16 @@ fn bad_orders_and_actions_are_errors_in_state_and_never_reach_the_daemon() {
     let broker = Broker::start();
     let master = Master::connect(broker.port);
     let prefix = unique_prefix("reject");
-    let daemon = start_daemon(&prefix);
-    // Obstacles: a site file with a closed ring of 8 circles around (-6, 0) on the map
-    // "site" (the vehicle's) and a circle at (8, 0) on another map, which must never be
-    // sent (a goal at (8, 0) is driven below); one more circle at (5, 5) inline. 9 circles
-    // on the map: each goal gets the 8 nearest its way (the wire's limit).
-    let site = std::env::temp_dir().join(format!("wlnav-fleet-site-{}.toml", std::process::id()));
-    let ring: Vec<String> = (0..8)
-        .map(|k| {
-            let a = k as f64 * std::f64::consts::FRAC_PI_4;
-            format!(
-                "{{ x = {:.4}, y = {:.4}, r = 0.9 }}",
-                -6.0 + 2.3 * a.cos(),
-                2.3 * a.sin()
-            )
-        })
-        .collect();
-    std::fs::write(
-        &site,
-        format!(
-            "[maps.site]\nobstacles = [{}]\n[maps.elsewhere]\nobstacles = [{{ x = 8.0, y = 0.0, r = 1.0 }}]\n",
-            ring.join(", ")
-        ),
-    )
-    .unwrap();
-    let mut bridge = start_bridge(
-        &broker.addr(),
-        "L1",
-        &prefix,
-        Some(&format!(
-            "site_file = {:?}\nobstacles = [{{ x = 5.0, y = 5.0, r = 1.0 }}]\n",
-            site.display().to_string()
-        )),
-    );
+    // The daemon's site (DESIGN §17; the bridge has none of its own): bounds around the
+    // origin (the simulated machine starts there, heading +x), a pile at (5, 5) and a closed
+    // square wall around (-6, 0) (the machine's outline fits inside, there is no way in).
+    // Its id, not the bridge's configured map_id ("site", the default), is the map orders
+    // must be on.
+    let site = std::env::temp_dir().join(format!("wlnav-fleet-site-{}.json", std::process::id()));
+    std::fs::write(&site, SITE).unwrap();
+    let daemon = start_daemon_with(&prefix, Some(&site));
+    master.set_map(SITE_ID);
+    let mut bridge = start_bridge(&broker.addr(), "L1", &prefix, None);
     let telemetry = TelemetryLog::start(&prefix);
     wait_ready(&master, "L1");
 
@@ -240,9 +230,28 @@ fn bad_orders_and_actions_are_errors_in_state_and_never_reach_the_daemon() {
     let good = master
         .order("L1", "probe", 0, 0, &[("A", 0.0, 0.0, 0.0, true)])
         .to_string();
-    master.wait_state("L1", t0, LONG, "probe accepted", |s| {
+    let s = master.wait_state("L1", t0, LONG, "probe accepted", |s| {
         s["orderId"] == "probe"
     });
+    assert_eq!(s["agvPosition"]["mapId"], SITE_ID, "{s:#}");
+    // An order on another map than the daemon's site, even the bridge's configured map_id:
+    // refused, naming both ids; nothing reaches the daemon (checked below).
+    let s = new_error(
+        &master,
+        "validationError",
+        &format!("node A: mapId \"site\", but the daemon's site is \"{SITE_ID}\" (version 7)"),
+        || {
+            master.order_on(
+                "site",
+                "L1",
+                "elsewhere",
+                0,
+                0,
+                &[("A", 0.0, 0.0, 0.0, true)],
+            );
+        },
+    );
+    assert_eq!(s["orderId"], "probe");
     let hostile: Vec<(&str, Vec<u8>, &str)> = vec![
         ("garbage", b"{this is not json".to_vec(), "not valid JSON"),
         (
@@ -353,12 +362,13 @@ fn bad_orders_and_actions_are_errors_in_state_and_never_reach_the_daemon() {
     let checked = samples.len();
     assert!(bridge.is_running());
 
-    // The daemon's own validation: a node in an obstacle, a node outside the workspace.
+    // The daemon's own validation: a node in the site's pile, a node outside the workspace.
     let obst = [("A", 0.0, 0.0, 0.0, true), ("B", 5.0, 5.0, 0.0, true)];
     let s = new_error(&master, "noRouteError", "wlnavd refused node B", || {
         master.order("L1", "obst", 0, 0, &obst);
     });
     assert!(s["errors"].to_string().contains("GoalInCollision"), "{s:#}");
+    assert!(s["errors"].to_string().contains("pile"), "{s:#}");
     let t = Instant::now();
     master.order(
         "L1",
@@ -371,7 +381,7 @@ fn bad_orders_and_actions_are_errors_in_state_and_never_reach_the_daemon() {
         s["orderId"] == "ws" && has_error(s, "noRouteError", "wlnavd refused node B")
     });
     assert!(s["errors"].to_string().contains("OutOfWorkspace"), "{s:#}");
-    // A goal the daemon accepts and then aborts as no-route: inside the closed ring.
+    // A goal the daemon accepts and then aborts as no-route: inside the closed wall.
     let t = Instant::now();
     master.order(
         "L1",
@@ -384,12 +394,17 @@ fn bad_orders_and_actions_are_errors_in_state_and_never_reach_the_daemon() {
         s["orderId"] == "ring" && has_error(s, "noRouteError", "aborted (no-route)")
     });
     assert_eq!(s["lastNodeId"], "A", "{s:#}");
-    // The daemon got the ring (8 circles: the nearest of the map's 9; the other map's none).
+    // The goals went without circles: the daemon's site is the world.
     let log = daemon.log_text();
     assert!(
         log.lines()
-            .any(|l| l.contains("(-6.00, 0.00,") && l.contains("with 8 obstacle(s)")),
+            .any(|l| l.contains("(-6.00, 0.00,") && l.contains("with 0 obstacle(s)")),
         "wlnavd log:\n{log}"
+    );
+    assert!(
+        !log.lines()
+            .any(|l| l.contains("goal ") && l.contains("obstacle(s)") && !l.contains("with 0 ")),
+        "a goal with circles; wlnavd log:\n{log}"
     );
 
     // Update rules: another order while one is active, a stale update.

@@ -9,9 +9,7 @@ mod common;
 use std::time::Duration;
 
 use serde_json::{json, Value};
-use shm_ipc::{
-    fault_flags, AbortReason, GoalOutcome, GoalReply, Mode, Obstacle, RejectCode, Telemetry,
-};
+use shm_ipc::{fault_flags, AbortReason, GoalOutcome, GoalReply, Mode, RejectCode, Telemetry};
 use wlnav_fleet::config::MachineInfo;
 use wlnav_fleet::order::{Identity, Limits};
 use wlnav_fleet::vda::{self, ConnectionState, Header};
@@ -39,7 +37,6 @@ fn vehicle() -> Vehicle {
             limits: Limits::default(),
             map_id: "site".into(),
             first_node_range: 1.0,
-            obstacles: vec![Obstacle::new(3.0, 2.0, 0.5)],
             machine: MachineInfo::default(),
         },
         1,
@@ -95,11 +92,17 @@ fn instant(actions: &[(&str, &str)]) -> Vec<u8> {
 fn states_in_every_situation_match_the_schema() {
     let t0 = Duration::ZERO;
     let mut v = vehicle();
-    // Before any daemon: an error, no position.
+    // Before any daemon: an error, no position; an order refused (no telemetry yet).
+    assert_valid("state", &state_json(&v));
+    v.on_order(&order("early", 0, &[("A", 0, 0.0, true)]), t0);
     assert_valid("state", &state_json(&v));
     v.on_telemetry(&telemetry(0.0, 0.0, Mode::Idle), t0);
     assert_valid("state", &state_json(&v));
-    // Every kind of rejection.
+    // Every kind of rejection (a node on another map too).
+    let north = String::from_utf8(order("north", 0, &[("A", 0, 0.0, true)]))
+        .unwrap()
+        .replace("\"mapId\":\"site\"", "\"mapId\":\"north\"");
+    v.on_order(north.as_bytes(), t0);
     v.on_order(b"garbage", t0);
     v.on_order(&order("far", 0, &[("X", 0, 30.0, true)]), t0);
     v.on_instant_actions(
@@ -108,7 +111,11 @@ fn states_in_every_situation_match_the_schema() {
     );
     let s = state_json(&v);
     assert_valid("state", &s);
-    assert!(s["errors"].as_array().unwrap().len() >= 3, "{s:#}");
+    assert!(s["errors"].as_array().unwrap().len() >= 5, "{s:#}");
+    assert!(
+        s["errors"].to_string().contains("mapId \\\"north\\\""),
+        "{s:#}"
+    );
     // An order with a horizon, driven.
     let fx = v.on_order(
         &order(

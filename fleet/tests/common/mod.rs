@@ -204,6 +204,11 @@ impl Drop for Proc {
 /// ready (telemetry in idle). Its log is at `info` (the tests read its goals with their
 /// obstacle counts).
 pub fn start_daemon(prefix: &str) -> Daemon {
+    start_daemon_with(prefix, None)
+}
+
+/// [`start_daemon`] with the site `site` (`wlnavd --site FILE`, DESIGN §17).
+pub fn start_daemon_with(prefix: &str, site: Option<&Path>) -> Daemon {
     let scale = timing_scale::daemon_time_scale(FAST);
     let mut command = DaemonCommand::sim(
         &wlnav_test_kit::binaries().wlnavd,
@@ -213,6 +218,9 @@ pub fn start_daemon(prefix: &str) -> Daemon {
     )
     .args(["--cost".to_owned(), wlnav_test_kit::cost()])
     .env("RUST_LOG", "info");
+    if let Some(site) = site {
+        command = command.args(["--site".as_ref(), site.as_os_str()]);
+    }
     // On a slower CPU the solver's budget (also the start-up self-test's) is scaled too.
     if timing_scale::factor() > 1.0 {
         let budget = command.log.with_extension("toml");
@@ -326,6 +334,9 @@ pub struct Received {
 /// schema (a failure is recorded and reported by [`Master::check_valid`]).
 pub struct Master {
     client: rumqttc::Client,
+    /// The mapId of the nodes [`Master::order`] sends ("site": the bridge's default
+    /// `map_id`, the map while wlnavd has no site).
+    map_id: Mutex<String>,
     pub received: Arc<Mutex<Vec<Received>>>,
     pub invalid: Arc<Mutex<Vec<String>>>,
     header_id: std::sync::atomic::AtomicU64,
@@ -400,6 +411,7 @@ impl Master {
         });
         Self {
             client,
+            map_id: Mutex::new("site".into()),
             received,
             invalid,
             header_id: 0.into(),
@@ -428,10 +440,30 @@ impl Master {
         })
     }
 
+    /// The mapId of the orders [`Master::order`] sends from now on.
+    pub fn set_map(&self, map_id: &str) {
+        *self.map_id.lock().unwrap() = map_id.to_owned();
+    }
+
     /// Sends an order built from (nodeId, x, y, allowedDeviationXY, released) nodes,
-    /// sequence ids from `first_seq`. The order is checked against its schema first.
+    /// sequence ids from `first_seq`, on the map set by [`Master::set_map`] ("site" unless
+    /// set). The order is checked against its schema first.
     pub fn order(
         &self,
+        serial: &str,
+        order_id: &str,
+        update: u64,
+        first_seq: u64,
+        nodes: &[(&str, f64, f64, f64, bool)],
+    ) -> Value {
+        let map = self.map_id.lock().unwrap().clone();
+        self.order_on(&map, serial, order_id, update, first_seq, nodes)
+    }
+
+    /// [`Master::order`] with every node on map `map_id`.
+    pub fn order_on(
+        &self,
+        map_id: &str,
         serial: &str,
         order_id: &str,
         update: u64,
@@ -445,7 +477,7 @@ impl Master {
             .iter()
             .enumerate()
             .map(|(i, (id, x, y, dev, rel))| json!({"nodeId": id, "sequenceId": first_seq + 2 * i as u64, "released": rel, "actions": [],
-                "nodePosition": {"x": x, "y": y, "mapId": "site", "allowedDeviationXY": dev}}))
+                "nodePosition": {"x": x, "y": y, "mapId": map_id, "allowedDeviationXY": dev}}))
             .collect();
         o["edges"] = nodes
             .windows(2)
