@@ -39,7 +39,9 @@ fn every_site_file_loads() {
             path.display()
         );
         let idx = SiteIndex::new(site);
-        assert!(idx.site().features().len() >= 10, "{}", path.display());
+        // The evaluation's sites have work to do; the demo's is small on purpose.
+        let least = if stem == "demo" { 3 } else { 10 };
+        assert!(idx.site().features().len() >= least, "{}", path.display());
         names.push(stem);
     }
     for name in ["lane", "large-pit-40", "quarry", "yard"] {

@@ -415,12 +415,22 @@ pub fn paper(
         worksite_study(base, nets, worksite, &assets, &mut md)?;
     }
     let path = out_dir.join("results.md");
+    // The sites' section is written by scripts/sites_table.py (the sites are measured apart,
+    // scripts/measure-sites.sh): kept as it is when the study is written again.
+    if let Ok(old) = std::fs::read_to_string(&path) {
+        if let Some(at) = old.find(SITES_HEADING) {
+            let _ = write!(md, "\n{}", &old[at..]);
+        }
+    }
     std::fs::write(&path, md).with_context(|| format!("writing {}", path.display()))?;
     eprintln!("wrote {}", path.display());
     Ok(())
 }
 
 pub use control::obstacle::PENETRATION_TOLERANCE;
+
+/// The heading of the sites' section of `results.md` (scripts/sites_table.py writes it).
+const SITES_HEADING: &str = "## 5. Sites";
 
 /// The scenario's kind: its name without the trailing number (`wall012` → `wall`).
 fn kind_of(name: &str) -> &str {

@@ -200,12 +200,12 @@ fn demo_drives_the_loading_cycle_and_stops_the_daemon() {
     );
     // The demo's site (sim/sites/demo.json): its pile, wall and keep-out drawn.
     // wlnavd is started on the site, and the picture draws it.
-    assert!(out.contains("`demo-yard`: 3 features"), "{out}");
-    assert!(out.contains("--site "), "wlnavd not started on the site: {out}");
+    assert!(out.contains("`demo`: 3 features"), "{out}");
     assert!(
-        picture.matches("<polygon").count() >= 3,
-        "no site drawn"
+        out.contains("--site "),
+        "wlnavd not started on the site: {out}"
     );
+    assert!(picture.matches("<polygon").count() >= 3, "no site drawn");
     assert!(std::fs::metadata(&rec).expect("recording").len() > 1000);
     // 0 = every leg reached, 3 = a leg not reached (reported honestly); never a crash.
     assert!(matches!(o.status.code(), Some(0) | Some(3)), "{out}");

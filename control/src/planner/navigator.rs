@@ -275,7 +275,8 @@ impl Navigator {
             && self.stuck_near(x, &goal)
             && (self.world.is_empty()
                 || self.in_search_goal_region(x, &goal)
-                || (st.retry_in_sight && self.goal_in_sight(x, &goal)))
+                || (st.retry_in_sight && self.goal_in_sight(x, &goal))
+                || self.replan_gave_only_the_goal())
         {
             self.retries += 1;
             self.last_replan = now;
@@ -648,6 +649,15 @@ impl Navigator {
     fn goal_in_sight(&self, x: &State, goal: &Goal) -> bool {
         self.world
             .segment_clear([x[ix::X], x[ix::Y]], [goal.x, goal.y], self.world.margin())
+    }
+
+    /// Whether the route is a replan's that came back as the goal alone: from
+    /// where the machine stalled the search sees nothing to route around, so
+    /// another replan would hand back the same (the retry's approach does not).
+    fn replan_gave_only_the_goal(&self) -> bool {
+        self.route.report.replan
+            && self.route.report.outcome == PlanOutcome::Route
+            && self.route.targets.len() == 1
     }
 
     /// Whether `x` is inside the goal region of the search, where a replan

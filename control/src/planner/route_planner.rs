@@ -21,6 +21,10 @@ use super::route::subgoals_from_path;
 use super::world::CheckedWorld;
 use super::{FollowingSettings, NavError, PathPose, PlanOutcome, PlanReport, SearchSettings};
 
+/// How much more of the extra margins a plan gives up than an endpoint inside
+/// them lacks [m]: the endpoint then passes its own check with room to spare.
+const RELIEF_GAP: f64 = 0.02;
+
 /// What is asked of the planner.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum PlanKind {
@@ -170,7 +174,7 @@ impl RoutePlanner {
         self.world.copy_from(&request.world);
         report.outcome = match request.kind {
             PlanKind::First | PlanKind::Replan => self.route(request, route, &mut report),
-            PlanKind::Retry => self.retry(&request.start, &request.goal, route),
+            PlanKind::Retry => self.retry(&request.start, &request.goal, route, &mut report),
         };
         report.duration = t0.elapsed();
         route.report = report;
@@ -185,16 +189,8 @@ impl RoutePlanner {
         report: &mut PlanReport,
     ) -> PlanOutcome {
         let (start, goal) = (&req.start, req.goal);
+        let (margin, endpoints) = self.endpoint_margin(start, &goal);
         let s = &self.search_settings;
-        // Near a pile the start or goal may already be inside the margin: the
-        // plan keeps what the endpoints have (half of it), never more than asked.
-        let goal_pose = State::new(goal.x, goal.y, goal.theta, 0.0, 0.0, 0.0);
-        let endpoints = 0.5
-            * self
-                .world
-                .state_clearance(start)
-                .min(self.world.state_clearance(&goal_pose));
-        let margin = s.clearance_margin.min(endpoints).max(0.0);
         let direct_margin = s.direct_margin.min(endpoints).max(margin);
         let plan_every_goal = s.plan_every_goal;
         self.world.set_margin(direct_margin);
@@ -250,6 +246,30 @@ impl RoutePlanner {
         }
     }
 
+    /// The margin a plan from `start` to `goal` keeps and the most it could
+    /// (half the endpoints' slack); sets the relief of the extra margins it
+    /// needs ([`CheckedWorld::set_relief`]). Near a pile the start or goal may
+    /// already be inside the margin: the plan keeps what the endpoints have
+    /// (half of it), never more than asked. An endpoint inside an outline
+    /// circle's extra margin (the machine was stopped there) gives up as much
+    /// of the extras as it lacks, and a bit.
+    fn endpoint_margin(&mut self, start: &State, goal: &Goal) -> (f64, f64) {
+        let goal_pose = State::new(goal.x, goal.y, goal.theta, 0.0, 0.0, 0.0);
+        let slack = self
+            .world
+            .state_slack(start)
+            .min(self.world.state_slack(&goal_pose));
+        self.world
+            .set_relief(if slack < 0.0 { RELIEF_GAP - slack } else { 0.0 });
+        let endpoints = 0.5 * slack;
+        let margin = self
+            .search_settings
+            .clearance_margin
+            .min(endpoints)
+            .max(0.0);
+        (margin, endpoints)
+    }
+
     /// The goal shot a path may end with (its last pose outside the search's
     /// goal region), driven again by the actor from the path's end: the
     /// search keeps only where it starts. Empty when it does not reach.
@@ -284,23 +304,66 @@ impl RoutePlanner {
     /// The retry after a stall on the goal: route [approach pose, goal], the
     /// approach pose `approach_distance` behind the goal on its heading (a
     /// forward final approach), or ahead of it (a reversing one) when the one
-    /// behind or the way to it is blocked. With both blocked: no route (the
-    /// navigator keeps its own; the abort window decides).
-    fn retry(&mut self, x: &State, goal: &Goal, route: &mut Route) -> PlanOutcome {
+    /// behind or the way to it is blocked. Where the actor's roll-out cannot
+    /// reach either (the machine stalled facing away, next to a pile), the
+    /// search plans the way to the first free one (at the full distance, else
+    /// at half of it). With none: no route (the navigator keeps its own; the
+    /// abort window decides).
+    fn retry(
+        &mut self,
+        x: &State,
+        goal: &Goal,
+        route: &mut Route,
+        report: &mut PlanReport,
+    ) -> PlanOutcome {
         self.world.set_margin(self.search_settings.clearance_margin);
-        match retry_approach(self.approach_distance, goal, |a| {
+        self.world.set_relief(0.0);
+        route.clear();
+        if let Some(a) = retry_approach(self.approach_distance, goal, |a| {
             self.world.is_empty()
                 || (self.world.pose_free(a.x, a.y, a.theta, 0.0)
                     && self.open_way_cost(x, a).is_some())
         }) {
-            Some(a) => {
-                route.clear();
-                route.targets.extend([a, *goal]);
-                route.target_path_index.extend([0, 0]);
-                PlanOutcome::Retry
-            }
-            None => PlanOutcome::NoRoute,
+            route.targets.extend([a, *goal]);
+            route.target_path_index.extend([0, 0]);
+            return PlanOutcome::Retry;
         }
+        // Between piles a pose the full distance off may not be free: half as far.
+        let Some(a) = [1.0, 0.5].into_iter().find_map(|k| {
+            retry_approach(k * self.approach_distance, goal, |a| {
+                self.world.pose_free(a.x, a.y, a.theta, 0.0)
+            })
+        }) else {
+            return PlanOutcome::NoRoute;
+        };
+        let (margin, _) = self.endpoint_margin(x, &a);
+        self.world.set_margin(margin);
+        let actor = self.actor.as_mut().map(|(a, ws)| (&*a, ws));
+        let (result, stats) = self
+            .search
+            .search(&self.world, x, &a, actor, &mut route.path);
+        report.search = stats;
+        if result.is_err() {
+            route.clear();
+            return PlanOutcome::NoRoute;
+        }
+        let f = &self.following;
+        subgoals_from_path(
+            &route.path,
+            a,
+            f.subgoal_spacing,
+            f.subgoal_radius,
+            &mut route.targets,
+            &mut route.target_path_index,
+        );
+        // The goal after the approach pose (in place of it if the route is full).
+        if route.targets.len() == route.targets.capacity() {
+            route.targets.pop();
+            route.target_path_index.pop();
+        }
+        route.targets.push(*goal);
+        route.target_path_index.push(route.path.len());
+        PlanOutcome::Retry
     }
 
     /// "Is anything in the way?", by measurement: the actor rolled out from

@@ -776,18 +776,25 @@ fn no_retry_while_moving_or_far_from_the_goal() {
 }
 
 #[test]
-fn a_retry_approaches_from_ahead_when_behind_is_blocked_and_not_at_all_when_both_are() {
+fn a_retry_approaches_from_ahead_when_behind_is_blocked_then_from_half_as_far_and_not_at_all_when_all_are(
+) {
     let s = NavigatorSettings::default();
+    let d = s.stall.approach_distance;
     let goal = Goal::new(5.0, 0.0, 0.0);
-    let behind = Obstacle::new(goal.x - s.stall.approach_distance, 0.0, 0.5);
-    let ahead = Obstacle::new(goal.x + s.stall.approach_distance, 0.0, 0.5);
+    let behind = Obstacle::new(goal.x - d, 0.0, 0.5);
+    let ahead = Obstacle::new(goal.x + d, 0.0, 0.5);
+    // Blocks the pose half as far ahead (its front axle), not the goal.
+    let half_ahead = Obstacle::new(goal.x + 0.5 * d + 0.3, 0.0, 0.4);
     let stuck = stopped_beside(&goal);
     for (obstacles, expected) in [
+        (vec![behind], Some(Goal::new(goal.x + d, 0.0, 0.0))),
+        // Both poses the full distance off blocked: the one half as far ahead,
+        // reached by a search (the straight way there is not the machine's).
         (
-            vec![behind],
-            Some(Goal::new(goal.x + s.stall.approach_distance, 0.0, 0.0)),
+            vec![behind, ahead],
+            Some(Goal::new(goal.x + 0.5 * d, 0.0, 0.0)),
         ),
-        (vec![behind, ahead], None),
+        (vec![behind, ahead, half_ahead], None),
     ] {
         let mut nav = navigator(false);
         nav.set_goal(&stuck, goal, &obstacles, 0.0).unwrap();
@@ -800,8 +807,9 @@ fn a_retry_approaches_from_ahead_when_behind_is_blocked_and_not_at_all_when_both
         let r = nav.last_plan().unwrap();
         match expected {
             Some(approach) => {
-                assert_eq!(r.outcome, PlanOutcome::Retry);
-                assert_eq!(nav.route(), &[approach, goal]);
+                assert_eq!(r.outcome, PlanOutcome::Retry, "{obstacles:?}");
+                let route = nav.route();
+                assert_eq!(route[route.len() - 2..], [approach, goal], "{route:?}");
             }
             None => {
                 assert_eq!(r.outcome, PlanOutcome::NoRoute);
@@ -848,4 +856,66 @@ fn a_retry_opens_its_own_abort_window() {
         "retry at {retry_at}, aborted at {aborted_at}"
     );
     assert_eq!(nav.plans(), 2);
+}
+
+#[test]
+fn a_plan_from_inside_the_extra_margins_gives_up_only_what_it_lacks() {
+    use super::world::CheckedWorld;
+    use crate::site::Outline;
+    let p = MachineParams::default();
+    let mut w = CheckedWorld::new(p, 4, 0.0);
+    let outline = Outline::axle_circles(0.65).unwrap();
+    w.set_outline(outline, &[0.3, 0.3]);
+    // A pile of 1 m (a wire circle carries the half-width: 1.65 m).
+    w.set(&[Obstacle::new(3.0, 0.0, 1.65)]).unwrap();
+    // Front axle 0.1 m from the pile's edge (an axle disc of 0.65 m): inside
+    // the extra margin of 0.3 m, 0.2 m short of it.
+    let near = State::new(3.0 - 1.0 - 0.65 - 0.1, 0.0, 0.0, 0.0, 0.0, 0.0);
+    let clearance = w.state_clearance(&near);
+    assert!((clearance - 0.1).abs() < 1e-9, "{clearance}");
+    let slack = w.state_slack(&near);
+    assert!((slack - (clearance - 0.3)).abs() < 1e-9, "{slack}");
+    assert!(!w.state_free(&near));
+    w.set_relief(-slack - 0.01);
+    assert!(!w.state_free(&near), "less relief than it lacks");
+    w.set_relief(-slack + 0.01);
+    assert!(w.state_free(&near));
+    // Relief never gives up the outline itself: a state 5 cm inside the pile
+    // stays blocked whatever the relief.
+    let inside = State::new(3.0 - 1.0 - 0.65 + 0.05, 0.0, 0.0, 0.0, 0.0, 0.0);
+    w.set_relief(10.0);
+    assert!(!w.state_free(&inside));
+}
+
+#[test]
+fn a_replan_that_hands_back_the_goal_alone_is_followed_by_a_retry() {
+    // Stopped 1.5 m from the goal, turned away, a post between: not in the
+    // search's goal region, the goal not in sight, so the stall replans first. The search
+    // from there ends in the goal alone (the route that stalled); the next
+    // stall retries from the approach pose instead of replanning again.
+    let mut nav = navigator(false);
+    let goal = Goal::new(5.0, 0.0, 0.0);
+    let stuck = at_rest(3.5, 0.0, 0.5);
+    nav.set_goal(&stuck, goal, &[Obstacle::new(4.3, 0.0, 0.25)], 0.0)
+        .unwrap();
+    let mut outcomes = Vec::new();
+    for k in 0..150 {
+        let before = nav.plans();
+        if let NavStep::Abort(_) = nav.update(&stuck, k as f64 * 0.2) {
+            break;
+        }
+        if nav.plans() > before {
+            let r = nav.last_plan().unwrap();
+            outcomes.push((r.outcome, r.replan, nav.route().len()));
+        }
+    }
+    let replan = outcomes
+        .iter()
+        .position(|&(o, replan, n)| o == PlanOutcome::Route && replan && n == 1)
+        .unwrap_or_else(|| panic!("no replan giving the goal alone: {outcomes:?}"));
+    assert_eq!(
+        outcomes.get(replan + 1).map(|o| o.0),
+        Some(PlanOutcome::Retry),
+        "{outcomes:?}"
+    );
 }

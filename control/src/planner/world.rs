@@ -20,6 +20,9 @@ use super::NavError;
 pub struct CheckedWorld {
     world: World,
     margin: f64,
+    /// How much of each outline circle's extra margin a plan gives up
+    /// ([`CheckedWorld::set_relief`]); 0 but where an endpoint is inside it.
+    relief: f64,
 }
 
 impl CheckedWorld {
@@ -28,6 +31,7 @@ impl CheckedWorld {
         Self {
             world: World::with_axle_circles(params, capacity),
             margin,
+            relief: 0.0,
         }
     }
 
@@ -105,12 +109,30 @@ impl CheckedWorld {
         self.state_free(&State::new(x, y, theta, beta, 0.0, 0.0))
     }
 
-    /// Every outline circle keeps the margin plus its extra (the MPC plans
-    /// each circle that much wider: a route it could not follow would stall).
+    /// The least of (clearance − extra margin) over the outline's circles:
+    /// the most margin a check of this state could keep (+∞ in an empty world).
+    pub fn state_slack(&self, s: &State) -> f64 {
+        self.world
+            .excess(s, self.world.extra_margins(), f64::INFINITY)
+            .map_or(f64::INFINITY, |c| c.clearance)
+    }
+
+    /// Lets the following checks give up `relief` ≥ 0 of each circle's extra
+    /// margin (never more than the extra: the outline itself stays free). A
+    /// machine stopped inside its extras (the envelope stopped it there, or a
+    /// reload moved a feature) must be able to plan its way out, or every
+    /// search would fail at its first node.
+    pub fn set_relief(&mut self, relief: f64) {
+        self.relief = relief.max(0.0);
+    }
+
+    /// Every outline circle keeps the margin plus its extra, less the relief
+    /// (the MPC plans each circle that much wider: a route it could not
+    /// follow would stall).
     pub fn state_free(&self, s: &State) -> bool {
         let mut margins = *self.world.extra_margins();
         for m in &mut margins {
-            *m += self.margin;
+            *m = (*m - self.relief).max(0.0) + self.margin;
         }
         // Only what comes nearer than the margins is searched for.
         self.world.excess(s, &margins, 0.0).is_none()

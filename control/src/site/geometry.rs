@@ -92,6 +92,14 @@ fn norm(a: P2) -> f64 {
 
 /// Closest point to `p` on segment a–b and its distance.
 pub fn closest_on_segment(p: P2, a: P2, b: P2) -> (P2, f64) {
+    let (q, d2) = closest_on_segment_squared(p, a, b);
+    (q, d2.sqrt())
+}
+
+/// Closest point to `p` on segment a–b and its squared distance: what a
+/// search over many segments compares (one square root for the winner; the
+/// envelope and the MPC ask every polygon near the machine each tick).
+fn closest_on_segment_squared(p: P2, a: P2, b: P2) -> (P2, f64) {
     let ab = sub(b, a);
     let l2 = dot(ab, ab);
     let t = if l2 > 0.0 {
@@ -100,7 +108,8 @@ pub fn closest_on_segment(p: P2, a: P2, b: P2) -> (P2, f64) {
         0.0
     };
     let q = [a[0] + t * ab[0], a[1] + t * ab[1]];
-    (q, norm(sub(p, q)))
+    let v = sub(p, q);
+    (q, dot(v, v))
 }
 
 /// Orientation of c relative to the directed line a → b: > 0 left, < 0 right.
@@ -269,14 +278,15 @@ impl Polygon {
     /// Nearest outline point; the distance is negative inside. O(n).
     pub fn nearest(&self, p: P2) -> Nearest {
         let n = self.vertices.len();
-        let (mut best_q, mut best_d, mut best_i) = (self.vertices[0], f64::INFINITY, 0);
+        let (mut best_q, mut best_d2, mut best_i) = (self.vertices[0], f64::INFINITY, 0);
         for i in 0..n {
             let (a, b) = self.edge(i);
-            let (q, d) = closest_on_segment(p, a, b);
-            if d < best_d {
-                (best_q, best_d, best_i) = (q, d, i);
+            let (q, d2) = closest_on_segment_squared(p, a, b);
+            if d2 < best_d2 {
+                (best_q, best_d2, best_i) = (q, d2, i);
             }
         }
+        let best_d = best_d2.sqrt();
         let inside = self.contains(p);
         let normal = if best_d > 0.0 {
             let v = sub(p, best_q);
@@ -341,13 +351,14 @@ impl Polyline {
 
     /// Nearest point of the capsule chain's outline; negative inside. O(n).
     pub fn nearest(&self, p: P2) -> Nearest {
-        let (mut best_c, mut best_d, mut best_i) = (self.vertices[0], f64::INFINITY, 0);
+        let (mut best_c, mut best_d2, mut best_i) = (self.vertices[0], f64::INFINITY, 0);
         for (i, w) in self.vertices.windows(2).enumerate() {
-            let (q, d) = closest_on_segment(p, w[0], w[1]);
-            if d < best_d {
-                (best_c, best_d, best_i) = (q, d, i);
+            let (q, d2) = closest_on_segment_squared(p, w[0], w[1]);
+            if d2 < best_d2 {
+                (best_c, best_d2, best_i) = (q, d2, i);
             }
         }
+        let best_d = best_d2.sqrt();
         let normal = if best_d > 0.0 {
             let v = sub(p, best_c);
             [v[0] / best_d, v[1] / best_d]
