@@ -7,7 +7,7 @@ use iceoryx2::prelude::ZeroCopySend;
 use shm_ipc::{
     pose_flags, AbortReason, Command, GoalKind, GoalOutcome, GoalReply, GoalRequest, MachineState,
     Mode, Obstacle, Pose2, PoseEstimate, RejectCode, Telemetry, MAX_OBSTACLES, MAX_ROUTE,
-    MAX_TRAJECTORY, REASON_TEXT_CAPACITY,
+    MAX_TRAJECTORY, REASON_TEXT_CAPACITY, SITE_ID_CAPACITY,
 };
 
 /// The bytes of a padding-free POD value.
@@ -71,6 +71,9 @@ fn sizes_alignments_and_offsets() {
             + MAX_ROUTE * 24
             + 2 * 8
             + 2 * 4
+            + 2 * 8
+            + 2 * 4
+            + SITE_ID_CAPACITY
     );
 
     assert_eq!(offset_of!(GoalRequest, obstacles), 40);
