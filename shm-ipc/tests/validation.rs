@@ -238,7 +238,8 @@ fn obstacle_geometry_is_left_to_the_daemon() {
 
 #[test]
 fn unknown_kind_is_rejected() {
-    for kind in [0, 5, u32::MAX] {
+    // 1-5 are the kinds (set goal, cancel, stop, resume, reload site).
+    for kind in [0, 6, u32::MAX] {
         let mut req = goal(0.0, 0.0, 0.0, &[]);
         req.kind = kind;
         let reason = reject(&req);
@@ -248,11 +249,12 @@ fn unknown_kind_is_rejected() {
 }
 
 #[test]
-fn cancel_stop_and_resume_are_accepted_even_with_garbage_goal_fields() {
+fn cancel_stop_resume_and_reload_are_accepted_even_with_garbage_goal_fields() {
     for mut req in [
         GoalRequest::cancel(5),
         GoalRequest::stop(6),
         GoalRequest::resume(7),
+        GoalRequest::reload_site(8),
     ] {
         req.goal = Pose2::new(f64::NAN, f64::INFINITY, 1e300);
         req.obstacle_count = 1000;
@@ -262,6 +264,7 @@ fn cancel_stop_and_resume_are_accepted_even_with_garbage_goal_fields() {
             ValidRequest::Cancel { request_id } => assert_eq!(request_id, 5),
             ValidRequest::Stop { request_id } => assert_eq!(request_id, 6),
             ValidRequest::Resume { request_id } => assert_eq!(request_id, 7),
+            ValidRequest::ReloadSite { request_id } => assert_eq!(request_id, 8),
             other => panic!("unexpected {other:?}"),
         }
     }
