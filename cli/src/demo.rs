@@ -1,8 +1,8 @@
 //! `wlnav demo`: the whole system in one command. Starts `wlnavd --sim` (the built-in
 //! simulated machine, no configuration) under a private prefix, waits until it is ready,
-//! drives the short loading cycle in [`LOADING_CYCLE`] and a leg around a pile through the
-//! real shared-memory path (goal requests with obstacles, telemetry), prints progress and
-//! each leg's convergence time, writes an SVG of the obstacles, the global route, the driven
+//! drives the short loading cycle in [`LOADING_CYCLE`] and a leg around a pile of the demo's
+//! site through the real shared-memory path (goal requests, telemetry), prints progress and
+//! each leg's convergence time, writes an SVG of the site, the global route, the driven
 //! path and the planned horizons, and stops the daemon with SIGTERM. Exit code 0 only if
 //! every leg was reached.
 
@@ -18,7 +18,7 @@ use clap::Args;
 use shm_ipc::Client;
 use shm_ipc::ClientError;
 use shm_ipc::IpcConfig;
-use shm_ipc::{GoalReply, Obstacle, Pose2};
+use shm_ipc::{GoalReply, Pose2};
 
 use super::commands::{
     describe_reply, emit, follow, outcome_line, FollowEnd, FollowOptions, ProgressPrinter,
@@ -34,11 +34,8 @@ use super::{args, exit, signal, Cli};
 pub struct Leg {
     /// What the leg does.
     pub name: &'static str,
-    /// Goal of the front axle.
+    /// Goal of the front axle (the site is the daemon's: no circles go with it).
     pub goal: Pose2,
-    /// Obstacles sent with the goal (radii inflated by the machine's half-width, as on the
-    /// wire).
-    pub obstacles: &'static [Obstacle],
 }
 
 /// A short V-pattern loading cycle from the origin (heading 0): forward into the pile face
@@ -54,22 +51,18 @@ pub const LOADING_CYCLE: [Leg; 4] = [
     Leg {
         name: "drive to the pile face",
         goal: Pose2::new(5.0, 0.0, 0.0),
-        obstacles: &[],
     },
     Leg {
         name: "back out while turning",
         goal: Pose2::new(1.5, 1.5, -std::f64::consts::FRAC_PI_3),
-        obstacles: &[],
     },
     Leg {
         name: "drive to the dump point",
         goal: Pose2::new(4.0, -2.83, -std::f64::consts::FRAC_PI_3),
-        obstacles: &[],
     },
     Leg {
         name: "around a pile to a face",
         goal: Pose2::new(8.0, -9.758, -std::f64::consts::FRAC_PI_3),
-        obstacles: &[],
     },
 ];
 
@@ -153,8 +146,8 @@ fn send_goal(client: &Client, leg: &Leg) -> Result<(u64, GoalReply), ClientError
     let mut tries = 0;
     loop {
         let id = client.next_request_id();
-        let req = shm_ipc::GoalRequest::set_goal(id, leg.goal, leg.obstacles)
-            .expect("a leg's obstacles fit the wire's limit");
+        let req = shm_ipc::GoalRequest::set_goal(id, leg.goal, &[])
+            .expect("no circles are within the wire's limit");
         match client.request(&req, Duration::from_secs(2)) {
             Err(ClientError::NoDaemon { .. }) if tries < 20 => {
                 tries += 1;
@@ -307,7 +300,6 @@ pub fn run(cli: &Cli, a: &DemoArgs) -> anyhow::Result<u8> {
         let mut trace = LegTrace {
             name: leg.name.to_owned(),
             goal: g,
-            obstacles: leg.obstacles.iter().map(|o| (o.x, o.y, o.r)).collect(),
             ..LegTrace::default()
         };
         if i > 0 && !results.last().is_some_and(|r| r.status.is_succeeded()) {

@@ -31,8 +31,6 @@ pub struct LegTrace {
     pub horizons: Vec<Vec<(f64, f64)>>,
     /// Whether the daemon reported the goal reached.
     pub reached: bool,
-    /// The leg's obstacles (x, y, inflated radius) [m].
-    pub obstacles: Vec<(f64, f64, f64)>,
     /// The global layer's first route for the leg (subgoals, then the goal) [m]; empty
     /// when the way was direct.
     pub route: Vec<(f64, f64)>,
@@ -186,9 +184,10 @@ fn layout(points: &[(f64, f64)], legend_px: f64) -> ((f64, f64), (f64, f64), (u3
     ((x0, x1), (y0, y1), (width as u32, height as u32))
 }
 
-/// Writes the picture: each leg's obstacles (grey discs) and planned route (dashed, through
-/// its subgoals), driven path (thick), planned horizons (thin, faint), goal (dot and a
-/// heading tick 0.5 m long), and the start pose.
+/// Writes the picture: the site (bounds, grey features, red keep-outs), each leg's planned
+/// route (dashed, through its subgoals), driven path (thick), planned horizons (thin,
+/// faint), goal (dot and a heading tick 0.5 m long), the outline where it ended, and the
+/// start pose.
 pub fn write_svg(
     path: &Path,
     title: &str,
@@ -204,9 +203,6 @@ pub fn write_svg(
         all.extend(&leg.path);
         all.extend(leg.horizons.iter().flatten());
         all.push((leg.goal.x, leg.goal.y));
-        for &(x, y, r) in &leg.obstacles {
-            all.extend([(x - r, y - r), (x + r, y + r)]);
-        }
     }
     // The legend's rows (one per leg and the key) at about 19 px each, and its frame.
     let legend_px = 19.0 * (legs.len() + 1) as f64 + 16.0;
@@ -261,14 +257,6 @@ pub fn write_svg(
                     )])
                     .map_err(err)?;
             }
-        }
-        for &(x, y, r) in &leg.obstacles {
-            chart
-                .draw_series([Polygon::new(
-                    circle_points(x, y, r),
-                    RGBColor(150, 150, 150).mix(0.6).filled(),
-                )])
-                .map_err(err)?;
         }
         if !leg.route.is_empty() {
             chart
