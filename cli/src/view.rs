@@ -59,10 +59,6 @@ fn deg(rad: f64) -> f64 {
     rad.to_degrees()
 }
 
-/// One line per tick: everything an operator looks at, in a fixed order, and the goal
-/// outcome on the tick that reports one.
-///
-/// `tick 412 tracking  x  3.21 y -0.40 θ  12.5° β   4.1° v  0.82 | goal  6.00  0.00    0.0° err 2.81 m  -12.5° | cmd β̇ -3.0°/s v 0.85 | solve 3.9 ms qp 11 cost 2.35 | faults -`
 /// "site yard version 3 hash 0123456789abcdef", or "site none".
 pub fn site_text(t: &Telemetry) -> String {
     if t.site_id_len == 0 {
@@ -76,6 +72,10 @@ pub fn site_text(t: &Telemetry) -> String {
     )
 }
 
+/// One line per tick: everything an operator looks at, in a fixed order, and the goal
+/// outcome on the tick that reports one.
+///
+/// `tick 412 tracking  x  3.21 y -0.40 θ  12.5° β   4.1° v  0.82 | goal  6.00  0.00    0.0° err 2.81 m  -12.5° | cmd β̇ -3.0°/s v 0.85 | solve 3.9 ms qp 11 cost 2.35 | faults -`
 pub fn line(t: &Telemetry) -> String {
     match outcome_text(t) {
         Some(outcome) => format!("{} | outcome {outcome}", state_line(t)),

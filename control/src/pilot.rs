@@ -213,11 +213,6 @@ impl<C: StageCost> Pilot<C> {
         self.world.set_extra_margins(extra);
     }
 
-    /// The world the envelope checks (site, circles, outline).
-    pub fn world(&self) -> &World {
-        &self.world
-    }
-
     /// Forgets goal and plan (not the commands sent: they still act).
     pub fn reset(&mut self) {
         self.mpc.clear_goal();

@@ -33,18 +33,12 @@ use wlnavd::controller::{load_controller, Controller, Step};
 /// drive around the wall (12 s).
 const TICKS: usize = 60;
 
+/// Wall-clock limits are multiplied by `WLNAV_TIMING_SCALE` (slow or emulated machines).
+#[path = "../../tests/timing_scale.rs"]
+mod timing_scale;
+
 fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
-}
-
-/// Wall-clock limits are multiplied by `WLNAV_TIMING_SCALE` (slow or emulated
-/// machines; tests/timing_scale.rs).
-fn timing_scale() -> f64 {
-    std::env::var("WLNAV_TIMING_SCALE")
-        .ok()
-        .and_then(|s| s.parse::<f64>().ok())
-        .filter(|k| k.is_finite() && *k >= 1.0)
-        .unwrap_or(1.0)
 }
 
 /// `wlnavd --sim` without a configuration file: the built-in defaults, the
@@ -131,7 +125,7 @@ fn run(config: &Config, eval: &EvalConfig) -> (Vec<Tick>, Vec<Tick>) {
     let dt = config.period();
     let mut plant = Plant::new(params, eval.plant, State::zeros()).unwrap();
     let goal = Goal::new(8.0, 0.0, 0.0);
-    let wait = Duration::from_secs_f64(60.0 * timing_scale());
+    let wait = timing_scale::real(Duration::from_secs(60));
     let (mut ours, mut theirs) = (Vec::new(), Vec::new());
     for k in 0..TICKS {
         let now = k as f64 * dt;

@@ -453,8 +453,6 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
         finite
     }
 
-    /// Applies α·Δ from the QP solution, projects the controls onto their box
-    /// (removing interior-point round-off) and records the slacks.
     /// The QP of a tick with `n_reach` of the goal's circles within reach:
     /// with a site, the one with every row; else the fewest slots that hold
     /// every (outline circle, circle) pair (for the default outline: one
@@ -567,6 +565,8 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
         }
     }
 
+    /// Applies α·Δ from the QP solution, projects the controls onto their box
+    /// (removing interior-point round-off) and records the slacks.
     fn take_step(&mut self) {
         let s = self.settings;
         let qp = &self.qps[self.n_active];

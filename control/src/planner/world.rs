@@ -94,12 +94,6 @@ impl CheckedWorld {
         self.margin = margin;
     }
 
-    /// The outline's least clearance for the front-axle pose (x, y, θ) at
-    /// articulation β (+∞ in an empty world).
-    pub fn pose_clearance(&self, x: f64, y: f64, theta: f64, beta: f64) -> f64 {
-        self.state_clearance(&State::new(x, y, theta, beta, 0.0, 0.0))
-    }
-
     pub fn state_clearance(&self, s: &State) -> f64 {
         self.world.clearance(s)
     }

@@ -143,9 +143,9 @@ fn row_gradients_match_finite_differences() {
                     b[k] -= eps;
                     let (ha, _) = w.row(&a, c, t);
                     let (hb, _) = w.row(&b, c, t);
+                    assert!(ha.is_finite() && hb.is_finite(), "{t:?} circle {c}");
                     fd[k] = (ha - hb) / (2.0 * eps);
-                    let (h2, _) = w.row(&a, c, t);
-                    smooth &= ((ha - h) - (h - hb)).abs() < 1e-9 && h2 == ha;
+                    smooth &= ((ha - h) - (h - hb)).abs() < 1e-9;
                 }
                 if !smooth || h.abs() > 30.0 {
                     continue;
@@ -184,12 +184,11 @@ fn site_rows_keep_the_nearest_pairs() {
         let mut all = Vec::new();
         for (i, c) in placed[..w.outline().len()].iter().enumerate() {
             let m = margins[(w.outline().circles()[i].body == Body::Rear) as usize];
-            for (f, feat) in idx.site().features().iter().enumerate() {
+            for feat in idx.site().features() {
                 let e = feat.shape.signed_distance(c.center) - c.radius - m;
                 if e <= reach {
                     all.push(e);
                 }
-                let _ = f;
             }
             let b = -idx.site().bounds().signed_distance(c.center) - c.radius - m;
             if b < reach {
@@ -280,12 +279,15 @@ fn excess_among_the_features_near_is_the_index_answer_within_reach() {
                 .excess_among(&x, &margins, cap, Some(&near[..n]))
                 .map(|c| c.clearance);
             match (full, local) {
-                (Some(a), Some(b)) => assert!((a - b).abs() < 1e-9, "{a} vs {b}"),
+                (Some(a), Some(b)) => {
+                    assert!((a - b).abs() < 1e-9, "{a} vs {b}");
+                    compared += 1;
+                }
                 (None, None) => {}
                 other => panic!("{other:?} (reach {reach}, cap {cap})"),
             }
-            compared += 1;
         }
     }
+    // Only the cases with something within the cap compare two distances.
     assert!(compared > 300, "{compared}");
 }
