@@ -29,8 +29,19 @@
 //! the cusps, where the machine must stop, and hands the critic each cusp and
 //! the goal as targets. The projection only moves forwards along the path
 //! (from a hint), so a path that passes close to itself is not jumped.
+//!
+//! The point followed is the leading axle's ([`AxlePoint`]): the front axle
+//! (x_f, y_f) with the front body's heading θ driving forwards, the rear
+//! axle with the rear body's heading θ − β reversing. A reversing machine
+//! steered by its trailing front axle is a trailer pushed backwards: measured,
+//! it locked the articulation and stalled. The leading point's position and
+//! heading are functions of (x_f, y_f, θ, β) ([`AxlePoint::position`]); V's
+//! gradient and Gauss–Newton Hessian over them go through that Jacobian J
+//! (∇ = Jᵀ∇_p, ∇² ≈ Jᵀ∇²_p J: the mapping's own curvature is left out, as
+//! the path's is).
 
 use crate::model::{ix, Control, MachineParams, State, NU};
+use crate::obstacle::AxlePoint;
 
 /// The weights of [`PathCost`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -70,6 +81,9 @@ pub struct PathCost {
     /// Progress beyond the last pose still pays (along the last segment's
     /// line): the path ends where something else takes over at speed.
     open_end: bool,
+    /// The axle point whose positions and body headings `points` are.
+    point: AxlePoint,
+    params: MachineParams,
 }
 
 /// The value, gradient and (Gauss–Newton) Hessian of [`PathCost`] at a stage,
@@ -77,18 +91,22 @@ pub struct PathCost {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PathTerm {
     pub value: f64,
-    /// ∂V/∂(x_f, y_f, θ).
-    pub grad_pose: [f64; 3],
-    /// ∂²V/∂(x_f, y_f)² (2 q_c n nᵀ).
-    pub hess_position: [[f64; 2]; 2],
-    /// ∂²V/∂θ² (q_h·max(cos, 0)).
-    pub hess_heading: f64,
+    /// ∂V/∂(x_f, y_f, θ, β).
+    pub grad_pose: [f64; POSE],
+    /// The Gauss–Newton ∂²V/∂(x_f, y_f, θ, β)²: Jᵀ·diag(2 q_c n nᵀ,
+    /// q_h·max(cos, 0))·J over the followed point's position and heading.
+    pub hess_pose: [[f64; POSE]; POSE],
     /// ∂V/∂u and the diagonal of ∂²V/∂u².
     pub grad_control: [f64; NU],
     pub hess_control: [f64; NU],
     /// The segment p was projected onto: the next stage's hint.
     pub segment: usize,
 }
+
+/// The state components a path term depends on: x_f, y_f, θ, β.
+pub const POSE: usize = 4;
+/// Their indices in the state.
+pub const POSE_INDEX: [usize; POSE] = [ix::X, ix::Y, ix::THETA, ix::BETA];
 
 /// Poses a path cost holds (allocated once): a path of 0.6 m primitives this
 /// long is over a kilometre, far beyond a planning square; the poses beyond
@@ -114,6 +132,8 @@ impl PathCost {
             },
             control_scale: [0.0; NU],
             open_end: false,
+            point: AxlePoint::Front,
+            params: MachineParams::default(),
         }
     }
 
@@ -132,23 +152,30 @@ impl PathCost {
         self.open_end
     }
 
+    /// The axle point that follows the path.
+    pub fn point(&self) -> AxlePoint {
+        self.point
+    }
+
     /// The path's length L [m].
     pub fn length(&self) -> f64 {
         self.arc.last().copied().unwrap_or(0.0)
     }
 
-    /// Sets the path: poses (x, y, θ) in the order of travel. Poses closer
-    /// than a millimetre to the previous one are dropped (a segment needs a
-    /// direction). Non-finite poses or weights, or fewer than two distinct
-    /// poses, leave it empty: a broken path must not steer. With `open_end`
-    /// the arc length left goes on falling beyond the last pose (the machine
-    /// is not asked to stop there); otherwise it stops at 0.
+    /// Sets the path: poses (x, y, heading) of `point` and its body, in the
+    /// order of travel. Poses closer than a millimetre to the previous one
+    /// are dropped (a segment needs a direction). Non-finite poses or
+    /// weights, or fewer than two distinct poses, leave it empty: a broken
+    /// path must not steer. With `open_end` the arc length left goes on
+    /// falling beyond the last pose (the machine is not asked to stop
+    /// there); otherwise it stops at 0.
     pub fn set(
         &mut self,
         poses: impl IntoIterator<Item = [f64; 3]>,
         weights: PathWeights,
         params: &MachineParams,
         open_end: bool,
+        point: AxlePoint,
     ) {
         self.clear();
         let umax = params.control_max();
@@ -183,6 +210,18 @@ impl PathCost {
         self.weights = weights;
         self.control_scale = [1.0 / umax[0], 1.0 / umax[1]];
         self.open_end = open_end;
+        self.point = point;
+        self.params = *params;
+    }
+
+    /// The pose (x, y, heading) of `point` and its body in state `x`.
+    pub fn point_pose(point: AxlePoint, params: &MachineParams, x: &State) -> [f64; 3] {
+        let [px, py] = point.position(params, x);
+        let heading = match point {
+            AxlePoint::Front => x[ix::THETA],
+            AxlePoint::Rear => x[ix::THETA] - x[ix::BETA],
+        };
+        [px, py, heading]
     }
 
     /// Copies `other` (no allocation).
@@ -194,6 +233,8 @@ impl PathCost {
         self.weights = other.weights;
         self.control_scale = other.control_scale;
         self.open_end = other.open_end;
+        self.point = other.point;
+        self.params = other.params;
     }
 
     /// The segment nearest to (x, y) among those from `hint` to
@@ -215,9 +256,11 @@ impl PathCost {
         best
     }
 
-    /// The arc length left from (x, y)'s projection (from segment `hint`)
-    /// to the path's end (negative beyond it), and the segment projected onto.
-    pub fn arc_left(&self, x: f64, y: f64, hint: usize) -> (f64, usize) {
+    /// The arc length left from the followed point's projection in state
+    /// `state` (from segment `hint`) to the path's end (negative beyond it),
+    /// and the segment projected onto.
+    pub fn arc_left(&self, state: &State, hint: usize) -> (f64, usize) {
+        let [x, y, _] = Self::point_pose(self.point, &self.params, state);
         let i = self.nearest_segment(x, y, hint);
         let (a, b) = (self.points[i], self.points[i + 1]);
         let len = self.arc[i + 1] - self.arc[i];
@@ -238,7 +281,7 @@ impl PathCost {
     /// `hint`. Call only on a non-empty path.
     pub fn eval(&self, x: &State, u: &Control, hint: usize) -> PathTerm {
         let w = &self.weights;
-        let (px, py, theta) = (x[ix::X], x[ix::Y], x[ix::THETA]);
+        let [px, py, theta] = Self::point_pose(self.point, &self.params, x);
         let i = self.nearest_segment(px, py, hint);
         let (a, b) = (self.points[i], self.points[i + 1]);
         let len = self.arc[i + 1] - self.arc[i];
@@ -274,18 +317,31 @@ impl PathCost {
             grad_control[c] = 2.0 * w.control * k * k * u[c];
             hess_control[c] = 2.0 * w.control * k * k;
         }
+        // Over the point's (p_x, p_y, heading), then through J.
+        let grad_point = [
+            (g_turn - pull) * t[0] + g_lat * n[0],
+            (g_turn - pull) * t[1] + g_lat * n[1],
+            w.heading * sin,
+        ];
+        let hess_lateral = 2.0 * w.lateral;
+        let hess_heading = w.heading * cos.max(0.0);
+        let [jx, jy] = self.point.jacobian(&self.params, x);
+        let jh = match self.point {
+            AxlePoint::Front => [0.0, 0.0, 1.0, 0.0],
+            AxlePoint::Rear => [0.0, 0.0, 1.0, -1.0],
+        };
+        // n·J: the lateral error's row.
+        let jn: [f64; POSE] = std::array::from_fn(|c| n[0] * jx[c] + n[1] * jy[c]);
+        let grad_pose = std::array::from_fn(|c| {
+            grad_point[0] * jx[c] + grad_point[1] * jy[c] + grad_point[2] * jh[c]
+        });
+        let hess_pose = std::array::from_fn(|r| {
+            std::array::from_fn(|c| hess_lateral * jn[r] * jn[c] + hess_heading * jh[r] * jh[c])
+        });
         PathTerm {
             value,
-            grad_pose: [
-                (g_turn - pull) * t[0] + g_lat * n[0],
-                (g_turn - pull) * t[1] + g_lat * n[1],
-                w.heading * sin,
-            ],
-            hess_position: [
-                [2.0 * w.lateral * n[0] * n[0], 2.0 * w.lateral * n[0] * n[1]],
-                [2.0 * w.lateral * n[1] * n[0], 2.0 * w.lateral * n[1] * n[1]],
-            ],
-            hess_heading: w.heading * cos.max(0.0),
+            grad_pose,
+            hess_pose,
             grad_control,
             hess_control,
             segment: i,
@@ -321,6 +377,7 @@ mod tests {
             weights(),
             &MachineParams::default(),
             false,
+            AxlePoint::Front,
         );
         p
     }
@@ -347,6 +404,24 @@ mod tests {
         assert_eq!(term.segment, 2);
     }
 
+    /// ∂V/∂(x_f, y_f, θ, β) against central differences on the stage's
+    /// segment (the model is exact on it).
+    fn assert_pose_gradient(p: &PathCost, x: &State, u: &Control, term: &PathTerm) {
+        let h = 1e-6;
+        for (k, c) in POSE_INDEX.into_iter().enumerate() {
+            let (mut xp, mut xm) = (*x, *x);
+            xp[c] += h;
+            xm[c] -= h;
+            let fd = (p.eval(&xp, u, term.segment).value - p.eval(&xm, u, term.segment).value)
+                / (2.0 * h);
+            assert!(
+                (fd - term.grad_pose[k]).abs() < 1e-5,
+                "{k}: {fd} vs {:?}",
+                term.grad_pose
+            );
+        }
+    }
+
     #[test]
     fn gradient_matches_finite_differences() {
         let p = l_path();
@@ -359,20 +434,7 @@ mod tests {
             // From segment 1 all three are within the search's reach.
             let term = p.eval(&x, &u, 1);
             let h = 1e-6;
-            for (k, c) in [ix::X, ix::Y, ix::THETA].into_iter().enumerate() {
-                let (mut xp, mut xm) = (x, x);
-                xp[c] += h;
-                xm[c] -= h;
-                // The same segment: the model is exact on it.
-                let fd = (p.eval(&xp, &u, term.segment).value
-                    - p.eval(&xm, &u, term.segment).value)
-                    / (2.0 * h);
-                assert!(
-                    (fd - term.grad_pose[k]).abs() < 1e-5,
-                    "{k}: {fd} vs {:?}",
-                    term.grad_pose
-                );
-            }
+            assert_pose_gradient(&p, &x, &u, &term);
             for c in 0..NU {
                 let (mut up, mut um) = (u, u);
                 up[c] += h;
@@ -397,9 +459,9 @@ mod tests {
                 (at(e) - 2.0 * at(0.0) + at(-e)) / (e * e)
             };
             let n_h_n = if term.segment == 0 {
-                term.hess_position[1][1]
+                term.hess_pose[1][1]
             } else {
-                term.hess_position[0][0]
+                term.hess_pose[0][0]
             };
             assert!((fd2 - n_h_n).abs() < 1e-3, "{fd2} vs {n_h_n}");
         }
@@ -420,6 +482,7 @@ mod tests {
             weights(),
             &MachineParams::default(),
             false,
+            AxlePoint::Front,
         );
         // A point between the legs near the start, nearer the return leg (0.3 m)
         // than the first (0.7 m): from the start's hint the return leg is beyond
@@ -438,9 +501,90 @@ mod tests {
         assert_eq!(term.grad_pose[0], 0.0);
         // ... unless the end is open: then it pulls on along the last segment.
         let poses = p.points.clone();
-        p.set(poses, weights(), &MachineParams::default(), true);
+        p.set(
+            poses,
+            weights(),
+            &MachineParams::default(),
+            true,
+            AxlePoint::Front,
+        );
         let term = p.eval(&x, &Control::zeros(), 2);
         assert_eq!(term.grad_pose[0], weights().per_metre);
+    }
+
+    #[test]
+    fn reversing_follows_the_rear_axle_and_its_derivatives_match_finite_differences() {
+        // The rear axle's path: along y = 0 towards -x, the rear body heading
+        // 0 (the machine reverses, its front axle trailing at +x).
+        let params = MachineParams::default();
+        let mut p = PathCost::new();
+        p.set(
+            [[0.0, 0.0, 0.0], [-2.0, 0.0, 0.0], [-4.0, 0.5, -0.3]],
+            weights(),
+            &params,
+            false,
+            AxlePoint::Rear,
+        );
+        assert_eq!(p.point(), AxlePoint::Rear);
+        // A machine whose rear axle sits on the path at (-1, 0), unarticulated,
+        // heading 0: its front axle is L_f + L_r ahead.
+        let lever = params.l_f + params.l_r;
+        let on = State::new(-1.0 + lever, 0.0, 0.0, 0.0, 0.0, -0.5);
+        let term = p.eval(&on, &Control::zeros(), 0);
+        let left = p.length() - 1.0;
+        assert!((term.value - 3.0 * left).abs() < 1e-9, "{}", term.value);
+        let (arc, _) = p.arc_left(&on, 0);
+        assert!((arc - left).abs() < 1e-9);
+        // Pulled backwards (the way the rear axle travels), not forwards.
+        assert!(term.grad_pose[0] > 0.0, "{:?}", term.grad_pose);
+        let u = Control::new(0.1, -0.2);
+        for x in [
+            State::new(-0.5 + lever, 0.3, 0.2, 0.1, 0.0, -0.5),
+            State::new(-1.2 + lever, -0.2, -0.4, -0.3, 0.0, -0.5),
+            State::new(-2.6 + lever, 0.4, 0.1, 0.4, 0.0, -0.5),
+        ] {
+            let term = p.eval(&x, &u, 0);
+            let h = 1e-6;
+            assert_pose_gradient(&p, &x, &u, &term);
+            // Gauss–Newton: the Hessian is Jᵀ·diag(2 q_c, q_h cos)·J with J
+            // the Jacobian of the residuals (lateral error, heading error) on
+            // the stage's segment and with its reference heading held (the
+            // path's curvature is left out of the model, as on the front
+            // axle): checked against finite differences of the residuals.
+            let [px0, py0, _] = PathCost::point_pose(AxlePoint::Rear, &params, &x);
+            let (a, b) = (p.points[term.segment], p.points[term.segment + 1]);
+            let len = p.arc[term.segment + 1] - p.arc[term.segment];
+            let n = [-(b[1] - a[1]) / len, (b[0] - a[0]) / len];
+            let along = ((px0 - a[0]) * (b[0] - a[0]) + (py0 - a[1]) * (b[1] - a[1])) / len;
+            let f = (along / len).clamp(0.0, 1.0);
+            let theta_r = a[2] + f * crate::model::wrap_angle(b[2] - a[2]);
+            let residuals = |y: &State| {
+                let [px, py, heading] = PathCost::point_pose(AxlePoint::Rear, &params, y);
+                [n[0] * (px - a[0]) + n[1] * (py - a[1]), heading - theta_r]
+            };
+            let mut jac = [[0.0; POSE]; 2];
+            for (k, c) in POSE_INDEX.into_iter().enumerate() {
+                let (mut xp, mut xm) = (x, x);
+                xp[c] += h;
+                xm[c] -= h;
+                let (rp, rm) = (residuals(&xp), residuals(&xm));
+                for r in 0..2 {
+                    jac[r][k] = (rp[r] - rm[r]) / (2.0 * h);
+                }
+            }
+            let dtheta = residuals(&x)[1];
+            let weight = [2.0 * 12.0, 9.0 * dtheta.cos().max(0.0)];
+            for r in 0..POSE {
+                for c in 0..POSE {
+                    let gn: f64 = (0..2).map(|k| weight[k] * jac[k][r] * jac[k][c]).sum();
+                    assert!(
+                        (gn - term.hess_pose[r][c]).abs() < 1e-4 * (1.0 + gn.abs()),
+                        "({r}, {c}): {gn} vs {}",
+                        term.hess_pose[r][c]
+                    );
+                }
+            }
+        }
     }
 
     #[test]
@@ -452,6 +596,7 @@ mod tests {
             weights(),
             &params,
             false,
+            AxlePoint::Front,
         );
         assert!(p.is_empty());
         p.set(
@@ -459,19 +604,27 @@ mod tests {
             weights(),
             &params,
             false,
+            AxlePoint::Front,
         );
         assert!(p.is_empty(), "one distinct pose");
         let bad = PathWeights {
             lateral: -1.0,
             ..weights()
         };
-        p.set([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]], bad, &params, false);
+        p.set(
+            [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]],
+            bad,
+            &params,
+            false,
+            AxlePoint::Front,
+        );
         assert!(p.is_empty());
         p.set(
             [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]],
             weights(),
             &params,
             false,
+            AxlePoint::Front,
         );
         assert!(!p.is_empty());
     }

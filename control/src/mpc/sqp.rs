@@ -13,7 +13,7 @@ use super::constraints::{fill_bounds, fill_obstacles, ObstacleRows};
 use super::cost::{stage_block, terminal_block, StageCost};
 use super::dynamics::Dynamics;
 use super::layout::{QpLayout, AXLE_POINTS, NU, NX, NZ};
-use super::path_cost::PathTerm;
+use super::path_cost::{PathTerm, POSE_INDEX};
 use super::qp::{QpBackend, QpStatus};
 use super::settings::{MpcError, MpcSettings};
 use super::solution::{FallbackReason, StepStatus};
@@ -47,15 +47,12 @@ fn path_derivatives(term: &PathTerm, out: &mut Derivatives) {
     out.value = term.value;
     out.grad = [0.0; NZ];
     out.hess = [[0.0; NZ]; NZ];
-    for (k, c) in [ix::X, ix::Y, ix::THETA].into_iter().enumerate() {
-        out.grad[c] = term.grad_pose[k];
-    }
-    for i in 0..2 {
-        for j in 0..2 {
-            out.hess[i][j] = term.hess_position[i][j];
+    for (r, &i) in POSE_INDEX.iter().enumerate() {
+        out.grad[i] = term.grad_pose[r];
+        for (c, &j) in POSE_INDEX.iter().enumerate() {
+            out.hess[i][j] = term.hess_pose[r][c];
         }
     }
-    out.hess[ix::THETA][ix::THETA] = term.hess_heading;
     for c in 0..NU {
         out.grad[NX + c] = term.grad_control[c];
         out.hess[NX + c][NX + c] = term.hess_control[c];

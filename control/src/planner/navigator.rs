@@ -8,7 +8,7 @@ use crate::model::{
     goal_distance, ix, wrap_angle, Control, Goal, MachineParams, State, REACH_SPEED,
 };
 use crate::mpc::{PathCost, PathWeights};
-use crate::obstacle::Obstacle;
+use crate::obstacle::{AxlePoint, Obstacle};
 use crate::progress::ProgressChecker;
 use crate::Actor;
 
@@ -519,7 +519,7 @@ impl Navigator {
     /// part (a cusp, or the goal); otherwise the current route entry.
     fn drive_target(&self) -> (Goal, bool) {
         let last = self.route.targets.len() - 1;
-        if let Some(end) = self.forward_end().filter(|_| self.route_index < last) {
+        if let Some(end) = self.followed_end().filter(|_| self.route_index < last) {
             // The path cost drives there; the critic, with this target, does
             // the last part.
             if end + 1 < self.route.path.len() {
@@ -542,7 +542,7 @@ impl Navigator {
     fn refresh_path(&mut self, x: &State) {
         let goal = self.goal;
         let key = self
-            .forward_end()
+            .followed_end()
             .zip(goal)
             .map(|(end, _)| (self.plans, end));
         if key != self.path_key {
@@ -558,7 +558,7 @@ impl Navigator {
         if self.path_handed || self.path_cost.is_empty() {
             return;
         }
-        let (left, segment) = self.path_cost.arc_left(x[ix::X], x[ix::Y], self.path_hint);
+        let (left, segment) = self.path_cost.arc_left(x, self.path_hint);
         self.path_hint = segment;
         // An open end is where the search's goal shot started: the critic
         // takes over there, where the shot showed the way is open.
@@ -574,12 +574,18 @@ impl Navigator {
         }
     }
 
-    /// The path cost for the forward part ending at pose `end`. A path that
+    /// The path cost for the part ending at pose `end`, followed by the
+    /// leading axle (the rear one reversing). A forward path that
     /// ends where a goal shot starts is continued by the shot (the actor's
     /// way to the goal, driven again by the planner); a shot that reverses or
     /// did not reach leaves the path's end open (the critic takes over there).
     fn set_path_cost(&mut self, end: usize, goal: &Goal) {
         let path = &self.route.path;
+        let point = if path[end].direction >= 0 {
+            AxlePoint::Front
+        } else {
+            AxlePoint::Rear
+        };
         let shot = self.shot_ends_path(goal, end);
         let f = &self.settings.following;
         let start = path_geometry::direction_start(path, self.path_index)
@@ -591,29 +597,39 @@ impl Navigator {
             heading: f.heading * c,
             control: f.control * c,
         };
-        let poses = path[start..=end].iter().map(|p| [p.x, p.y, p.theta]);
+        let params = self.params;
+        let poses = path[start..=end].iter().map(|p| {
+            let x = State::new(p.x, p.y, p.theta, p.beta, 0.0, 0.0);
+            PathCost::point_pose(point, &params, &x)
+        });
         // A shot that reverses on the way is a manoeuvre for the critic.
         let traced = &self.route.shot;
-        let drivable =
-            shot && !traced.is_empty() && !traced.iter().any(|x| x[ix::V] < -REACH_SPEED);
+        let drivable = point == AxlePoint::Front
+            && shot
+            && !traced.is_empty()
+            && !traced.iter().any(|x| x[ix::V] < -REACH_SPEED);
         let tail: &[State] = if drivable { traced } else { &[] };
         let tail = tail.iter().map(|x| [x[ix::X], x[ix::Y], x[ix::THETA]]);
         let open_end = shot && !drivable;
         self.path_cost
-            .set(poses.chain(tail), weights, &self.params, open_end);
+            .set(poses.chain(tail), weights, &params, open_end, point);
     }
 
-    /// On a forward part of the route's path: the index of its last pose.
-    /// Reversing parts go by the route's subgoals, the critic's targets:
-    /// measured, the path cost reversing (the front axle trailing the rear)
-    /// can lock the articulation and stall.
-    fn forward_end(&self) -> Option<usize> {
+    /// On a followed part of the route's path: the index of its last pose.
+    /// Forward parts are followed by the front axle. Reversing parts are
+    /// followed by the rear axle on the actor's open way only; on a searched
+    /// route they go by its subgoals, the critic's targets. Measured
+    /// (docs/decisions.md): following the search's reversing parts too
+    /// reached fewer goals (198 of obstacles200 against 200), and the front
+    /// axle trailing the rear locks the articulation and stalls.
+    fn followed_end(&self) -> Option<usize> {
         let path = &self.route.path;
         if path.is_empty() {
             return None;
         }
         let end = path_geometry::direction_end(path, self.path_index);
-        (path[end].direction >= 0).then_some(end)
+        let open_way = self.route.report.outcome == PlanOutcome::Direct;
+        (path[end].direction >= 0 || open_way).then_some(end)
     }
 
     /// Whether pose `end` of the path is its last and a goal shot starts

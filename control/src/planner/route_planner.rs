@@ -12,7 +12,7 @@
 use std::time::{Duration, Instant};
 
 use crate::actor::{Actor, ActorWorkspace};
-use crate::model::{ix, Goal, MachineParams, State};
+use crate::model::{ix, Goal, MachineParams, State, REACH_SPEED};
 use crate::world::World;
 
 use super::hybrid_astar::{self, HybridAStar, SearchStats};
@@ -88,6 +88,18 @@ impl Route {
         self.shot.clear();
     }
 
+    /// The targets along the path: its subgoals, then `goal`.
+    fn set_subgoals(&mut self, goal: Goal, f: &FollowingSettings) {
+        subgoals_from_path(
+            &self.path,
+            goal,
+            f.subgoal_spacing,
+            f.subgoal_radius,
+            &mut self.targets,
+            &mut self.target_path_index,
+        );
+    }
+
     /// A route that is the goal alone (the open way).
     fn direct(&mut self, goal: Goal) {
         self.clear();
@@ -128,6 +140,8 @@ pub struct RoutePlanner {
     world: CheckedWorld,
     search: HybridAStar,
     actor: Option<(Actor, ActorWorkspace)>,
+    /// The actor's roll-out on the open way (its states, start first).
+    open_way: Vec<State>,
 }
 
 impl RoutePlanner {
@@ -149,6 +163,7 @@ impl RoutePlanner {
                 let ws = ActorWorkspace::new(&a);
                 (a, ws)
             }),
+            open_way: Vec::with_capacity(open_way_steps(s) + 1),
             search_settings: s.clone(),
             following: settings.following,
             approach_distance: settings.stall.approach_distance,
@@ -203,9 +218,13 @@ impl RoutePlanner {
         };
         self.world.set_margin(margin);
         // Planning every goal, an open way is searched too, and kept (the
-        // critic alone) unless the search finds a cheaper one.
-        if self.world.is_empty() || (open_cost.is_some() && !plan_every_goal) {
+        // roll-out's path) unless the search finds a cheaper one.
+        if self.world.is_empty() {
             route.direct(goal);
+            return PlanOutcome::Direct;
+        }
+        if open_cost.is_some() && !plan_every_goal {
+            self.follow_open_way(goal, route);
             return PlanOutcome::Direct;
         }
         let actor = self.actor.as_mut().map(|(a, ws)| (&*a, ws));
@@ -216,27 +235,19 @@ impl RoutePlanner {
         match result {
             Ok(()) if open_cost.is_some_and(|c| stats.cost >= c) => {
                 // Planning every goal: the open way is as cheap.
-                route.direct(goal);
+                self.follow_open_way(goal, route);
                 PlanOutcome::Direct
             }
             Ok(()) => {
                 // The search's nodes are 0.6 m apart: thinned to the spacing.
-                let f = &self.following;
-                subgoals_from_path(
-                    &route.path,
-                    goal,
-                    f.subgoal_spacing,
-                    f.subgoal_radius,
-                    &mut route.targets,
-                    &mut route.target_path_index,
-                );
+                route.set_subgoals(goal, &self.following);
                 self.trace_shot(&goal, route);
                 PlanOutcome::Route
             }
             // Planning every goal: a search that fails (its budget) where the
             // roll-out finds the way open goes direct, as without the search.
             Err(_) if open_cost.is_some() => {
-                route.direct(goal);
+                self.follow_open_way(goal, route);
                 PlanOutcome::Direct
             }
             Err(_) => {
@@ -347,15 +358,7 @@ impl RoutePlanner {
             route.clear();
             return PlanOutcome::NoRoute;
         }
-        let f = &self.following;
-        subgoals_from_path(
-            &route.path,
-            a,
-            f.subgoal_spacing,
-            f.subgoal_radius,
-            &mut route.targets,
-            &mut route.target_path_index,
-        );
+        route.set_subgoals(a, &self.following);
         // The goal after the approach pose (in place of it if the route is full).
         if route.targets.len() == route.targets.capacity() {
             route.targets.pop();
@@ -374,9 +377,10 @@ impl RoutePlanner {
     /// the margin without arriving; without an actor the straight distance).
     fn open_way_cost(&mut self, start: &State, goal: &Goal) -> Option<f64> {
         let s = &self.search_settings;
+        self.open_way.clear();
         match self.actor.as_mut() {
             Some((actor, ws)) => {
-                let steps = (s.direct_horizon / s.rollout_dt).ceil() as usize;
+                self.open_way.push(*start);
                 let r = roll_out(
                     &self.params,
                     actor,
@@ -386,9 +390,12 @@ impl RoutePlanner {
                     goal,
                     Arrival::Pose(s.shot_tolerance),
                     s.rollout_dt,
-                    steps,
-                    None,
+                    open_way_steps(s),
+                    Some(&mut self.open_way),
                 );
+                if !r.reached {
+                    self.open_way.clear();
+                }
                 match (r.collided, r.reached) {
                     (true, _) => None,
                     (false, true) => Some(r.duration(s.rollout_dt) * self.params.v_max),
@@ -399,6 +406,47 @@ impl RoutePlanner {
                 .then(|| (start[ix::X] - goal.x).hypot(start[ix::Y] - goal.y)),
         }
     }
+
+    /// The open way among circles as a route to follow: the path of the
+    /// actor's roll-out that found it open (its subgoals, and reversing parts
+    /// by the rear axle), not the critic alone. Measured on obstacles200: the
+    /// critic left to itself drives elsewhere than the roll-out that was
+    /// checked (dock024: the roll-out drives forwards round the piles, the
+    /// critic reverses into them) and stalls there. Without a roll-out that
+    /// arrived (no actor, or one that keeps the margin without arriving): the
+    /// goal alone, as before.
+    fn follow_open_way(&mut self, goal: Goal, route: &mut Route) {
+        route.direct(goal);
+        if self.open_way.len() < 2 {
+            return;
+        }
+        route.clear();
+        let mut direction = 1;
+        for (i, x) in self.open_way.iter().enumerate() {
+            if route.path.len() == route.path.capacity() {
+                break;
+            }
+            // A pose's direction is the motion leaving it (the start's is the
+            // roll-out's first).
+            let v = self.open_way.get(i + 1).unwrap_or(x)[ix::V];
+            if v.abs() > REACH_SPEED {
+                direction = if v < 0.0 { -1 } else { 1 };
+            }
+            route.path.push(PathPose {
+                x: x[ix::X],
+                y: x[ix::Y],
+                theta: x[ix::THETA],
+                beta: x[ix::BETA],
+                direction,
+            });
+        }
+        route.set_subgoals(goal, &self.following);
+    }
+}
+
+/// Steps of the open way's roll-out.
+fn open_way_steps(s: &SearchSettings) -> usize {
+    (s.direct_horizon / s.rollout_dt).ceil() as usize
 }
 
 /// The retry's approach pose: `distance` behind the goal on its heading, else
