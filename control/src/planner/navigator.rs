@@ -628,8 +628,16 @@ impl Navigator {
             return None;
         }
         let end = path_geometry::direction_end(path, self.path_index);
-        let open_way = self.route.report.outcome == PlanOutcome::Direct;
-        (path[end].direction >= 0 || open_way).then_some(end)
+        // MEASUREMENT SWITCHES (removed in the next commit): REVERSEALL=1
+        // follows every route's reversing parts, OPENWAYREV=off none.
+        let reverse = if std::env::var_os("REVERSEALL").is_some() {
+            true
+        } else if std::env::var("OPENWAYREV").is_ok_and(|v| v == "off") {
+            false
+        } else {
+            self.route.rolled_out
+        };
+        (path[end].direction >= 0 || reverse).then_some(end)
     }
 
     /// Whether pose `end` of the path is its last and a goal shot starts

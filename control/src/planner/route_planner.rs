@@ -65,6 +65,9 @@ pub struct Route {
     /// The goal shot the path ends with, driven again by the actor (empty
     /// when the path does not end with one, or it does not reach the goal).
     pub shot: Vec<State>,
+    /// The path is the actor's roll-out (an open way), not the search's:
+    /// its reversing parts are followed too (by the rear axle).
+    pub rolled_out: bool,
 }
 
 impl Route {
@@ -77,6 +80,7 @@ impl Route {
             targets: Vec::with_capacity(s.max_nodes + 1),
             target_path_index: Vec::with_capacity(s.max_nodes + 1),
             shot: Vec::with_capacity(hybrid_astar::shot_steps(s.shot_range, s.rollout_dt) + 1),
+            rolled_out: false,
         }
     }
 
@@ -86,6 +90,7 @@ impl Route {
         self.targets.clear();
         self.target_path_index.clear();
         self.shot.clear();
+        self.rolled_out = false;
     }
 
     /// The targets along the path: its subgoals, then `goal`.
@@ -98,6 +103,17 @@ impl Route {
             &mut self.targets,
             &mut self.target_path_index,
         );
+    }
+
+    /// `goal` after the path's end (in place of the last target if the
+    /// route is full): the retry's goal after its approach pose.
+    fn push_after(&mut self, goal: Goal) {
+        if self.targets.len() == self.targets.capacity() {
+            self.targets.pop();
+            self.target_path_index.pop();
+        }
+        self.targets.push(goal);
+        self.target_path_index.push(self.path.len());
     }
 
     /// A route that is the goal alone (the open way).
@@ -335,8 +351,10 @@ impl RoutePlanner {
                 || (self.world.pose_free(a.x, a.y, a.theta, 0.0)
                     && self.open_way_cost(x, a).is_some())
         }) {
-            route.targets.extend([a, *goal]);
-            route.target_path_index.extend([0, 0]);
+            // The roll-out that reached it is the way there (none in open
+            // ground: the critic drives).
+            self.follow_open_way(a, route);
+            route.push_after(*goal);
             return PlanOutcome::Retry;
         }
         // Between piles a pose the full distance off may not be free: half as far.
@@ -359,13 +377,8 @@ impl RoutePlanner {
             return PlanOutcome::NoRoute;
         }
         route.set_subgoals(a, &self.following);
-        // The goal after the approach pose (in place of it if the route is full).
-        if route.targets.len() == route.targets.capacity() {
-            route.targets.pop();
-            route.target_path_index.pop();
-        }
-        route.targets.push(*goal);
-        route.target_path_index.push(route.path.len());
+        route.push_after(*goal);
+        route.rolled_out = std::env::var_os("RETRYREV").is_some();
         PlanOutcome::Retry
     }
 
@@ -421,6 +434,7 @@ impl RoutePlanner {
             return;
         }
         route.clear();
+        route.rolled_out = true;
         let mut direction = 1;
         for (i, x) in self.open_way.iter().enumerate() {
             if route.path.len() == route.path.capacity() {
