@@ -617,27 +617,20 @@ impl Navigator {
 
     /// On a followed part of the route's path: the index of its last pose.
     /// Forward parts are followed by the front axle. Reversing parts are
-    /// followed by the rear axle on the actor's open way only; on a searched
-    /// route they go by its subgoals, the critic's targets. Measured
-    /// (docs/decisions.md): following the search's reversing parts too
-    /// reached fewer goals (198 of obstacles200 against 200), and the front
-    /// axle trailing the rear locks the articulation and stalls.
+    /// followed by the rear axle on the actor's roll-out only (an open way,
+    /// or a retry's way to its approach pose); on a searched route they go by
+    /// its subgoals, the critic's targets. Measured (docs/decisions.md):
+    /// following the search's reversing parts too reached fewer goals (its
+    /// primitives change β in steps at the nodes, where the rear axle's path
+    /// jumps by up to L_r·Δβ), and the front axle trailing the rear locks
+    /// the articulation and stalls.
     fn followed_end(&self) -> Option<usize> {
         let path = &self.route.path;
         if path.is_empty() {
             return None;
         }
         let end = path_geometry::direction_end(path, self.path_index);
-        // MEASUREMENT SWITCHES (removed in the next commit): REVERSEALL=1
-        // follows every route's reversing parts, OPENWAYREV=off none.
-        let reverse = if std::env::var_os("REVERSEALL").is_some() {
-            true
-        } else if std::env::var("OPENWAYREV").is_ok_and(|v| v == "off") {
-            false
-        } else {
-            self.route.rolled_out
-        };
-        (path[end].direction >= 0 || reverse).then_some(end)
+        (path[end].direction >= 0 || self.route.rolled_out).then_some(end)
     }
 
     /// Whether pose `end` of the path is its last and a goal shot starts

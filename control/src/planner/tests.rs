@@ -891,6 +891,37 @@ fn a_retry_approaches_from_ahead_when_behind_is_blocked_then_from_half_as_far_an
     }
 }
 
+/// A retry whose approach pose the actor's roll-out reaches follows that
+/// roll-out there (its path, reversing parts by the rear axle), then the
+/// critic takes the goal.
+#[test]
+fn a_retry_the_actor_reaches_follows_its_roll_out() {
+    let goal = Goal::new(5.0, 0.0, 0.0);
+    let d = NavigatorSettings::default().stall.approach_distance;
+    let behind = Obstacle::new(goal.x - d, 0.0, 0.5);
+    let stuck = stopped_beside(&goal);
+    let mut nav = navigator(true);
+    nav.set_goal(&stuck, goal, &[behind], 0.0).unwrap();
+    let mut t = 0.0;
+    while nav.plans() == 1 {
+        nav.update(&stuck, t);
+        t += 0.2;
+        assert!(t < 10.0);
+    }
+    assert_eq!(nav.last_plan().unwrap().outcome, PlanOutcome::Retry);
+    let approach = Goal::new(goal.x + d, 0.0, 0.0);
+    let route = nav.route();
+    assert_eq!(route[route.len() - 2..], [approach, goal], "{route:?}");
+    let path = nav.path();
+    assert!(path.len() > 2, "{} poses", path.len());
+    assert_eq!([path[0].x, path[0].y], [stuck[ix::X], stuck[ix::Y]]);
+    let end = path.last().unwrap();
+    assert!(
+        (end.x - approach.x).hypot(end.y - approach.y) < 0.5,
+        "{end:?}"
+    );
+}
+
 #[test]
 fn a_retry_opens_its_own_abort_window() {
     // Stopped beside the goal and never moving again: the retry at
