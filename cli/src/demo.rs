@@ -267,12 +267,15 @@ pub fn run(cli: &Cli, a: &DemoArgs) -> anyhow::Result<u8> {
         start.heading.to_degrees()
     ));
     emit(&format!("  cost     {cost_text}"));
-    if let (Some(path), Some(d)) = (&site, &drawn_site) {
+    if let Some(path) = &site {
+        // What wlnavd loaded, as its telemetry says (not this program's parse).
+        let drawn = drawn_site.as_ref().map_or(String::new(), |d| {
+            format!("; {} features drawn", d.features)
+        });
         emit(&format!(
-            "  site     {} (`{}`: {} features; wlnavd --site)",
+            "  site     {} (wlnavd --site {}{drawn})",
+            super::view::site_text(&first),
             path.display(),
-            d.id,
-            d.features
         ));
     }
 
