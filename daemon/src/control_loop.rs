@@ -93,6 +93,9 @@ pub struct LoopContext {
 pub struct ControlLoop {
     /// The site in force (DESIGN §17).
     site: Option<std::sync::Arc<control::site::SiteIndex>>,
+    /// A replaced site the slot was too busy to take back: handed back at a
+    /// later tick, never freed here.
+    retiring: Option<std::sync::Arc<control::site::SiteIndex>>,
     ctx: LoopContext,
     controller: Box<dyn Controller>,
     notifier: Notifier,
@@ -191,6 +194,7 @@ impl ControlLoop {
             tick: 0,
             seen_data: false,
             site: None,
+            retiring: None,
         }
     }
 
@@ -318,13 +322,24 @@ impl ControlLoop {
 
     /// A reloaded site, if one waits, goes into force at this tick boundary: the
     /// goal check and the controller together (DESIGN §17); telemetry names the
-    /// site in force. No allocation.
+    /// site in force. The replaced site goes back to the slot, which frees it
+    /// off the tick (this loop holds the last reference until then).
     fn swap_site(&mut self, t: &mut Telemetry) {
-        if let Some(site) = self.ctx.goals.site().take() {
-            tracing::info!("{} in force", crate::site::describe(&site));
-            self.controller.set_site(Some(site.clone()));
-            self.ctx.goals.lock().set_site(Some(site.clone()));
-            self.site = Some(site);
+        let slot = self.ctx.goals.site();
+        if let Some(old) = self.retiring.take() {
+            self.retiring = slot.retire(old).err();
+        }
+        // While a replaced site waits to be handed back (a reload was freeing
+        // the one before), the next one waits in the slot.
+        if self.retiring.is_none() {
+            if let Some((site, text)) = slot.take() {
+                tracing::info!("{text} in force");
+                self.controller.set_site(Some(site.clone()));
+                self.ctx.goals.lock().set_site(Some(site.clone()));
+                if let Some(old) = self.site.replace(site) {
+                    self.retiring = slot.retire(old).err();
+                }
+            }
         }
         t.set_site(
             self.site

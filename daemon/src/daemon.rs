@@ -267,7 +267,7 @@ async fn run_async(
     // in force (after the start-up self-test's goal, which knows no site).
     let site = SiteSlot::new(config.site.path().map(Path::to_path_buf));
     if config.site.path().is_some() {
-        let text = site.reload().map_err(DaemonError::Site)?;
+        let text = site.reload(false).map_err(DaemonError::Site)?;
         tracing::info!("{text}");
     }
     let goals = Arc::new(SharedGoals::new(

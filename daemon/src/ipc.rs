@@ -171,7 +171,7 @@ pub async fn serve_goals(
             let decided = valid.map_err(|reason| (reason.code(), reason.to_string()));
             let decided = decided.and_then(|v| match v {
                 // Read and validated here, off the tick; in force from the next tick.
-                ValidRequest::ReloadSite { request_id } => match goals.site.reload() {
+                ValidRequest::ReloadSite { request_id } => match goals.site.reload(shutting_down) {
                     Ok(text) => {
                         tracing::info!("request {request_id}: {text} loaded, in force next tick");
                         Ok(v)

@@ -103,11 +103,19 @@ pub fn describe(index: &SiteIndex) -> String {
     )
 }
 
-/// The configured site file and a reloaded site waiting for the next tick.
+/// A reloaded site for the control thread: the index and its description
+/// (formatted by the reload, so that the tick that swaps it in only logs it).
+pub type PendingSite = (Arc<SiteIndex>, String);
+
+/// The configured site file, a reloaded site waiting for the next tick, and
+/// the site it replaced, handed back by the control thread so that the whole
+/// old index is freed here (by the next reload, or with the slot), not on the
+/// tick.
 #[derive(Debug)]
 pub struct SiteSlot {
     path: Option<PathBuf>,
-    pending: Mutex<Option<Arc<SiteIndex>>>,
+    pending: Mutex<Option<PendingSite>>,
+    retired: Mutex<Option<Arc<SiteIndex>>>,
 }
 
 impl SiteSlot {
@@ -116,26 +124,51 @@ impl SiteSlot {
         Self {
             path,
             pending: Mutex::new(None),
+            retired: Mutex::new(None),
         }
     }
 
     /// Reads the configured file again. On success the new site waits for the
     /// next tick ([`SiteSlot::take`]) and its description is returned; on any
-    /// error nothing changes.
-    pub fn reload(&self) -> Result<String, String> {
+    /// error nothing changes. Frees the site the last swap retired. Refused
+    /// while the daemon shuts down: no tick would put it in force.
+    pub fn reload(&self, shutting_down: bool) -> Result<String, String> {
+        if shutting_down {
+            return Err("the daemon is shutting down".into());
+        }
         let Some(path) = &self.path else {
             return Err("the daemon has no site file (`[site] file` / `--site`)".into());
         };
+        drop(
+            self.retired
+                .lock()
+                .unwrap_or_else(|p| p.into_inner())
+                .take(),
+        );
         let index = load(path).map_err(|e| e.to_string())?;
         let text = describe(&index);
-        *self.pending.lock().unwrap_or_else(|p| p.into_inner()) = Some(Arc::new(index));
+        *self.pending.lock().unwrap_or_else(|p| p.into_inner()) =
+            Some((Arc::new(index), text.clone()));
         Ok(text)
     }
 
     /// A reloaded site not yet in force, if any (the control thread, at a
     /// tick boundary). A `try_lock`: a reload being stored is taken next tick.
-    pub fn take(&self) -> Option<Arc<SiteIndex>> {
+    pub fn take(&self) -> Option<PendingSite> {
         self.pending.try_lock().ok().and_then(|mut p| p.take())
+    }
+
+    /// Takes the site a swap replaced (the control thread): it is freed off
+    /// the tick. Gives it back when the slot is busy (a reload is freeing the
+    /// last one): the caller keeps it and retires it at a later tick.
+    pub fn retire(&self, old: Arc<SiteIndex>) -> Result<(), Arc<SiteIndex>> {
+        match self.retired.try_lock() {
+            Ok(mut r) if r.is_none() => {
+                *r = Some(old);
+                Ok(())
+            }
+            _ => Err(old),
+        }
     }
 }
 
@@ -159,26 +192,45 @@ mod tests {
         let path = write(dir.path(), "pad.json", SITE);
         let slot = SiteSlot::new(Some(path.clone()));
         assert!(slot.take().is_none());
-        let text = slot.reload().unwrap();
+        let text = slot.reload(false).unwrap();
         assert!(text.starts_with("site `pad` version 3 hash "), "{text}");
-        let taken = slot.take().unwrap();
+        let (taken, described) = slot.take().unwrap();
+        assert_eq!(described, text);
         assert_eq!(taken.site().features().len(), 1);
         assert!(slot.take().is_none());
+        // The site a swap replaces is handed back, freed by the next reload
+        // (not by the control thread), one at a time.
+        let old = Arc::new(load(&path).unwrap());
+        let weak = Arc::downgrade(&old);
+        slot.retire(old).unwrap();
+        let second = Arc::new(load(&path).unwrap());
+        let second = slot.retire(second).expect_err("one retired site at a time");
+        assert!(weak.upgrade().is_some(), "freed before a reload");
+        slot.reload(false).unwrap();
+        assert!(
+            weak.upgrade().is_none(),
+            "the reload frees the retired site"
+        );
+        slot.retire(second).unwrap();
+        slot.take().unwrap();
         // A broken file: the error names the file, the feature and what is wrong.
         write(
             dir.path(),
             "pad.json",
             &SITE.replace(r#""circle": [3, 3, 1]"#, r#""circle": [3, 3, -1]"#),
         );
-        let e = slot.reload().unwrap_err();
+        let e = slot.reload(false).unwrap_err();
         assert!(e.contains("pad.json") && e.contains("pile-1"), "{e}");
         assert!(slot.take().is_none());
         std::fs::remove_file(&path).unwrap();
-        assert!(slot.reload().unwrap_err().contains("pad.json"));
+        assert!(slot.reload(false).unwrap_err().contains("pad.json"));
         assert!(SiteSlot::new(None)
-            .reload()
+            .reload(false)
             .unwrap_err()
             .contains("no site file"));
+        // Shutting down: refused, nothing read or pending.
+        assert!(slot.reload(true).unwrap_err().contains("shutting down"));
+        assert!(slot.take().is_none());
     }
 
     #[test]
