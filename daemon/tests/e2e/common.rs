@@ -64,6 +64,17 @@ pub struct Running {
 }
 
 /// Starts the daemon on its own thread and connects a client.
+/// `config` driven by the committed networks of `dir` (a path from the
+/// repository's root, e.g. [`control::weights::DEFAULT_DIR`]), with the
+/// machine they were trained for.
+pub fn with_committed_weights(mut config: Config, dir: &str) -> Config {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    config.controller.cost = CostKind::Critic;
+    config.weights = wlnavd::config::WeightsConfig::in_dir(&root.join(dir));
+    config.adopt_trained_machine();
+    config
+}
+
 pub fn start(config: Config, controller: Option<ControllerFactory>) -> Running {
     let shutdown = ShutdownHandle::new();
     let (tx, rx) = tokio::sync::oneshot::channel();

@@ -241,14 +241,6 @@ fn an_enclosed_goal_ends_aborted_no_route_with_the_machine_at_rest() {
 
 /// `config` with the trained critic and actor of a committed machine directory
 /// (relative to the repository), the machine and Δt taken from their metadata.
-fn with_committed_weights(mut config: wlnavd::config::Config, dir: &str) -> wlnavd::config::Config {
-    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    config.controller.cost = wlnavd::config::CostKind::Critic;
-    config.weights = wlnavd::config::WeightsConfig::in_dir(&root.join(dir));
-    config.adopt_trained_machine();
-    config
-}
-
 /// Sends `goal`, records the telemetry until its outcome (at most 60 s) and
 /// requires it to be `succeeded`, reported once.
 fn drive_to_success(d: &Running, goal: Pose2, obstacles: &[Obstacle]) -> Vec<Telemetry> {

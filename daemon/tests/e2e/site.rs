@@ -34,17 +34,8 @@ fn write_site(dir: &Path, text: &str) -> PathBuf {
     path
 }
 
-fn with_committed_weights(mut config: wlnavd::config::Config) -> wlnavd::config::Config {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    config.controller.cost = wlnavd::config::CostKind::Critic;
-    config.weights =
-        wlnavd::config::WeightsConfig::in_dir(&root.join(control::weights::DEFAULT_DIR));
-    config.adopt_trained_machine();
-    config
-}
-
 fn start_in_site(name: &str, file: &Path) -> Running {
-    let mut config = with_committed_weights(sim_config(name));
+    let mut config = with_committed_weights(sim_config(name), control::weights::DEFAULT_DIR);
     config.site.file = file.to_path_buf();
     config.validate().unwrap();
     start(config, None)
