@@ -62,6 +62,22 @@ impl AxlePoint {
         }
     }
 
+    /// The heading of the point's body: θ for the front, θ − β for the rear.
+    pub fn heading(self, x: &State) -> f64 {
+        match self {
+            AxlePoint::Front => x[ix::THETA],
+            AxlePoint::Rear => x[ix::THETA] - x[ix::BETA],
+        }
+    }
+
+    /// ∂(heading)/∂(x_f, y_f, θ, β).
+    pub fn heading_jacobian(self) -> [f64; 4] {
+        match self {
+            AxlePoint::Front => [0.0, 0.0, 1.0, 0.0],
+            AxlePoint::Rear => [0.0, 0.0, 1.0, -1.0],
+        }
+    }
+
     /// ∂(position)/∂(x_f, y_f, θ, β): rows are the point's x and y.
     pub fn jacobian(self, p: &MachineParams, x: &State) -> [[f64; 4]; 2] {
         match self {

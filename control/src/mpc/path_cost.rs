@@ -217,11 +217,7 @@ impl PathCost {
     /// The pose (x, y, heading) of `point` and its body in state `x`.
     pub fn point_pose(point: AxlePoint, params: &MachineParams, x: &State) -> [f64; 3] {
         let [px, py] = point.position(params, x);
-        let heading = match point {
-            AxlePoint::Front => x[ix::THETA],
-            AxlePoint::Rear => x[ix::THETA] - x[ix::BETA],
-        };
-        [px, py, heading]
+        [px, py, point.heading(x)]
     }
 
     /// Copies `other` (no allocation).
@@ -326,10 +322,7 @@ impl PathCost {
         let hess_lateral = 2.0 * w.lateral;
         let hess_heading = w.heading * cos.max(0.0);
         let [jx, jy] = self.point.jacobian(&self.params, x);
-        let jh = match self.point {
-            AxlePoint::Front => [0.0, 0.0, 1.0, 0.0],
-            AxlePoint::Rear => [0.0, 0.0, 1.0, -1.0],
-        };
+        let jh = self.point.heading_jacobian();
         // n·J: the lateral error's row.
         let jn: [f64; POSE] = std::array::from_fn(|c| n[0] * jx[c] + n[1] * jy[c]);
         let grad_pose = std::array::from_fn(|c| {
