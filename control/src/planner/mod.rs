@@ -112,14 +112,16 @@ pub enum NavError {
 /// How the last plan ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum PlanOutcome {
-    /// Nothing in the way: the route is the goal alone.
+    /// Nothing in the way: the goal alone in open ground; among circles the
+    /// path of the actor's roll-out that found the way open, then the goal.
     Direct,
     /// A route of subgoals.
     Route,
     /// The planner found none.
     NoRoute,
-    /// A retry after a stall near the goal: the route is the approach pose,
-    /// then the goal (`StallSettings::approach_distance`).
+    /// A retry after a stall near the goal: the route is the approach pose
+    /// (by the actor's roll-out or a search where one reaches it), then the
+    /// goal (`StallSettings::approach_distance`).
     Retry,
 }
 

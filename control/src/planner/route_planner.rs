@@ -52,8 +52,8 @@ pub struct PlanRequest {
     pub world: World,
 }
 
-/// A planned route: the path (empty when direct or a retry) and the targets
-/// along it, ending with the goal.
+/// A planned route: the path (empty in open ground, and for a retry the
+/// critic drives) and the targets along it, ending with the goal.
 #[derive(Debug, Clone)]
 pub struct Route {
     pub report: PlanReport,
