@@ -65,8 +65,9 @@ pub struct Route {
     /// The goal shot the path ends with, driven again by the actor (empty
     /// when the path does not end with one, or it does not reach the goal).
     pub shot: Vec<State>,
-    /// The path is the actor's roll-out (an open way), not the search's:
-    /// its reversing parts are followed too (by the rear axle).
+    /// The path is the actor's roll-out (an open way, or a retry's way to
+    /// its approach pose), not the search's: its reversing parts are
+    /// followed too (by the rear axle).
     pub rolled_out: bool,
 }
 
