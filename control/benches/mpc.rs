@@ -149,6 +149,7 @@ impl Loop {
                 world: self.mpc.world(),
                 dt: 0.2,
                 last: self.last,
+                live: None,
             },
             proposed,
         )

@@ -210,7 +210,7 @@ impl DelayCompensator {
         if duration <= 0.0 {
             return *measured;
         }
-        self.propagate_with(time, measured, &[], 1.0, 0.0, time + duration, |_| {})
+        self.propagate_with(time, measured, &[], 1.0, 0.0, time + duration, |_, _| {})
     }
 
     /// The state at `end` from the state measured at `time`, with the commands
@@ -223,7 +223,7 @@ impl DelayCompensator {
     /// saturated at the nominal bounds (1: as commanded; the envelope's bound
     /// on the actuator gain). `observe` sees the state after every
     /// integration sub-step (at most `substep` apart, split at every
-    /// activation and ramp end).
+    /// activation and ramp end), with its time.
     pub fn propagate_with(
         &self,
         time: f64,
@@ -232,7 +232,7 @@ impl DelayCompensator {
         gain: f64,
         late: f64,
         end: f64,
-        mut observe: impl FnMut(&State),
+        mut observe: impl FnMut(f64, &State),
     ) -> State {
         let mut x = *measured;
         let p = self.params;
@@ -317,7 +317,7 @@ impl DelayCompensator {
             clamp_state(&reach, &mut next_x);
             x = next_x;
             t += h;
-            observe(&x);
+            observe(t, &x);
         }
         x
     }
@@ -430,7 +430,7 @@ mod tests {
             },
         );
         let x = State::new(0.0, 0.0, 0.0, 0.0, 0.0, 0.5);
-        let mut seen = 0;
+        let (mut seen, mut last) = (0, 0.0);
         let y = c.propagate_with(
             0.0,
             &x,
@@ -438,14 +438,18 @@ mod tests {
             1.0,
             0.0,
             2.0,
-            |_| seen += 1,
+            |t, _| {
+                assert!(t > last && t <= 2.0 + 1e-12, "{t} after {last}");
+                last = t;
+                seen += 1;
+            },
         );
         assert_eq!(y[ix::V], 0.0);
         // 0.3 s at 0.5 m/s, then 0.5²/2 = 0.125 m of braking.
         assert!((y[ix::X] - 0.275).abs() < 1e-9, "{}", y[ix::X]);
         assert!(seen >= 200, "{seen}");
         // Without pending commands it is propagate_over.
-        let a = c.propagate_with(0.0, &x, &[], 1.0, 0.0, 0.3, |_| {});
+        let a = c.propagate_with(0.0, &x, &[], 1.0, 0.0, 0.3, |_, _| {});
         assert_eq!(a, c.propagate_over(0.0, &x, 0.3));
     }
 }

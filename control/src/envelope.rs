@@ -43,6 +43,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::assumption_check::CheckSettings;
 use crate::delay::DelayCompensator;
+use crate::live::{LiveSet, LiveSettings, MAX_LIVE_OBSTACLES};
 use crate::model::{MachineParams, State, VelocityCommand};
 use crate::site::index::Near;
 use crate::site::outline::{Body, Outline, MAX_OUTLINE_CIRCLES};
@@ -313,6 +314,35 @@ pub struct EnvelopeInput<'a> {
     pub dt: f64,
     /// The last command sent (the stop ramps down from it).
     pub last: VelocityCommand,
+    /// The live obstacles perception sees, and the clearance kept to them
+    /// (`None`: none are checked).
+    pub live: Option<LiveView<'a>>,
+}
+
+/// The live obstacles the envelope keeps off ([`crate::live`]).
+#[derive(Debug, Clone, Copy)]
+pub struct LiveView<'a> {
+    pub set: &'a LiveSet,
+    pub settings: &'a LiveSettings,
+}
+
+/// The live obstacle a prediction came nearest to.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LiveContact {
+    /// Perception's id of it.
+    pub id: u32,
+    /// Smallest predicted clearance to it beyond the margins and its stop
+    /// field [m] (negative: inside).
+    pub excess: f64,
+}
+
+/// What [`predict`] found: the smallest clearance beyond the margins over
+/// everything (the site, the goal's circles, the live obstacles' stop
+/// fields), and the live obstacle nearest.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Prediction {
+    pub excess: f64,
+    pub live: Option<LiveContact>,
 }
 
 /// Which command left the loop.
@@ -348,6 +378,9 @@ pub struct Guarded {
     pub proposed_excess: f64,
     /// The same for the command sent.
     pub excess: f64,
+    /// The live obstacle the command sent comes nearest to, if any is
+    /// within [`SITE_REACH`] of its stop field.
+    pub live: Option<LiveContact>,
 }
 
 impl Guarded {
@@ -357,26 +390,28 @@ impl Guarded {
     }
 }
 
-/// Smallest clearance beyond the margins [m] of both axle points over the
+/// Smallest clearance beyond the margins [m] of the outline over the
 /// prediction: `command` sent now, a stop sent a tick later, until at rest;
 /// with the commands acting after the delay and, if `response_lag` > 0, at
-/// lags up to it ([`late_samples`]).
-pub fn predicted_excess(input: &EnvelopeInput, command: VelocityCommand) -> f64 {
+/// lags up to it ([`late_samples`]). Live obstacles are predicted along
+/// their velocities to each predicted state's time, their stop field
+/// ([`LiveSettings::reach`]) added to the margins.
+pub fn predict(input: &EnvelopeInput, command: VelocityCommand) -> Prediction {
     let EnvelopeInput {
         params: p,
         settings: s,
         ..
     } = *input;
-    if input.world.is_empty() {
-        return f64::INFINITY;
+    let live = input.live.filter(|l| !l.set.is_empty());
+    if input.world.is_empty() && live.is_none() {
+        return Prediction {
+            excess: f64::INFINITY,
+            live: None,
+        };
     }
     let margins = s.circle_margins(p, input.world.outline());
     let stop_at = input.now + input.dt;
-    // The stop acts a delay after it is sent; from the fastest the machine can
-    // go (gain × the bounds), it is at rest within the longer of the two
-    // braking times (plus the ramp of the model's response).
-    let braking =
-        s.actuator_gain_max * (p.v_max / p.a_max).max(p.beta_dot_max / p.beta_ddot_max) + input.dt;
+    let braking = braking_time(p, s, input.dt);
     let pending = [(input.now, command), (stop_at, VelocityCommand::ZERO)];
     // The site's features the prediction can come near: every outline circle
     // stays within the distance the front axle can go (at the fastest the
@@ -395,23 +430,70 @@ pub fn predicted_excess(input: &EnvelopeInput, command: VelocityCommand) -> f64 
         input.state[crate::model::ix::X],
         input.state[crate::model::ix::Y],
     ];
+    let reach = speed * horizon + extent + SITE_REACH;
     let mut near = [Near::default(); NEAR_FEATURES];
-    let local = input
-        .world
-        .features_near(front, speed * horizon + extent + SITE_REACH, &mut near);
+    let local = input.world.features_near(front, reach, &mut near);
     let near = local.map(|n| &near[..n]);
+    // The live obstacles that can come within reach: their bounding discs'
+    // paths from now to the end of the prediction.
+    let mut movers = [0u8; MAX_LIVE_OBSTACLES];
+    let mut n_movers = 0;
+    if let Some(l) = live {
+        let end = input.now + horizon;
+        for (i, o) in l
+            .set
+            .obstacles()
+            .iter()
+            .enumerate()
+            .take(MAX_LIVE_OBSTACLES)
+        {
+            let (c, r) = o.shape.bounding_circle();
+            let at = |t: f64| {
+                let dt = t - o.stamp;
+                [c[0] + o.velocity[0] * dt, c[1] + o.velocity[1] * dt]
+            };
+            let (_, d) = crate::site::geometry::closest_on_segment(front, at(input.now), at(end));
+            if d - r - l.settings.reach(end - o.stamp) < reach {
+                movers[n_movers] = i as u8;
+                n_movers += 1;
+            }
+        }
+    }
     let mut excess = if input.world.site().is_some() {
         SITE_REACH
     } else {
         f64::INFINITY
     };
-    let mut observe = |x: &State| {
+    let mut nearest_live: Option<LiveContact> = None;
+    let substep = input.settings.substep;
+    let mut observe = |t: f64, x: &State| {
         // Below the least so far only: the index prunes everything farther.
-        if let Some(c) = input.world.excess_among(x, &margins, excess, near) {
-            excess = excess.min(c.clearance);
+        if !input.world.is_empty() {
+            if let Some(c) = input.world.excess_among(x, &margins, excess, near) {
+                excess = excess.min(c.clearance);
+            }
+        }
+        let Some(l) = live else { return };
+        if n_movers == 0 {
+            return;
+        }
+        let placed = input.world.place(x);
+        for &i in &movers[..n_movers] {
+            let o = &l.set.obstacles()[i as usize];
+            // The obstacle moves up to |v|·substep between two samples.
+            let grow = l.settings.reach(t - o.stamp) + 0.5 * o.speed() * substep;
+            for (c, m) in placed[..outline.len()].iter().zip(&margins) {
+                let e = o.clearance_at(c.center, c.radius + m + grow, t);
+                if nearest_live.is_none_or(|n| e < n.excess) {
+                    nearest_live = Some(LiveContact {
+                        id: o.id,
+                        excess: e,
+                    });
+                }
+            }
         }
     };
-    observe(input.state);
+    observe(input.now, input.state);
     // The machine responds after the delay, or up to `response_lag` later.
     // The prediction is not monotone in the delay (a later stop is farther
     // along, a later turn is wider or narrower), so neither end bounds what
@@ -433,7 +515,29 @@ pub fn predicted_excess(input: &EnvelopeInput, command: VelocityCommand) -> f64 
             &mut observe,
         );
     }
-    excess - pad
+    let live = nearest_live
+        .filter(|c| c.excess < SITE_REACH)
+        .map(|c| LiveContact {
+            excess: c.excess - pad,
+            ..c
+        });
+    Prediction {
+        excess: live.map_or(excess, |c| excess.min(c.excess + pad)) - pad,
+        live,
+    }
+}
+
+/// How long [`predict`] follows the machine after its stop acts [s]: from
+/// the fastest it can go (gain × the bounds), it is at rest within the
+/// longer of the two braking times, plus the ramp of the model's response
+/// (the command period `dt`).
+pub fn braking_time(p: &MachineParams, s: &EnvelopeSettings, dt: f64) -> f64 {
+    s.actuator_gain_max * (p.v_max / p.a_max).max(p.beta_dot_max / p.beta_ddot_max) + dt
+}
+
+/// The smallest clearance beyond the margins of [`predict`].
+pub fn predicted_excess(input: &EnvelopeInput, command: VelocityCommand) -> f64 {
+    predict(input, command).excess
 }
 
 /// With a site, [`predicted_excess`] measures exactly up to this [m] and
@@ -472,45 +576,46 @@ pub fn guard(input: &EnvelopeInput, proposed: VelocityCommand) -> Guarded {
         choice: Choice::Proposed,
         proposed_excess: f64::INFINITY,
         excess: f64::INFINITY,
+        live: None,
     };
-    if !input.settings.enabled || input.world.is_empty() {
+    let has_live = input.live.is_some_and(|l| !l.set.is_empty());
+    if !input.settings.enabled || (input.world.is_empty() && !has_live) {
         return pass;
     }
-    let excess = predicted_excess(input, proposed);
-    if excess >= 0.0 {
-        return Guarded {
-            proposed_excess: excess,
-            excess,
-            ..pass
-        };
+    let it = predict(input, proposed);
+    let passed = Guarded {
+        proposed_excess: it.excess,
+        excess: it.excess,
+        live: it.live,
+        ..pass
+    };
+    if it.excess >= 0.0 {
+        return passed;
     }
     let stop = stop_command(input.last, Some(input.state), input.params, input.dt);
-    let stop_excess = predicted_excess(input, stop);
+    let stopped = predict(input, stop);
     // No worse than stopping now: moving away from (or along) a circle the
     // machine is already too close to.
-    if excess >= stop_excess - 1e-9 {
-        return Guarded {
-            proposed_excess: excess,
-            excess,
-            ..pass
-        };
+    if it.excess >= stopped.excess - 1e-9 {
+        return passed;
     }
     let steer = VelocityCommand {
         beta_dot: proposed.beta_dot,
         ..stop
     }
     .limited(input.params);
-    let steer_excess = predicted_excess(input, steer);
-    let (command, choice, best) = if steer_excess > stop_excess {
-        (steer, Choice::BrakeSteering, steer_excess)
+    let steered = predict(input, steer);
+    let (command, choice, best) = if steered.excess > stopped.excess {
+        (steer, Choice::BrakeSteering, steered)
     } else {
-        (stop, Choice::Stop, stop_excess)
+        (stop, Choice::Stop, stopped)
     };
     Guarded {
         command,
         choice,
-        proposed_excess: excess,
-        excess: best,
+        proposed_excess: it.excess,
+        excess: best.excess,
+        live: best.live,
     }
 }
 
@@ -553,6 +658,7 @@ mod tests {
             world,
             dt: 0.2,
             last,
+            live: None,
         }
     }
 
@@ -589,6 +695,104 @@ mod tests {
         assert_eq!(g.choice, Choice::Proposed);
         assert_eq!(g.command, full);
         assert!(g.excess > 0.0 && g.excess < 0.6);
+    }
+
+    /// The guard's verdict on `command` with `set` as the live obstacles.
+    fn guard_live(
+        inp: EnvelopeInput,
+        set: &LiveSet,
+        fields: &LiveSettings,
+        command: VelocityCommand,
+    ) -> Guarded {
+        guard(
+            &EnvelopeInput {
+                live: Some(LiveView {
+                    set,
+                    settings: fields,
+                }),
+                ..inp
+            },
+            command,
+        )
+    }
+
+    /// A person of radius 0.3 m, seen at `stamp` with its centre at (x, y),
+    /// walking at `velocity`.
+    fn person(x: f64, y: f64, velocity: [f64; 2], stamp: f64) -> LiveSet {
+        use crate::live::{LiveClass, LiveObstacle, LiveShape};
+        let shape = LiveShape::circle([x, y], 0.3).unwrap();
+        let o = LiveObstacle::new(42, LiveClass::Person, shape, velocity, stamp).unwrap();
+        let mut set = LiveSet::new();
+        set.set(stamp, &[o]).unwrap();
+        set
+    }
+
+    #[test]
+    fn a_person_closing_in_is_stopped_for_at_the_formulas_distance() {
+        // The envelope's prediction against its closed form (crate::live's
+        // S_stop): 1 m/s, 0.2 s delay, a person walking head-on at 0.5 m/s
+        // seen 0.1 s ago.
+        let p = avant();
+        let s = EnvelopeSettings::exact();
+        let fields = LiveSettings::default();
+        let (sent, x) = driving(1.0, 0.2);
+        let full = VelocityCommand {
+            beta_dot: 0.0,
+            v: 1.0,
+        };
+        let (u, age) = (0.5, 0.1);
+        let response = 0.2 + 0.2; // the stop a tick later, acting a delay after
+        let gap = crate::live::stop_distance(
+            &p,
+            &fields,
+            1.0,
+            u,
+            response,
+            age,
+            braking_time(&p, &s, 0.2),
+            s.margin,
+        );
+        // The gap runs from the front circle (radius 0.65 about the axle) to
+        // the person's edge where it was seen.
+        for (offset, stops) in [(0.05, false), (-0.05, true)] {
+            let centre = 0.65 + gap + offset + 0.3;
+            let set = person(centre, 0.0, [-u, 0.0], -age);
+            let g = guard_live(input(&p, &s, &sent, &x, &[], full), &set, &fields, full);
+            assert_eq!(g.overridden(), stops, "{offset}: {g:?}");
+            // The excess is the offset (the ramp model brakes as the closed
+            // form does; the mover's sub-step pad is 2.5 mm).
+            assert!((g.proposed_excess - offset).abs() < 5e-3, "{g:?}");
+            assert_eq!(g.live.map(|c| c.id), Some(42));
+            if stops {
+                assert_eq!(g.choice, Choice::Stop);
+                assert!(g.excess > g.proposed_excess);
+            }
+        }
+    }
+
+    #[test]
+    fn a_person_walking_away_or_crossing_behind_is_no_reason_to_stop() {
+        let p = avant();
+        let s = EnvelopeSettings::exact();
+        let fields = LiveSettings::default();
+        let (sent, x) = driving(1.0, 0.2);
+        let full = VelocityCommand {
+            beta_dot: 0.0,
+            v: 1.0,
+        };
+        let check =
+            |set: &LiveSet| guard_live(input(&p, &s, &sent, &x, &[], full), set, &fields, full);
+        // 3 m ahead, walking away faster than the machine: passes.
+        assert!(!check(&person(3.0, 0.0, [1.5, 0.0], 0.0)).overridden());
+        // The same person standing there: the stop field is reached.
+        assert!(check(&person(3.0, 0.0, [0.0, 0.0], 0.0)).overridden());
+        // Crossing 3 m ahead, already past the path and walking off sideways.
+        assert!(!check(&person(3.0, 2.0, [0.0, 1.4], 0.0)).overridden());
+        // Crossing towards the path 2 m to the side: it arrives in the stop.
+        assert!(check(&person(2.2, -2.0, [0.0, 1.4], 0.0)).overridden());
+        // Far off: not even reported.
+        let g = check(&person(30.0, 0.0, [0.0, 0.0], 0.0));
+        assert_eq!((g.choice, g.live), (Choice::Proposed, None));
     }
 
     #[test]

@@ -13,6 +13,7 @@ pub mod encoder;
 pub mod envelope;
 pub mod gain;
 pub mod goal_check;
+pub mod live;
 pub mod mlp;
 pub mod model;
 pub mod mpc;

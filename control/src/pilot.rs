@@ -21,7 +21,8 @@ use std::time::{Duration, Instant};
 
 use crate::assumption_check::{self, Assessment, AssumptionMonitor, Decision, Finding};
 use crate::delay::DelayCompensator;
-use crate::envelope::{self, EnvelopeInput, EnvelopeSettings, Guarded};
+use crate::envelope::{self, EnvelopeInput, EnvelopeSettings, Guarded, LiveContact, LiveView};
+use crate::live::{self, Freshness, FreshnessState, LiveSet, LiveSettings};
 use crate::model::{Goal, MachineParams, State, VelocityCommand};
 use crate::mpc::{Mpc, MpcError, Solution, StageCost};
 use crate::obstacle::Obstacle;
@@ -68,6 +69,33 @@ pub struct PilotStep<'a> {
     /// The check of the envelope's assumptions this tick (`Continue`, or
     /// `Widen` with the finding the envelope was widened to).
     pub assumptions: Assessment,
+    /// What the live obstacles did to this tick (`None` without perception).
+    pub live: Option<LiveStatus>,
+}
+
+/// The live obstacles' effect on a tick ([`Pilot::enable_live`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LiveStatus {
+    /// The perception's freshness (a stop unless `Fresh`, when required).
+    pub freshness: FreshnessState,
+    /// The slow-down field's factor on the speed (1: none).
+    pub slow: f64,
+    /// Held after a protective stop until the way has been clear for
+    /// [`LiveSettings::resume_wait`].
+    pub holding: bool,
+    /// The live obstacle the command sent comes nearest to.
+    pub contact: Option<LiveContact>,
+}
+
+/// Perception's part of the pilot: the newest set, its freshness, the hold
+/// after a protective stop.
+#[derive(Debug, Clone)]
+struct Live {
+    settings: LiveSettings,
+    set: LiveSet,
+    freshness: Freshness,
+    /// Held since a protective stop: (since, clear since).
+    hold: Option<(f64, Option<f64>)>,
 }
 
 /// One tick's decision.
@@ -112,6 +140,8 @@ pub struct Pilot<C: StageCost> {
     /// navigator's window towards its current target decides, among its
     /// replans and retries): the pilot is the one owner of `no-progress`.
     progress: ProgressChecker,
+    /// Live obstacles from perception (`None`: not configured).
+    live: Option<Live>,
 }
 
 impl<C: StageCost> Pilot<C> {
@@ -143,8 +173,74 @@ impl<C: StageCost> Pilot<C> {
             costs_seen: None,
             plans_seen: 0,
             progress: ProgressChecker::new(progress),
+            live: None,
             mpc,
         })
+    }
+
+    /// Checks live obstacles from now on ([`crate::live`]): the envelope
+    /// keeps their stop fields, the speed is scaled down in their slow-down
+    /// field, a protective stop holds until the way has been clear for
+    /// `resume_wait`, and (when `required`) a stale set stops the machine.
+    pub fn enable_live(&mut self, settings: LiveSettings) -> Result<(), PilotError> {
+        settings
+            .validate()
+            .map_err(|e| PilotError::Envelope(e.to_string()))?;
+        self.live = Some(Live {
+            settings,
+            set: LiveSet::new(),
+            freshness: Freshness::default(),
+            hold: None,
+        });
+        Ok(())
+    }
+
+    /// The newest set perception published (validated by the caller; its
+    /// stamps on the pilot's clock). Ignored unless [`Self::enable_live`].
+    /// No allocation.
+    pub fn set_live(&mut self, set: &LiveSet) {
+        if let Some(l) = &mut self.live {
+            if let Some(stamp) = set.stamp() {
+                l.freshness.arrived(stamp, &l.settings);
+            }
+            l.set.copy_from(set);
+        }
+    }
+
+    /// The check when a set arrives between ticks (DESIGN §18): the command
+    /// last sent, as if sent at `now` from the state `x` measured then,
+    /// against the newest set. `Some`: send its stop at once (and record
+    /// it through [`Self::sent`]); the hold after a protective stop starts.
+    pub fn check_live(&mut self, x: &State, now: f64) -> Option<Guarded> {
+        if self.live.as_ref()?.set.is_empty() || self.last == VelocityCommand::ZERO {
+            return None;
+        }
+        let guarded = envelope::guard(&self.envelope_input(x, now), self.last);
+        let protective = guarded.overridden() && guarded.live.is_some_and(|c| c.excess < 0.0);
+        if protective {
+            if let Some(l) = &mut self.live {
+                l.hold = Some((l.hold.map_or(now, |h| h.0), None));
+            }
+        }
+        protective.then_some(guarded)
+    }
+
+    /// What the envelope checks against at `now` from the state `x`.
+    fn envelope_input<'a>(&'a self, x: &'a State, now: f64) -> EnvelopeInput<'a> {
+        EnvelopeInput {
+            params: &self.params,
+            settings: self.assumptions.effective(),
+            sent: &self.sent,
+            now,
+            state: x,
+            world: &self.world,
+            dt: self.dt,
+            last: self.last,
+            live: self.live.as_ref().map(|l| LiveView {
+                set: &l.set,
+                settings: &l.settings,
+            }),
+        }
     }
 
     /// A new goal seen from the state `start` measured at `now` (the global
@@ -247,6 +343,20 @@ impl<C: StageCost> Pilot<C> {
                 broken: assumptions.broken,
             });
         }
+        // A protective hold pauses the progress windows, up to `max_hold`.
+        if let Some((since, _)) = self.live.as_ref().and_then(|l| l.hold) {
+            let max_hold = self
+                .live
+                .as_ref()
+                .map_or(f64::INFINITY, |l| l.settings.max_hold);
+            if now - since > max_hold {
+                return Ok(PilotDecision::Abort(AbortReason::NoProgress));
+            }
+            match &mut self.navigator {
+                Some(nav) => nav.hold_clocks(now),
+                None => self.progress.hold(now),
+            }
+        }
         let mut subgoal = None;
         let mut holding = false;
         if let Some(nav) = &mut self.navigator {
@@ -287,7 +397,7 @@ impl<C: StageCost> Pilot<C> {
             ),
             None => (&[][..], 0.0, Duration::ZERO),
         };
-        let proposed = if holding {
+        let mut proposed = if holding {
             // Holding for the first route: a stop at the limits (at rest, rest).
             envelope::stop_command(self.last, Some(x), &self.params, self.dt)
         } else {
@@ -295,21 +405,62 @@ impl<C: StageCost> Pilot<C> {
         };
         self.sent
             .set_delay(self.configured_delay.max(self.mpc.compensated_delay()));
-        let guarded = envelope::guard(
-            &EnvelopeInput {
-                params: &self.params,
-                settings: self.assumptions.effective(),
-                sent: &self.sent,
-                now,
-                state: x,
-                world: &self.world,
-                dt: self.dt,
-                last: self.last,
-            },
-            proposed,
-        );
+        // The live obstacles' slow-down field scales the speed down along
+        // the MPC's plan (ISO 21815: slow and stop, never steer).
+        let unscaled = proposed;
+        let mut slow = 1.0;
+        if let (Some(l), false) = (&self.live, holding) {
+            slow = slow_factor(
+                &self.world,
+                l,
+                self.assumptions.effective(),
+                self.mpc.solution(),
+                now + self.sent.delay(),
+                self.dt,
+            );
+            proposed.v *= slow;
+        }
+        let input = self.envelope_input(x, now);
+        let guarded = envelope::guard(&input, proposed);
+        let inside = |c: Option<LiveContact>| c.is_some_and(|c| c.excess < 0.0);
+        // Held after a protective stop, the way is clear once the MPC's plan
+        // keeps out of the stop fields for the slow-down field's time, and
+        // so does what it proposes (before the slow-down).
+        let blocked = self.live.as_ref().is_some_and(|l| {
+            l.hold.is_some() && (slow < 1.0 || inside(envelope::predict(&input, unscaled).live))
+        });
+        let stop = envelope::stop_command(self.last, Some(x), &self.params, self.dt);
+        let mut command = guarded.command;
+        let live_status = self.live.as_mut().map(|l| {
+            let freshness = l.freshness.update(now, &l.settings);
+            if guarded.overridden() && inside(guarded.live) {
+                // A protective stop: held until the way clears.
+                l.hold = Some((l.hold.map_or(now, |h| h.0), None));
+            } else if let Some((since, clear_since)) = l.hold {
+                // It must stay clear for `resume_wait`.
+                let clear = if blocked {
+                    None
+                } else {
+                    clear_since.or(Some(now))
+                };
+                l.hold = match clear {
+                    Some(t) if now - t >= l.settings.resume_wait => None,
+                    clear => Some((since, clear)),
+                };
+            }
+            let stale = l.settings.required && freshness != FreshnessState::Fresh;
+            if l.hold.is_some() || stale {
+                command = stop;
+            }
+            LiveStatus {
+                freshness,
+                slow,
+                holding: l.hold.is_some(),
+                contact: guarded.live,
+            }
+        });
         Ok(PilotDecision::Drive(PilotStep {
-            command: guarded.command,
+            command,
             proposed,
             guarded,
             solution: (!holding).then(|| self.mpc.solution()),
@@ -319,6 +470,7 @@ impl<C: StageCost> Pilot<C> {
             plan_time,
             new_plan,
             assumptions,
+            live: live_status,
         }))
     }
 
@@ -355,4 +507,34 @@ impl<C: StageCost> Pilot<C> {
     pub fn params(&self) -> &MachineParams {
         &self.params
     }
+}
+
+/// The slow-down field's factor ([`live::slow_factor`]) along the MPC's plan
+/// (its states from `t0`, `dt` apart), against the live obstacles' stop
+/// fields with the envelope's margins.
+fn slow_factor(
+    world: &World,
+    l: &Live,
+    settings: &EnvelopeSettings,
+    sol: &Solution,
+    t0: f64,
+    dt: f64,
+) -> f64 {
+    if l.set.is_empty() {
+        return 1.0;
+    }
+    let params = world.params();
+    let margins = settings.circle_margins(params, world.outline());
+    let n = world.outline().len();
+    live::slow_factor(&sol.states, t0, dt, &l.settings, |t, x| {
+        let placed = world.place(x);
+        let mut least = f64::INFINITY;
+        for o in l.set.obstacles() {
+            let grow = l.settings.reach(t - o.stamp);
+            for (c, m) in placed[..n].iter().zip(&margins) {
+                least = least.min(o.clearance_at(c.center, c.radius + m + grow, t));
+            }
+        }
+        least
+    })
 }

@@ -393,13 +393,13 @@ impl Plant {
 
     /// Advances the simulation by `duration` seconds.
     pub fn advance(&mut self, duration: f64) {
-        self.advance_observed(duration, |_| {});
+        self.advance_observed(duration, |_, _| {});
     }
 
-    /// Advances like [`Self::advance`] and shows `observe` the state after
+    /// Advances like [`Self::advance`] and shows `observe` the time and state after
     /// every integration sub-step (the evaluation's clearance is checked there,
     /// not only at ticks: DESIGN §10).
-    pub fn advance_observed(&mut self, duration: f64, mut observe: impl FnMut(&State)) {
+    pub fn advance_observed(&mut self, duration: f64, mut observe: impl FnMut(f64, &State)) {
         let end = self.time + duration.max(0.0);
         // Tiny remainders from float round-off are not worth a step.
         while end - self.time > 1e-12 {
@@ -421,7 +421,7 @@ impl Plant {
                 }
             }
             self.integrate(h.max(1e-12));
-            observe(&self.state);
+            observe(self.time, &self.state);
         }
         self.time = end;
     }

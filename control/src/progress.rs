@@ -73,6 +73,15 @@ impl ProgressChecker {
         now - self.best_at >= self.settings.timeout
     }
 
+    /// The machine is held by something outside its plan (a protective
+    /// stop, DESIGN §18) at `now`: the window starts again from here, the
+    /// best error kept.
+    pub fn hold(&mut self, now: f64) {
+        if self.target.is_some() {
+            self.best_at = self.best_at.max(now);
+        }
+    }
+
     /// Seconds since the last approach (0 before the first update).
     pub fn stalled_for(&self, now: f64) -> f64 {
         if self.target.is_some() {
@@ -89,6 +98,27 @@ mod tests {
 
     fn at(x: f64) -> State {
         State::new(x, 0.0, 0.0, 0.0, 0.0, 0.0)
+    }
+
+    #[test]
+    fn a_hold_restarts_the_window_and_keeps_the_best() {
+        let g = Goal::new(10.0, 0.0, 0.0);
+        let mut p = ProgressChecker::new(ProgressSettings::default());
+        assert!(!p.update(&at(1.0), &g, 0.0));
+        // Held from 1 s to 8 s: the window counts from 8 s.
+        for k in 1..=8 {
+            p.hold(k as f64);
+        }
+        assert_eq!(p.stalled_for(8.0), 0.0);
+        assert!(!p.update(&at(1.0), &g, 17.9));
+        assert!(p.update(&at(1.0), &g, 18.0));
+        // The best is kept: coming back to where it was is no approach.
+        let mut q = ProgressChecker::new(ProgressSettings::default());
+        assert!(!q.update(&at(5.0), &g, 0.0));
+        assert!(!q.update(&at(1.0), &g, 1.0));
+        q.hold(2.0);
+        assert!(!q.update(&at(1.0), &g, 3.0));
+        assert_eq!(q.stalled_for(3.0), 1.0);
     }
 
     #[test]

@@ -160,6 +160,7 @@ fn tick_allocates_only_inside_clarabel() {
                         world: mpc.world(),
                         dt: settings.dt,
                         last,
+                        live: None,
                     },
                     proposed,
                 )

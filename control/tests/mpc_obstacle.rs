@@ -47,7 +47,7 @@ fn drive(
         let cmd = sol.command;
         plant.command(cmd).unwrap();
         mpc.sent(now, cmd);
-        plant.advance_observed(settings.dt, |x| {
+        plant.advance_observed(settings.dt, |_, x| {
             min_clearance = min_clearance.min(footprint_clearance(&p, x, &[obstacle]))
         });
     }

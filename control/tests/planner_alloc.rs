@@ -212,4 +212,85 @@ fn the_global_layer_and_the_pilot_do_not_allocate() {
         "{} allocations (pilot in the pit)",
         after - before
     );
+
+    // The pilot with 128 live obstacles (DESIGN §18): a set taken every
+    // tick and checked on arrival between ticks, the slow-down field, the
+    // hold after a protective stop. At the ticks they are off the way (set
+    // 0), between them in it (set 1).
+    use control::live::{LiveClass, LiveObstacle, LiveSet, LiveSettings, LiveShape};
+    let sets: Vec<LiveSet> = (0..2)
+        .map(|j| {
+            let obstacles: Vec<LiveObstacle> = (0..128)
+                .map(|i| {
+                    let off = if j == 0 { 30.0 } else { 0.0 };
+                    let (x, y) = (
+                        2.0 + 0.5 * (i % 16) as f64,
+                        off - 6.0 + 1.5 * (i / 16) as f64,
+                    );
+                    let shape = if i % 2 == 0 {
+                        LiveShape::circle([x, y], 0.3).unwrap()
+                    } else {
+                        LiveShape::polygon(&[[x, y], [x + 0.4, y], [x + 0.4, y + 0.3]]).unwrap()
+                    };
+                    LiveObstacle::new(i, LiveClass::Person, shape, [0.0, 0.5], 0.0).unwrap()
+                })
+                .collect();
+            let mut set = LiveSet::new();
+            set.set(0.0, &obstacles).unwrap();
+            set
+        })
+        .collect();
+    let mpc = Mpc::new(p, critic, Some(trained().0), MpcSettings::default()).unwrap();
+    let mut pilot = Pilot::new(
+        p,
+        mpc,
+        Some(navigator("delayed", true)),
+        EnvelopeSettings::default(),
+        Default::default(),
+    )
+    .unwrap();
+    pilot.enable_live(LiveSettings::default()).unwrap();
+    let start = State::new(0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+    let mut fresh = LiveSet::new();
+    // A copy of `sets[j]` seen at `t`: fresh, the obstacles moving on.
+    let restamp = |fresh: &mut LiveSet, j: usize, t: f64| {
+        fresh.start(t).unwrap();
+        for o in sets[j].obstacles() {
+            fresh.push(LiveObstacle { stamp: t, ..*o }).unwrap();
+        }
+    };
+    let before = common::allocations();
+    pilot
+        .set_goal(&start, Goal::new(12.0, 0.0, 0.0), &[], 0.0)
+        .unwrap();
+    let (mut stopped, mut ticks) = (0, 0);
+    for k in 0..40 {
+        let now = k as f64 * 0.2;
+        let x = State::new(0.05 * k as f64, 0.0, 0.0, 0.0, 0.0, 0.5);
+        restamp(&mut fresh, 0, now);
+        pilot.set_live(&fresh);
+        let command = match pilot.step(&x, now, Instant::now()).unwrap() {
+            PilotDecision::Drive(s) => {
+                ticks += usize::from(s.live.is_some());
+                s.command
+            }
+            PilotDecision::Abort(_) | PilotDecision::Stop { .. } => VelocityCommand::ZERO,
+        };
+        pilot.sent(now, command);
+        restamp(&mut fresh, 1, now + 0.1);
+        pilot.set_live(&fresh);
+        if let Some(g) = pilot.check_live(&x, now + 0.1) {
+            stopped += 1;
+            pilot.sent(now + 0.1, g.command);
+        }
+    }
+    let after = common::allocations();
+    assert_eq!(ticks, 40);
+    assert!(stopped > 0, "the obstacles are in the way");
+    assert_eq!(
+        after - before,
+        0,
+        "{} allocations (pilot with live obstacles)",
+        after - before
+    );
 }

@@ -18,6 +18,7 @@ pub mod collocation;
 pub mod eval;
 pub mod guess;
 pub mod ipopt;
+pub mod movers;
 pub mod nlp;
 pub mod ocp;
 pub mod plots;

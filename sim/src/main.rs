@@ -30,6 +30,7 @@ use control::scenario;
 use control::site::{Outline, Site, SiteIndex};
 use control::MachineParams;
 use sim::eval;
+use sim::movers::PerceptionSettings;
 use sim::robustness::{self, PerturbationOptions};
 use sim::runner::{EvalConfig, Method, Networks};
 use std::sync::Arc;
@@ -66,9 +67,12 @@ fn navigator_override(s: &str) -> Result<(String, toml::Value), String> {
     Ok((key.trim().to_string(), value))
 }
 
-/// The default navigator settings with `overrides` applied (each a dotted key
-/// of [`NavigatorSettings`]); unknown keys are errors.
-fn navigator_settings(overrides: &[(String, toml::Value)]) -> Result<NavigatorSettings> {
+/// The default settings `T` with `overrides` applied (each a dotted key of
+/// `T`, given with `flag`); unknown keys are errors.
+fn with_overrides<T: serde::de::DeserializeOwned>(
+    overrides: &[(String, toml::Value)],
+    flag: &str,
+) -> Result<T> {
     let mut table = toml::Table::new();
     for (key, value) in overrides {
         let mut parts: Vec<&str> = key.split('.').collect();
@@ -79,15 +83,65 @@ fn navigator_settings(overrides: &[(String, toml::Value)]) -> Result<NavigatorSe
                 .entry(p)
                 .or_insert_with(|| toml::Value::Table(toml::Table::new()))
                 .as_table_mut()
-                .with_context(|| format!("--navigator {key}: `{p}` is a value, not a group"))?;
+                .with_context(|| format!("{flag} {key}: `{p}` is a value, not a group"))?;
         }
         t.insert(last.to_string(), value.clone());
     }
-    let s: NavigatorSettings = toml::Value::Table(table)
+    toml::Value::Table(table)
         .try_into()
-        .context("--navigator")?;
+        .with_context(|| flag.to_string())
+}
+
+/// The default navigator settings with `overrides` applied (each a dotted key
+/// of [`NavigatorSettings`]); unknown keys are errors.
+fn navigator_settings(overrides: &[(String, toml::Value)]) -> Result<NavigatorSettings> {
+    let s: NavigatorSettings = with_overrides(overrides, "--navigator")?;
     s.validate()?;
     Ok(s)
+}
+
+/// Things that move (DESIGN §18) and the simulated perception that sees them.
+#[derive(clap::Args, Clone)]
+struct MoverArgs {
+    /// A movers file (CSV `id,radius,t0,x0,y0,vx,vy,t1`): every scenario gets
+    /// them, seen through the simulated perception below.
+    #[arg(long, value_name = "FILE")]
+    movers: Option<PathBuf>,
+    /// From a mover's measurement to its delivery to the pilot [s].
+    #[arg(long, value_name = "S", default_value_t = PerceptionSettings::default().latency)]
+    perception_latency: f64,
+    /// Sets perception publishes per second.
+    #[arg(long, value_name = "HZ", default_value_t = PerceptionSettings::default().rate)]
+    perception_rate: f64,
+    /// Probability that a published set is lost (seeded per scenario).
+    #[arg(long, value_name = "P", default_value_t = PerceptionSettings::default().dropout)]
+    perception_dropout: f64,
+    /// A live-obstacle setting, `key=value` (repeatable), e.g. `--live
+    /// stop_margin=0.8`; the keys are `control::live::LiveSettings`'.
+    #[arg(long = "live", value_name = "KEY=VALUE", value_parser = navigator_override)]
+    live: Vec<(String, toml::Value)>,
+}
+
+impl MoverArgs {
+    /// Puts the movers, the perception and the live settings into `cfg`.
+    fn apply(&self, cfg: &mut EvalConfig) -> Result<()> {
+        cfg.perception = PerceptionSettings {
+            latency: self.perception_latency,
+            rate: self.perception_rate,
+            dropout: self.perception_dropout,
+            // The perturbations' seed (`--seed`), mixed with each scenario's name.
+            seed: cfg.perturbation.seed,
+        };
+        cfg.perception.validate()?;
+        cfg.live = with_overrides(&self.live, "--live")?;
+        cfg.live.validate()?;
+        if let Some(path) = &self.movers {
+            cfg.movers = Some(Arc::new(sim::movers::load(path)?));
+        } else if !self.live.is_empty() {
+            bail!("--live needs --movers");
+        }
+        Ok(())
+    }
 }
 
 #[derive(clap::Args, Clone)]
@@ -308,6 +362,8 @@ enum Command {
         #[command(flatten)]
         envelope: EnvelopeArgs,
         #[command(flatten)]
+        movers: MoverArgs,
+        #[command(flatten)]
         common: Common,
         #[arg(long)]
         out: PathBuf,
@@ -454,6 +510,7 @@ fn main() -> Result<()> {
             outline,
             perturbations,
             envelope,
+            movers,
             common,
             out,
         } => {
@@ -506,6 +563,7 @@ fn main() -> Result<()> {
             cfg.plant.validate()?;
             cfg.perturbation = perturbations.options().perturbation()?;
             cfg.envelope = envelope.settings()?;
+            movers.apply(&mut cfg)?;
             let mut ev = eval::evaluate(&cfg, &nets, &set)?;
             if let Some(path) = &t_star {
                 if cfg.methods.contains(&Method::MinTime) {

@@ -2,6 +2,7 @@
 //!
 //! `results.csv`: header
 //! `name,method,success,t_converge,t_settle,path_length,min_clearance,solve_ms_median,solve_ms_max`,
+//! and with movers (DESIGN §18) also `min_clearance_moving,protective_stops`;
 //! one row a scenario and method; `success` is `true`/`false`; a quantity that
 //! does not exist (no convergence, no obstacles) is an empty field. Times in
 //! seconds, lengths in metres, solve times in milliseconds.
@@ -11,6 +12,9 @@ use std::fmt::Write as _;
 /// The header of `results.csv`.
 pub const HEADER: &str =
     "name,method,success,t_converge,t_settle,path_length,min_clearance,solve_ms_median,solve_ms_max";
+
+/// The columns a run with movers adds (DESIGN §18).
+pub const MOVING_COLUMNS: &str = "min_clearance_moving,protective_stops";
 
 /// One row of `results.csv`.
 #[derive(Debug, Clone, PartialEq)]
@@ -28,6 +32,11 @@ pub struct ResultRow {
     pub min_clearance: Option<f64>,
     pub solve_ms_median: f64,
     pub solve_ms_max: f64,
+    /// With movers: the smallest clearance to one while the machine moved
+    /// (`None`: none came while it moved) [m].
+    pub min_clearance_moving: Option<f64>,
+    /// With movers: how many protective stops (`None`: a run without movers).
+    pub protective_stops: Option<usize>,
 }
 
 /// A malformed results file.
@@ -44,9 +53,15 @@ fn opt(v: Option<f64>) -> String {
     v.map_or(String::new(), |x| format!("{x}"))
 }
 
-/// Writes rows in the file format (round-trips through [`parse`]).
+/// Writes rows in the file format (round-trips through [`parse`]); the
+/// movers' columns when a row has them.
 pub fn to_csv(rows: &[ResultRow]) -> String {
+    let moving = rows.iter().any(|r| r.protective_stops.is_some());
     let mut s = String::from(HEADER);
+    if moving {
+        s.push(',');
+        s.push_str(MOVING_COLUMNS);
+    }
     s.push('\n');
     for r in rows {
         let _ = writeln!(
@@ -62,6 +77,15 @@ pub fn to_csv(rows: &[ResultRow]) -> String {
             r.solve_ms_median,
             r.solve_ms_max
         );
+        if moving {
+            s.pop();
+            let _ = writeln!(
+                s,
+                ",{},{}",
+                opt(r.min_clearance_moving),
+                r.protective_stops.map_or(String::new(), |n| n.to_string())
+            );
+        }
     }
     s
 }
@@ -78,13 +102,18 @@ pub fn parse(text: &str, source: &str) -> Result<Vec<ResultRow>, ResultsError> {
         .lines()
         .enumerate()
         .filter(|(_, l)| !l.trim().is_empty());
-    match lines.next() {
-        Some((_, h)) if h.trim().trim_start_matches('\u{feff}') == HEADER => {}
+    let with_movers = format!("{HEADER},{MOVING_COLUMNS}");
+    let moving = match lines.next() {
+        Some((_, h)) if h.trim().trim_start_matches('\u{feff}') == HEADER => false,
+        Some((_, h)) if h.trim().trim_start_matches('\u{feff}') == with_movers => true,
         Some((_, h)) => {
             return Err(fail(
                 1,
                 1,
-                format!("bad header `{}`: expected `{HEADER}`", h.trim()),
+                format!(
+                    "bad header `{}`: expected `{HEADER}` or `{with_movers}`",
+                    h.trim()
+                ),
             ))
         }
         None => {
@@ -94,8 +123,9 @@ pub fn parse(text: &str, source: &str) -> Result<Vec<ResultRow>, ResultsError> {
                 format!("empty file: expected the header `{HEADER}`"),
             ))
         }
-    }
-    let keys: Vec<&str> = HEADER.split(',').collect();
+    };
+    let header = if moving { with_movers.as_str() } else { HEADER };
+    let keys: Vec<&str> = header.split(',').collect();
     let mut rows = Vec::new();
     for (index, raw) in lines {
         let line_no = index + 1;
@@ -160,6 +190,19 @@ pub fn parse(text: &str, source: &str) -> Result<Vec<ResultRow>, ResultsError> {
             min_clearance: optional(6)?,
             solve_ms_median: number(7)?,
             solve_ms_max: number(8)?,
+            min_clearance_moving: if moving { optional(9)? } else { None },
+            protective_stops: if moving {
+                let t = fields[10].trim();
+                Some(t.parse::<usize>().map_err(|_| {
+                    fail(
+                        line_no,
+                        columns[10],
+                        format!("`protective_stops`: `{t}` is not a count"),
+                    )
+                })?)
+            } else {
+                None
+            },
         });
     }
     Ok(rows)

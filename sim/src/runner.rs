@@ -41,8 +41,10 @@ use control::{Actor, ActorWorkspace, Critic};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::clearance::ClearanceMeter;
+use crate::movers::{Mover, MoverMeter, Perception, PerceptionSettings};
 use crate::ocp::{self, BaselineSettings, Guess, MinTimeSettings};
 use crate::results::ResultRow;
+use control::live::LiveSettings;
 use control::site::{Outline, SiteIndex};
 use control::world::{default_outline, World};
 use std::sync::Arc;
@@ -250,6 +252,11 @@ pub struct EvalConfig {
     /// The machine's outline (`--outline`; default: a circle of the
     /// half-width at each axle).
     pub outline: Outline,
+    /// Things that move (DESIGN §18, `--movers`): every scenario gets them,
+    /// seen through `perception`, kept off by the pilot with `live`.
+    pub movers: Option<Arc<Vec<Mover>>>,
+    pub perception: PerceptionSettings,
+    pub live: LiveSettings,
     /// Worker threads.
     pub jobs: usize,
     pub progress: bool,
@@ -281,6 +288,9 @@ impl Default for EvalConfig {
             envelope: EnvelopeSettings::default(),
             site: None,
             outline: default_outline(),
+            movers: None,
+            perception: PerceptionSettings::default(),
+            live: LiveSettings::default(),
             jobs: std::thread::available_parallelism().map_or(2, |n| n.get()),
             progress: true,
         }
@@ -405,6 +415,8 @@ pub fn score(
         min_clearance,
         solve_ms_median: median,
         solve_ms_max: max,
+        min_clearance_moving: None,
+        protective_stops: None,
     }
 }
 
@@ -448,6 +460,9 @@ pub fn pilot(cfg: &EvalConfig, nets: &Networks) -> Result<Pilot<Critic>> {
     let mut pilot = Pilot::new(cfg.params, mpc, navigator, cfg.envelope, progress)?;
     pilot.set_outline(cfg.outline.clone());
     pilot.set_site(cfg.site.clone());
+    if cfg.movers.is_some() {
+        pilot.enable_live(cfg.live)?;
+    }
     Ok(pilot)
 }
 
@@ -464,6 +479,12 @@ pub fn run_mpc(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run> 
     let mut solve_ms = Vec::with_capacity(steps);
     let mut clearance = meter(cfg, *plant.params(), sc);
     clearance.observe(&plant.state());
+    let no_movers = Vec::new();
+    let movers = cfg.movers.as_deref().unwrap_or(&no_movers);
+    let mut perception = Perception::new(movers, cfg.perception, &sc.name);
+    let mut moving = MoverMeter::new(movers, World::new(*plant.params(), cfg.outline.clone(), 0));
+    let mut protective_stops = 0;
+    let mut held = false;
     let mut rest = RestCounter::new(cfg, dt);
     let mut aborted = false;
     let mut overrides = 0;
@@ -486,6 +507,10 @@ pub fn run_mpc(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run> 
             pilot
                 .set_goal(&x, sc.goal, &sc.obstacles, now)
                 .with_context(|| format!("scenario {}", sc.name))?;
+            // What perception delivered before the goal (its pre-roll).
+            while let Some((_, set)) = perception.next_delivery(now) {
+                pilot.set_live(set);
+            }
         }
         let cmd = if aborted {
             // An aborted goal ends the run: the machine is commanded to rest
@@ -525,6 +550,9 @@ pub fn run_mpc(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run> 
                         multiplier_max = multiplier_max.max(sol.obstacle_multiplier);
                     }
                     overrides += usize::from(p.guarded.overridden());
+                    let holding = p.live.is_some_and(|l| l.holding);
+                    protective_stops += usize::from(holding && !held);
+                    held = holding;
                     p.command
                 }
             };
@@ -543,9 +571,38 @@ pub fn run_mpc(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run> 
         }
         plant.command(cmd)?;
         pilot.sent(now, cmd);
-        plant.advance_observed(dt, |x| clearance.observe(x));
+        // The sets perception delivers during the tick, each checked when it
+        // arrives: a stop it calls for is sent then, not at the next tick.
+        let end = now + dt;
+        let mut t = now;
+        loop {
+            let next = if aborted {
+                None
+            } else {
+                perception.next_delivery(end)
+            };
+            let until = next.as_ref().map_or(end, |(at, _)| at.max(t));
+            plant.advance_observed(until - t, |at, x| {
+                clearance.observe(x);
+                moving.observe(at, x);
+            });
+            t = until;
+            let Some((_, set)) = next else { break };
+            pilot.set_live(set);
+            let x = compensate_pose_age(
+                &cfg.params,
+                &plant.measure(),
+                plant.perturbation().pose_latency,
+            );
+            if let Some(stop) = pilot.check_live(&x, t) {
+                plant.command(stop.command)?;
+                pilot.sent(t, stop.command);
+                protective_stops += usize::from(!held);
+                held = true;
+            }
+        }
     }
-    let row = score(
+    let mut row = score(
         sc,
         Method::Mpc.name(),
         &states,
@@ -554,6 +611,10 @@ pub fn run_mpc(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run> 
         &solve_ms,
         clearance.finish(),
     );
+    if cfg.movers.is_some() {
+        row.min_clearance_moving = moving.finish();
+        row.protective_stops = Some(protective_stops);
+    }
     Ok(Run {
         row,
         states,
@@ -599,7 +660,7 @@ pub fn run_actor(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run
         delay.record(now, cmd);
         solve_ms.push(t0.elapsed().as_secs_f64() * 1e3);
         plant.command(cmd)?;
-        plant.advance_observed(dt, |x| clearance.observe(x));
+        plant.advance_observed(dt, |_, x| clearance.observe(x));
     }
     let row = score(
         sc,

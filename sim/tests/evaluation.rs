@@ -72,6 +72,8 @@ fn row(
         min_clearance: clearance,
         solve_ms_median: 0.1 + 0.2,
         solve_ms_max: 1e-300,
+        min_clearance_moving: None,
+        protective_stops: None,
     }
 }
 
@@ -90,6 +92,19 @@ fn results_csv_round_trips() {
     assert_eq!((e.line, e.column), (2, 7), "{e}");
     let bad = format!("{}\nx,mpc,true,1,1,oops,,1,1\n", results::HEADER);
     assert_eq!(results::parse(&bad, "r.csv").unwrap_err().column, 16);
+    // With movers (DESIGN §18) the two columns follow, and round-trip.
+    let mut moving = rows.clone();
+    moving[0].protective_stops = Some(2);
+    moving[0].min_clearance_moving = Some(0.125);
+    moving[1].protective_stops = Some(0);
+    moving[2].protective_stops = Some(0);
+    let text = results::to_csv(&moving);
+    let header = format!("{},{}", results::HEADER, results::MOVING_COLUMNS);
+    assert!(text.starts_with(&format!("{header}\n")), "{text}");
+    assert_eq!(results::parse(&text, "results.csv").unwrap(), moving);
+    let bad = format!("{header}\nx,mpc,true,1,1,1,,1,1,0.5,two\n");
+    let e = results::parse(&bad, "r.csv").unwrap_err();
+    assert!(e.message.contains("protective_stops"), "{e}");
 }
 
 #[test]
@@ -649,4 +664,60 @@ fn the_envelope_names_the_assumption_a_machine_breaks_in_closed_loop() {
             r.assumption_findings
         );
     }
+}
+
+/// Things that move (DESIGN §18): a person standing in the way for 5 s stops
+/// the machine before it (its clearance while moving stays positive, one
+/// protective stop), and the goal is reached once the person has gone; the
+/// results carry the movers' columns. The same person crossing well behind
+/// the machine changes nothing.
+#[test]
+fn a_person_in_the_way_is_waited_for_and_the_results_say_so() {
+    let nets = committed();
+    let text = std::fs::read_to_string(manifest("scenarios/paper128.csv")).unwrap();
+    let set: Vec<Scenario> = scenario::parse(&text, "paper128.csv")
+        .unwrap()
+        .into_iter()
+        .filter(|s| s.name == "r9_b0_h0")
+        .collect();
+    let run = |movers: &str| {
+        let cfg = EvalConfig {
+            methods: vec![Method::Mpc],
+            jobs: 1,
+            progress: false,
+            movers: Some(std::sync::Arc::new(
+                sim::movers::parse(movers, "test").unwrap(),
+            )),
+            ..Default::default()
+        };
+        sim::eval::evaluate(&cfg, &nets, &set).unwrap().rows[0].clone()
+    };
+    let alone = {
+        let cfg = EvalConfig {
+            methods: vec![Method::Mpc],
+            jobs: 1,
+            progress: false,
+            ..Default::default()
+        };
+        sim::eval::evaluate(&cfg, &nets, &set).unwrap().rows[0].clone()
+    };
+    assert_eq!(alone.protective_stops, None);
+    let waited = run("id,radius,t0,x0,y0,vx,vy,t1\n1,0.3,0,5,0,0,0,9\n");
+    assert!(waited.success, "{waited:?}");
+    assert_eq!(waited.protective_stops, Some(1), "{waited:?}");
+    let c = waited
+        .min_clearance_moving
+        .expect("the person was there while it moved");
+    assert!(c > 0.0, "{waited:?}");
+    let (t_alone, t_waited) = (alone.t_converge.unwrap(), waited.t_converge.unwrap());
+    assert!(t_waited > t_alone + 3.0, "{t_alone} vs {t_waited}");
+    let behind = run("id,radius,t0,x0,y0,vx,vy,t1\n1,0.3,0,-6,-5,0,1.4,9\n");
+    assert_eq!(behind.protective_stops, Some(0), "{behind:?}");
+    assert_eq!(behind.t_converge, alone.t_converge);
+    let csv = sim::results::to_csv(&[waited]);
+    assert!(csv.starts_with(&format!(
+        "{},{}\n",
+        sim::results::HEADER,
+        sim::results::MOVING_COLUMNS
+    )));
 }

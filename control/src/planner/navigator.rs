@@ -224,6 +224,19 @@ impl Navigator {
         Ok(())
     }
 
+    /// The machine is held at `now` by something outside the plan (a
+    /// protective stop for a live obstacle, DESIGN §18): neither a stall
+    /// nor missing progress; the windows start again when the hold ends.
+    /// (The pilot bounds the hold itself.)
+    pub fn hold_clocks(&mut self, now: f64) {
+        if self.clocks_pending {
+            return;
+        }
+        self.last_progress = self.last_progress.max(now);
+        self.last_replan = self.last_replan.max(now);
+        self.checker.hold(now);
+    }
+
     /// Every tick: what the MPC should drive to now. Allocation-free, and
     /// no search: plans are asked for and taken when they arrive.
     pub fn update(&mut self, x: &State, now: f64) -> NavStep {

@@ -190,6 +190,57 @@ pub fn signed_area2(ring: &[P2]) -> f64 {
     (0..n).map(|i| cross(ring[i], ring[(i + 1) % n])).sum()
 }
 
+/// The winding of a ring: +1 counter-clockwise, −1 clockwise (from its
+/// signed area; turns an edge's left normal outward).
+pub fn winding(ring: &[P2]) -> f64 {
+    if signed_area2(ring) >= 0.0 {
+        1.0
+    } else {
+        -1.0
+    }
+}
+
+/// Unit outward normal of the edge a → b of a ring of `winding`.
+fn edge_outward_normal(a: P2, b: P2, winding: f64) -> P2 {
+    let e = sub(b, a);
+    let l = norm(e).max(f64::MIN_POSITIVE);
+    // Left normal (−e_y, e_x) points inside a counter-clockwise ring.
+    [winding * e[1] / l, -winding * e[0] / l]
+}
+
+/// Nearest outline point of the simple polygon `ring` (implicitly closed,
+/// of [`winding`] `winding`) to `p`; the distance is negative inside. O(n).
+/// What [`Polygon::nearest`] and a live obstacle's polygon (a ring of fixed
+/// capacity, [`crate::live`]) both use.
+pub fn ring_nearest(p: P2, ring: &[P2], winding: f64) -> Nearest {
+    let n = ring.len();
+    let edge = |i: usize| (ring[i], ring[(i + 1) % n]);
+    let (mut best_q, mut best_d2, mut best_i) = (ring[0], f64::INFINITY, 0);
+    for i in 0..n {
+        let (a, b) = edge(i);
+        let (q, d2) = closest_on_segment_squared(p, a, b);
+        if d2 < best_d2 {
+            (best_q, best_d2, best_i) = (q, d2, i);
+        }
+    }
+    let best_d = best_d2.sqrt();
+    let inside = point_in_polygon(p, ring);
+    let normal = if best_d > 0.0 {
+        let v = sub(p, best_q);
+        let s = if inside { -1.0 } else { 1.0 };
+        [s * v[0] / best_d, s * v[1] / best_d]
+    } else {
+        let (a, b) = edge(best_i);
+        edge_outward_normal(a, b, winding)
+    };
+    Nearest {
+        distance: if inside { -best_d } else { best_d },
+        point: best_q,
+        normal,
+        edge: Some(best_i),
+    }
+}
+
 /// A disc: centre and radius [m].
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Circle {
@@ -244,11 +295,7 @@ impl Polygon {
     /// loader checks; a caller building one must); the winding is taken from
     /// the signed area.
     pub fn new(vertices: Vec<P2>) -> Self {
-        let winding = if signed_area2(&vertices) >= 0.0 {
-            1.0
-        } else {
-            -1.0
-        };
+        let winding = winding(&vertices);
         let aabb = Aabb::of_points(&vertices);
         Self {
             vertices,
@@ -277,39 +324,13 @@ impl Polygon {
 
     /// Nearest outline point; the distance is negative inside. O(n).
     pub fn nearest(&self, p: P2) -> Nearest {
-        let n = self.vertices.len();
-        let (mut best_q, mut best_d2, mut best_i) = (self.vertices[0], f64::INFINITY, 0);
-        for i in 0..n {
-            let (a, b) = self.edge(i);
-            let (q, d2) = closest_on_segment_squared(p, a, b);
-            if d2 < best_d2 {
-                (best_q, best_d2, best_i) = (q, d2, i);
-            }
-        }
-        let best_d = best_d2.sqrt();
-        let inside = self.contains(p);
-        let normal = if best_d > 0.0 {
-            let v = sub(p, best_q);
-            let s = if inside { -1.0 } else { 1.0 };
-            [s * v[0] / best_d, s * v[1] / best_d]
-        } else {
-            self.outward_normal(best_i)
-        };
-        Nearest {
-            distance: if inside { -best_d } else { best_d },
-            point: best_q,
-            normal,
-            edge: Some(best_i),
-        }
+        ring_nearest(p, &self.vertices, self.winding)
     }
 
     /// Unit outward normal of edge i.
     pub fn outward_normal(&self, i: usize) -> P2 {
         let (a, b) = self.edge(i);
-        let e = sub(b, a);
-        let l = norm(e).max(f64::MIN_POSITIVE);
-        // Left normal (−e_y, e_x) points inside a counter-clockwise ring.
-        [self.winding * e[1] / l, -self.winding * e[0] / l]
+        edge_outward_normal(a, b, self.winding)
     }
 
     pub fn signed_distance(&self, p: P2) -> f64 {
