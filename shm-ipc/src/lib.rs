@@ -418,13 +418,15 @@ pub use config::{
 };
 pub use endpoint::{
     cleanup_stale_nodes, event_ids, qos, CleanupReport, Client, DaemonEndpoint, IncomingGoal,
-    IpcService, PendingGoal, StopClient, StopPath, StopReport, TelemetrySubscriber, Wakeup,
+    IpcService, ObstaclePublisher, PendingGoal, StopClient, StopPath, StopReport,
+    TelemetrySubscriber, Wakeup,
 };
 pub use error::{BoxedSource, ClientError, IpcError};
 pub use msg::{
     fault_flags, pose_flags, AbortReason, Command, GoalKind, GoalOutcome, GoalReply, GoalRequest,
-    MachineState, Mode, Obstacle, Pose2, PoseEstimate, RejectCode, Telemetry, MAX_OBSTACLES,
-    MAX_ROUTE, MAX_TRAJECTORY, REASON_TEXT_CAPACITY, SITE_ID_CAPACITY,
+    LiveObstacle, LiveObstacleError, LiveObstacleSet, MachineState, Mode, Obstacle, ObstacleClass,
+    ObstacleShape, Pose2, PoseEstimate, RejectCode, Telemetry, MAX_LIVE_OBSTACLES, MAX_OBSTACLES,
+    MAX_POLYGON_VERTICES, MAX_ROUTE, MAX_TRAJECTORY, REASON_TEXT_CAPACITY, SITE_ID_CAPACITY,
 };
 pub use validate::{
     heapless_obstacles, normalize_angle, GoalValidator, Num, RejectReason, ValidRequest, Workspace,
