@@ -408,6 +408,7 @@ mod error;
 mod holders;
 mod msg;
 mod validate;
+mod validate_live;
 
 /// The iceoryx2 version this crate is built against, for callers that need more of it (e.g.
 /// `iceoryx2::set_log_level` to silence its "no config file" warning in a CLI).
@@ -431,6 +432,10 @@ pub use msg::{
 pub use validate::{
     heapless_obstacles, normalize_angle, GoalValidator, Num, RejectReason, ValidRequest, Workspace,
     MAX_HEADING_ABS, MAX_OBSTACLE_ABS,
+};
+pub use validate_live::{
+    polygon_defect, Field, LiveObstacleValidator, LiveSetRejection, LiveValidatorSettingError,
+    PolygonDefect, MIN_POLYGON_AREA,
 };
 
 /// Now, in nanoseconds of `CLOCK_MONOTONIC`: the clock of [`PoseEstimate::timestamp_ns`] and
