@@ -114,7 +114,7 @@ fi
 # assertions on, no debug info;
 # Cargo.toml): the test executables of the four suites run below and the binaries they,
 # the examples and the package need (wlnavd, wlnav, wlnav-fleet, goal-client,
-# pose-publisher), nothing else. Every cargo invocation here selects the same packages,
+# pose-publisher, person-publisher), nothing else. Every cargo invocation here selects the same packages,
 # with test targets among what it builds, so cargo resolves one feature set and compiles
 # every dependency once (a `cargo test -p X` per suite, or a `cargo build` of a binary
 # alone, resolves other features and rebuilt most dependencies: measured). The first, a
@@ -146,11 +146,11 @@ if has_phase build; then
       "$CARGO" build --locked --target $TARGET --profile cross "${packages[@]}" --bins "${tests[@]:0:2}"
   } 2>"$CARGO_TARGET_DIR/cross-build.log"; } 2>"$CARGO_TARGET_DIR/cross-build.time" ||
     fail "cargo test --no-run / cargo build --profile cross --target $TARGET:\n$(tail -n 30 "$CARGO_TARGET_DIR/cross-build.log")"
-  for b in wlnavd wlnav wlnav-fleet goal-client pose-publisher; do
+  for b in wlnavd wlnav wlnav-fleet goal-client pose-publisher person-publisher; do
     file -L "$bin/$b" | grep -q 'ARM aarch64' || fail "$bin/$b is not an arm64 executable"
   done
   touch "$CARGO_TARGET_DIR/cross-build.ok"
-  step "built the test executables and binaries for $TARGET ($(tail -n 1 "$CARGO_TARGET_DIR/cross-build.time")): $bin/{wlnavd,wlnav,wlnav-fleet,goal-client,pose-publisher} are arm64"
+  step "built the test executables and binaries for $TARGET ($(tail -n 1 "$CARGO_TARGET_DIR/cross-build.time")): $bin/{wlnavd,wlnav,wlnav-fleet,goal-client,pose-publisher,person-publisher} are arm64"
 fi
 if ! has_phase run; then
   echo "cross-check: ${phases// /, }: OK in $(($(date +%s) - started)) s"

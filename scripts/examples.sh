@@ -7,7 +7,7 @@ cd "$(dirname "$0")/.."
 # The binaries of the test build (`cargo test --workspace` builds wlnavd and the examples,
 # which have integration tests): the same selection, so nothing is rebuilt when the tests
 # just ran; the dev profile is fast enough for a 5 Hz loop.
-# WLNAV_EXAMPLES_BIN_DIR: prebuilt wlnavd, goal-client and pose-publisher from elsewhere
+# WLNAV_EXAMPLES_BIN_DIR: prebuilt wlnavd, goal-client, pose-publisher and person-publisher from elsewhere
 # (scripts/cross-check.sh: the arm64 ones, run under qemu).
 if [ -n "${WLNAV_EXAMPLES_BIN_DIR:-}" ]; then
   bin=$WLNAV_EXAMPLES_BIN_DIR
@@ -61,4 +61,6 @@ run() {
 run goal-client "" "$bin/goal-client"
 run pose-publisher examples/external-pose.toml "$bin/pose-publisher"
 run python-client "" "$venv/bin/python" examples/python_client.py
-echo "examples: all three exit 0"
+run person-publisher "" "$bin/person-publisher"
+run python-obstacles "" "$venv/bin/python" examples/python_obstacles.py
+echo "examples: all five exit 0"

@@ -68,6 +68,18 @@ pub fn parse_seconds(text: &str) -> Result<f64, String> {
     Ok(v)
 }
 
+/// clap value parser for a rate in Hz: positive, at most 1000 (a perception publishes at
+/// 5–20 Hz; beyond 1 kHz a typo).
+pub fn parse_rate(text: &str) -> Result<f64, String> {
+    let v = finite_f64("the rate", text)?;
+    if !(v > 0.0 && v <= 1000.0) {
+        return Err(format!(
+            "the rate must be above 0 and at most 1000 Hz, got {v}"
+        ));
+    }
+    Ok(v)
+}
+
 /// clap value parser for `--prefix`.
 pub fn parse_prefix(text: &str) -> Result<String, String> {
     shm_ipc::validate_prefix(text).map_err(|e| e.to_string())?;

@@ -10,6 +10,7 @@
 //! | `watch [--table] [--count N]` | one line per tick, or a table | 0, 4 no telemetry, 130 Ctrl-C |
 //! | `record FILE.mcap [--duration S] [--ticks N]` | telemetry to MCAP (JSON schema, `json` messages: opens in Foxglove) | 0, 130 Ctrl-C (the file is finished either way) |
 //! | `demo` | start `wlnavd --sim`, drive a loading cycle, print times, write an SVG | 0 all legs reached, 3 a leg failed, 4 daemon trouble |
+//! | `obstacles publish FILE\|- [--rate HZ] [--once] [--duration S]` | publish live obstacle sets from JSON Lines (one set per line) as perception would, each stamped when sent ([`obstacles`]) | 0 done, 1 a bad line (named, nothing published for it), 4 no daemon or another publisher holds the service, 130 Ctrl-C |
 //!
 //! Usage errors (bad numbers, NaN, malformed `--obstacle`) exit with 2 and name the
 //! argument. The global `--prefix` selects the daemon (`wlnavd --prefix`).
@@ -19,6 +20,7 @@ pub mod commands;
 pub mod daemon_process;
 pub mod demo;
 pub mod follow;
+pub mod obstacles;
 pub mod plot;
 pub mod record;
 pub mod signal;
@@ -127,6 +129,64 @@ pub enum Command {
     Record(RecordArgs),
     /// Start wlnavd with its simulated machine and drive a loading cycle
     Demo(demo::DemoArgs),
+    /// Live obstacles (DESIGN §18): publish sets as a perception stack would
+    #[command(subcommand)]
+    Obstacles(ObstaclesCommand),
+}
+
+/// `wlnav obstacles …`.
+#[derive(Debug, Subcommand)]
+pub enum ObstaclesCommand {
+    /// Publish live obstacle sets from JSON Lines (a FILE, or `-` for standard input)
+    #[command(after_help = OBSTACLES_PUBLISH_HELP)]
+    Publish(ObstaclesPublishArgs),
+}
+
+const OBSTACLES_PUBLISH_HELP: &str = "\
+One set per line, e.g.
+  {\"obstacles\":[{\"id\":1,\"class\":\"person\",\"circle\":{\"x\":3.0,\"y\":0.0,\"radius\":0.4},\"velocity\":[0.0,1.4]},
+                 {\"id\":2,\"polygon\":[[0,0],[2,0],[2,1],[0,1]]}]}
+`id` and one of `circle` (x, y, radius: the physical radius [m]) or `polygon` (3 to 8
+[x, y] vertices [m], convex, either winding) are required; `class` (unknown, person,
+vehicle, machine, static; default unknown) and `velocity` ([vx, vy] m/s, default 0) are
+optional; unknown fields are errors; blank lines are skipped. `{\"obstacles\":[]}` says
+\"nothing is there\".
+
+Timing: the sets are published in turn, one every 1/RATE s, each stamped when it is
+sent (CLOCK_MONOTONIC; the set and all its obstacles). After the last set the last set is
+published again at the same rate, with fresh stamps (the daemon stops the machine when
+the newest set grows old), until --duration has passed since the first set or Ctrl-C;
+with --once the command ends after the last set instead. --duration ends the run early
+too, in the middle of the input.
+
+Checks: every line is checked with the daemon's own rules (finite numbers, positive
+radius, convex polygons, unique ids, …). A FILE is checked whole before anything is
+published: a bad line publishes nothing. Standard input is read as it comes (a quiet
+pipe repeats the last set): a bad line ends the run there, after the lines before it.
+
+Exit codes: 0 done, 1 a bad line (its number and the rule are named), 4 no daemon (after
+--connect-timeout), another process already publishes obstacles (it is named), or an
+I/O error, 130 interrupted.";
+
+/// `wlnav obstacles publish`.
+#[derive(Debug, Clone, Args)]
+pub struct ObstaclesPublishArgs {
+    /// JSON Lines input, one set per line; `-` reads standard input
+    #[arg(value_name = "FILE|-")]
+    pub file: String,
+    /// Sets per second
+    #[arg(long, default_value_t = 10.0, value_parser = args::parse_rate)]
+    pub rate: f64,
+    /// End after the last set of the input instead of repeating it
+    #[arg(long)]
+    pub once: bool,
+    /// End this many seconds after the first set (wall clock); default: at the end of
+    /// the input with --once, else at Ctrl-C
+    #[arg(long, value_parser = args::parse_seconds)]
+    pub duration: Option<f64>,
+    /// How long to wait for the daemon to create the obstacle service [s]
+    #[arg(long, default_value_t = 5.0, value_parser = args::parse_seconds)]
+    pub connect_timeout: f64,
 }
 
 /// `wlnav goal`.
@@ -253,6 +313,7 @@ pub fn run(cli: Cli) -> u8 {
         Command::Watch(a) => commands::watch(&cli, a),
         Command::Record(a) => record::run(&cli, a),
         Command::Demo(a) => demo::run(&cli, a),
+        Command::Obstacles(ObstaclesCommand::Publish(a)) => obstacles::publish(&cli, a),
     };
     match result {
         Ok(code) => code,

@@ -9,6 +9,7 @@ fn unknown_arguments_print_the_usage_and_fail() {
     for (bin, name) in [
         (env!("CARGO_BIN_EXE_goal-client"), "goal-client"),
         (env!("CARGO_BIN_EXE_pose-publisher"), "pose-publisher"),
+        (env!("CARGO_BIN_EXE_person-publisher"), "person-publisher"),
     ] {
         let out = Command::new(bin).arg("--bogus").output().unwrap();
         assert!(!out.status.success(), "{name} accepted --bogus");

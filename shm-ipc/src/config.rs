@@ -26,6 +26,9 @@ pub struct ServiceNames {
     /// [`crate::GoalReply`], plus event: the reserved stop path (see
     /// [`crate::StopClient`]).
     pub stop: String,
+    /// `{prefix}/v2/obstacles`: publish-subscribe [`crate::LiveObstacleSet`] (one
+    /// publisher: perception; the daemon subscribes), plus event.
+    pub obstacles: String,
 }
 
 impl ServiceNames {
@@ -37,6 +40,7 @@ impl ServiceNames {
             pose: format!("{prefix}/{API_VERSION}/pose"),
             telemetry: format!("{prefix}/{API_VERSION}/telemetry"),
             stop: format!("{prefix}/{API_VERSION}/stop"),
+            obstacles: format!("{prefix}/{API_VERSION}/obstacles"),
         })
     }
 }

@@ -76,6 +76,19 @@ pub enum IpcError {
         /// could not be found …"
         holders: String,
     },
+    /// Another process already publishes live obstacles: the obstacle service admits one
+    /// publisher (one perception stack), so two sets never interleave.
+    #[error(
+        "another process already publishes live obstacles on {service:?} (one publisher, for \
+         any perception stack): {holders}"
+    )]
+    ObstacleSourceTaken {
+        /// Service name
+        service: String,
+        /// The process holding the publisher (node name, pid, executable), or "the holder
+        /// could not be found …"
+        holders: String,
+    },
     /// Another process already serves goals under this prefix.
     #[error(
         "another daemon already serves {service:?} (its server port: {holders}); stop it or \

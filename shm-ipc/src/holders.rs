@@ -11,7 +11,7 @@
 use std::collections::BTreeMap;
 
 use crate::endpoint::IpcService;
-use crate::msg::{GoalReply, GoalRequest, PoseEstimate, Telemetry};
+use crate::msg::{GoalReply, GoalRequest};
 use iceoryx2::node::{Node, NodeState, NodeView};
 use iceoryx2::prelude::CallbackProgression;
 use iceoryx2::service::port_factory::PortFactory as _;
@@ -179,8 +179,8 @@ pub(crate) fn server_holders(factory: &GoalFactory) -> String {
 }
 
 /// Who holds the publishers of a publish-subscribe service.
-pub(crate) fn publisher_holders(
-    factory: &publish_subscribe::PortFactory<IpcService, PoseEstimate, ()>,
+pub(crate) fn publisher_holders<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend>(
+    factory: &publish_subscribe::PortFactory<IpcService, T, ()>,
 ) -> String {
     let mut counts = Counts::new();
     factory
@@ -190,8 +190,8 @@ pub(crate) fn publisher_holders(
 }
 
 /// Who holds the subscribers of a publish-subscribe service.
-pub(crate) fn subscriber_holders(
-    factory: &publish_subscribe::PortFactory<IpcService, Telemetry, ()>,
+pub(crate) fn subscriber_holders<T: std::fmt::Debug + iceoryx2::prelude::ZeroCopySend>(
+    factory: &publish_subscribe::PortFactory<IpcService, T, ()>,
 ) -> String {
     let mut counts = Counts::new();
     factory

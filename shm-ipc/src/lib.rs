@@ -1,11 +1,11 @@
 //! # shm-ipc: how programs talk to `wlnavd`
 //!
-//! Goals, poses and telemetry travel over [iceoryx2](https://docs.rs/iceoryx2/0.10) shared
+//! Goals, poses, live obstacles and telemetry travel over [iceoryx2](https://docs.rs/iceoryx2/0.10) shared
 //! memory (no broker, zero-copy, C/C++/Python bindings). This crate holds the wire types,
 //! the service names, a goal validator the daemon uses, and a small client library:
 //!
 //! * [`DaemonEndpoint`]: the daemon's side (serve goal requests, publish [`Telemetry`],
-//!   read [`PoseEstimate`]s, wait on events).
+//!   read [`PoseEstimate`]s and [`LiveObstacleSet`]s, wait on events).
 //! * [`Client`]: everyone else (send a goal and get accept/reject with a reason, cancel,
 //!   stop, resume, publish poses, [`Client::subscribe_telemetry`]). It only *opens* the
 //!   services the daemon created ([`IpcError::NotServed`] without a daemon;
@@ -18,6 +18,10 @@
 //!   obstacles with positive radius; rejections carry a [`RejectReason`]; accepted headings
 //!   are normalised to (−π, π]. (The footprint checks against the obstacles need the
 //!   machine and are the daemon's.)
+//! * [`ObstaclePublisher`]: the one publisher of live obstacles, for a perception stack
+//!   (DESIGN §18); [`LiveObstacleValidator`]: the rules the daemon checks every
+//!   [`LiveObstacleSet`] against (a set with one bad obstacle is rejected whole, with a
+//!   [`LiveSetRejection`] naming the rule and the obstacle).
 //!
 //! The `wlnav` command-line client is its own crate (`wlnav-cli`), built on this one.
 //!
@@ -44,6 +48,7 @@
 //! | `P/v2/stop` | request-response | [`GoalRequest`] (kind 3 only) → [`GoalReply`] | event id 5 after a request, 6 after a reply |
 //! | `P/v2/pose` | publish-subscribe | [`PoseEstimate`] | event id 3 after each sample |
 //! | `P/v2/telemetry` | publish-subscribe | [`Telemetry`] (one per control tick) | event id 4 after each sample |
+//! | `P/v2/obstacles` | publish-subscribe | [`LiveObstacleSet`] (perception → daemon, one publisher) | event id 7 after each set |
 //!
 //! ## What a peer must know
 //!
@@ -87,6 +92,12 @@
 //!   accepted sample; a run of rejects is a pose fault (controlled stop, fault bit
 //!   [`fault_flags::POSE_REJECTED`]). Samples without the valid flag are ignored; age is
 //!   judged on accepted samples only.
+//! * **One obstacle source.** `P/v2/obstacles` admits a **single publisher**, for any
+//!   perception stack: a second one is refused ([`IpcError::ObstacleSourceTaken`], naming
+//!   the holder). Each [`LiveObstacleSet`] replaces the previous one as a whole; publish
+//!   the complete set at perception's rate (an empty set when nothing is seen) and notify
+//!   id 7. The daemon checks every set with [`LiveObstacleValidator`] and drops a set that
+//!   fails, whole; freshness is judged on the set's `timestamp_ns`.
 //! * **The stop path.** `P/v2/stop` has its own 16 client slots; the `wlnav` CLI and
 //!   [`StopClient`] hold a port there only while a stop is in flight, so a process that
 //!   holds all 32 goal client slots cannot keep a stop out. One that holds all 16 stop
@@ -105,7 +116,9 @@
 //! active requests per client, 64 nodes, safe overflow on; stop: max 1 server, 16
 //! clients, 2 active requests per client, 64 nodes; pose: **1 publisher**, 8 subscribers;
 //! telemetry: 2 publishers, 16 subscribers; both: subscriber buffer 16, history 1, safe
-//! overflow on, 64 nodes; events: 64 listeners, 64 notifiers, 64 nodes. User headers are
+//! overflow on, 64 nodes; obstacles: **1 publisher**, 4 subscribers, subscriber buffer
+//! **1**, history 1, safe overflow on, 64 nodes; events: 64 listeners, 64 notifiers, 64
+//! nodes. User headers are
 //! empty (`()`, size 0). Each payload is registered under the type name given below (the
 //! `type_name` iceoryx2 compares when opening; in C++ set `IOX2_TYPE_NAME` to it; in
 //! Python see "Type names from Python" below).
@@ -189,6 +202,10 @@
 //! * **Poses, localization → daemon**: the daemon's subscriber buffer holds 16 samples,
 //!   safe overflow on (the oldest unread sample is overwritten; the publisher never
 //!   blocks); the daemon reads them all every tick.
+//! * **Live obstacles, perception → daemon**: the daemon's subscriber buffer holds **one**
+//!   set, safe overflow on: a new set overwrites an unread one, so the daemon always reads
+//!   the newest, the publisher never blocks, and a flood grows nothing (the shared memory
+//!   is sized once, at creation). Only the newest set matters: each replaces the last.
 //! * **Telemetry, daemon → subscribers**: 16 samples per subscriber, safe overflow on
 //!   (a slow reader loses the oldest, `tick` and `outcome_seq` show the gap); history 1
 //!   (a new subscriber gets the latest sample at once).
@@ -202,14 +219,15 @@
 //!   publishes poses), leaving **31**. Every [`Client`] (and `wlnav goal`, `cancel`,
 //!   `resume`, `watch`, `record`, while running) holds one for its lifetime.
 //! * **Nodes**: each process that opens a service is one of its 64 nodes (a [`Client`]
-//!   opens all four data services and their event services; a [`StopClient`] only the
+//!   opens all five data services and their event services; a [`StopClient`] only the
 //!   stop service, and the goal service when it falls back).
 //! * **Event ports**: 64 notifiers and 64 listeners per event service. The daemon holds
 //!   one notifier and one listener on the goal and on the stop event service, one
-//!   listener on the pose event service and one notifier on the telemetry event service;
-//!   a [`Client`] one notifier and one listener on the goal event service, one notifier
-//!   on the pose event service once it publishes, and one listener per telemetry
-//!   subscription.
+//!   listener on the pose and on the obstacle event service and one notifier on the
+//!   telemetry event service; a [`Client`] one notifier and one listener on the goal
+//!   event service, one notifier on the pose event service once it publishes, and one
+//!   listener per telemetry subscription; an [`ObstaclePublisher`] one notifier on the
+//!   obstacle event service.
 //! * **Request ids** need not be unique across clients for the replies: iceoryx2 routes
 //!   each reply to the client connection that sent the request. They should be unique
 //!   for telemetry: `goal_request_id` and `outcome_request_id` are how a client finds its
@@ -237,7 +255,8 @@
 //! A peer in another language should do the same: a stop needs only a client port; a
 //! notifier and a listener are optional. Every "slots taken" error
 //! ([`IpcError::PortsExhausted`], [`IpcError::AlreadyServed`],
-//! [`IpcError::PoseSourceTaken`]) names the processes holding the ports (node name, pid,
+//! [`IpcError::PoseSourceTaken`], [`IpcError::ObstacleSourceTaken`]) names the processes
+//! holding the ports (node name, pid,
 //! executable), or says that the holder could not be found.
 //!
 //! ## Payload layout (wire format v2)
@@ -333,6 +352,33 @@
 //! | 2748 | u32 | _reserved_site | zero |
 //! | 2752 | u8\[64\] | site_id | the loaded site's id, UTF-8, zero-filled |
 //!
+//! [`LiveObstacleSet`] (`wlnav::v2::LiveObstacleSet`), 24 592 bytes (DESIGN §18):
+//!
+//! | offset | type | field | meaning |
+//! |---|---|---|---|
+//! | 0 | u64 | timestamp_ns | the set's measurement time, `CLOCK_MONOTONIC` \[ns\]: freshness is judged on it |
+//! | 8 | u32 | sequence | publisher's counter (wraps) |
+//! | 12 | u32 | count | 0..=128 valid entries in `obstacles` (more: the set is rejected) |
+//! | 16 | LiveObstacle\[128\] | obstacles | the current live obstacles; unused entries zero |
+//!
+//! [`LiveObstacle`] (`wlnav::v2::LiveObstacle`), 192 bytes, at 16 + 192 i in the set:
+//!
+//! | offset | type | field | meaning |
+//! |---|---|---|---|
+//! | 0 | u32 | id | perception's track id, unique in the set |
+//! | 4 | u32 | shape | [`ObstacleShape`]: 0 circle, 1 convex polygon |
+//! | 8 | u32 | class | [`ObstacleClass`]: 0 unknown, 1 person, 2 vehicle, 3 machine, 4 static/other |
+//! | 12 | u32 | vertex_count | polygon: 3..=8 valid entries in `vertices`; circle: 0 |
+//! | 16 | u64 | timestamp_ns | when this obstacle was observed, `CLOCK_MONOTONIC` \[ns\] (≤ the set's + 0.05 s) |
+//! | 24 | f64 | x | circle centre \[m\], world frame (polygon: ignored, 0) |
+//! | 32 | f64 | y | circle centre \[m\] (polygon: ignored, 0) |
+//! | 40 | f64 | radius | circle's **physical** radius \[m\], not inflated by the machine (polygon: ignored, 0) |
+//! | 48 | f64 | vx | velocity \[m/s\], world frame |
+//! | 56 | f64 | vy | velocity \[m/s\], world frame |
+//! | 64 | f64\[8\]\[2\] | vertices | polygon (x, y) \[m\], world frame, in order around it (either winding); vertex k at 64 + 16 k |
+//!
+//! The rules a set must pass, and their defaults, are [`LiveObstacleValidator`]'s.
+//!
 //! ## Goal lifecycle
 //!
 //! A set-goal request is answered at once: accepted, or rejected with a [`RejectCode`] and
@@ -391,6 +437,10 @@
 //!                  uint64_t site_version, site_hash;
 //!                  uint32_t site_id_len, _reserved_site;
 //!                  uint8_t site_id[64]; } wlnav_telemetry; /* 2816 */
+//! typedef struct { uint32_t id, shape, class_, vertex_count; uint64_t timestamp_ns;
+//!                  double x, y, radius, vx, vy, vertices[8][2]; } wlnav_live_obstacle; /* 192 */
+//! typedef struct { uint64_t timestamp_ns; uint32_t sequence, count;
+//!                  wlnav_live_obstacle obstacles[128]; } wlnav_live_obstacle_set; /* 24592 */
 //! ```
 //!
 //! ## Start-up clean-up
@@ -408,6 +458,7 @@ mod error;
 mod holders;
 mod msg;
 mod validate;
+mod validate_live;
 
 /// The iceoryx2 version this crate is built against, for callers that need more of it (e.g.
 /// `iceoryx2::set_log_level` to silence its "no config file" warning in a CLI).
@@ -418,17 +469,23 @@ pub use config::{
 };
 pub use endpoint::{
     cleanup_stale_nodes, event_ids, qos, CleanupReport, Client, DaemonEndpoint, IncomingGoal,
-    IpcService, PendingGoal, StopClient, StopPath, StopReport, TelemetrySubscriber, Wakeup,
+    IpcService, ObstaclePublisher, PendingGoal, StopClient, StopPath, StopReport,
+    TelemetrySubscriber, Wakeup,
 };
 pub use error::{BoxedSource, ClientError, IpcError};
 pub use msg::{
     fault_flags, pose_flags, AbortReason, Command, GoalKind, GoalOutcome, GoalReply, GoalRequest,
-    MachineState, Mode, Obstacle, Pose2, PoseEstimate, RejectCode, Telemetry, MAX_OBSTACLES,
-    MAX_ROUTE, MAX_TRAJECTORY, REASON_TEXT_CAPACITY, SITE_ID_CAPACITY,
+    LiveObstacle, LiveObstacleError, LiveObstacleSet, MachineState, Mode, Obstacle, ObstacleClass,
+    ObstacleShape, Pose2, PoseEstimate, RejectCode, Telemetry, MAX_LIVE_OBSTACLES, MAX_OBSTACLES,
+    MAX_POLYGON_VERTICES, MAX_ROUTE, MAX_TRAJECTORY, REASON_TEXT_CAPACITY, SITE_ID_CAPACITY,
 };
 pub use validate::{
     heapless_obstacles, normalize_angle, GoalValidator, Num, RejectReason, ValidRequest, Workspace,
     MAX_HEADING_ABS, MAX_OBSTACLE_ABS,
+};
+pub use validate_live::{
+    polygon_defect, Field, LiveObstacleValidator, LiveSetRejection, LiveValidatorSettingError,
+    PolygonDefect, MIN_POLYGON_AREA,
 };
 
 /// Now, in nanoseconds of `CLOCK_MONOTONIC`: the clock of [`PoseEstimate::timestamp_ns`] and

@@ -548,3 +548,119 @@ fn a_second_pose_source_is_named() {
         other => panic!("expected PoseSourceTaken, got {other:?}"),
     }
 }
+
+fn person(id: u32, y: f64, stamp: u64) -> shm_ipc::LiveObstacle {
+    shm_ipc::LiveObstacle::circle(
+        id,
+        shm_ipc::ObstacleClass::Person,
+        [4.0, y],
+        0.4,
+        [0.0, 1.4],
+        stamp,
+    )
+}
+
+#[test]
+fn live_obstacles_reach_the_daemon_newest_first_and_wake_it() {
+    use shm_ipc::{LiveObstacleSet, ObstaclePublisher};
+    let config = unique_config("obstacles");
+    let ep = DaemonEndpoint::new(&config).expect("daemon");
+    let publisher = ObstaclePublisher::new(&config).expect("publisher");
+    assert_eq!(
+        publisher.service_name(),
+        format!("{}/v2/obstacles", config.prefix)
+    );
+    assert_eq!(ep.latest_obstacles().expect("obstacles"), None);
+
+    for seq in 0..3u32 {
+        let now = shm_ipc::monotonic_now_ns();
+        let mut set = LiveObstacleSet::empty(now, seq);
+        set.push(person(7, f64::from(seq), now)).expect("room");
+        publisher.publish(&set).expect("publish");
+    }
+    let woke = ep.wait(Some(timeout())).expect("wait");
+    assert!(woke.obstacles && woke.any(), "{woke:?}");
+    assert!(!woke.goal && !woke.stop);
+    let latest = ep.latest_obstacles().expect("read").expect("a set");
+    assert_eq!(
+        latest.sequence, 2,
+        "the newest set, the older ones replaced"
+    );
+    assert_eq!(latest.as_slice().len(), 1);
+    assert_eq!((latest.as_slice()[0].id, latest.as_slice()[0].y), (7, 2.0));
+    assert_eq!(ep.latest_obstacles().expect("read"), None, "drained");
+}
+
+#[test]
+fn a_flood_of_obstacle_sets_neither_blocks_nor_queues() {
+    use shm_ipc::{LiveObstacleSet, ObstaclePublisher};
+    let config = unique_config("obstacle_flood");
+    let ep = DaemonEndpoint::new(&config).expect("daemon");
+    let publisher = ObstaclePublisher::new(&config).expect("publisher");
+    let start = Instant::now();
+    for seq in 0..2000u32 {
+        publisher
+            .publish(&LiveObstacleSet::empty(shm_ipc::monotonic_now_ns(), seq))
+            .expect("a flood never blocks nor fails");
+    }
+    assert!(start.elapsed() < timeout(), "{:?}", start.elapsed());
+    // One set is buffered: the first read is the newest, the next finds nothing.
+    let first = ep.receive_obstacles().expect("read").expect("a set");
+    assert_eq!(first.sequence, 1999);
+    assert_eq!(ep.receive_obstacles().expect("read"), None);
+}
+
+#[test]
+fn draining_the_goal_events_leaves_the_obstacle_wakeup() {
+    use shm_ipc::{LiveObstacleSet, ObstaclePublisher};
+    let config = unique_config("obstacle_wakeup");
+    let ep = DaemonEndpoint::new(&config).expect("daemon");
+    let publisher = ObstaclePublisher::new(&config).expect("publisher");
+    publisher
+        .publish(&LiveObstacleSet::empty(shm_ipc::monotonic_now_ns(), 1))
+        .expect("publish");
+    // The goal task drains its events; the obstacle task's descriptor stays readable.
+    ep.drain_events().expect("drain");
+    let mut pfd = libc::pollfd {
+        fd: ep.obstacles_event_fd(),
+        events: libc::POLLIN,
+        revents: 0,
+    };
+    // SAFETY: one valid pollfd.
+    let ready = unsafe { libc::poll(&mut pfd, 1, 2000) };
+    assert_eq!(ready, 1, "the obstacle event fd is readable");
+    ep.drain_obstacle_events().expect("drain obstacles");
+    // SAFETY: as above.
+    let ready = unsafe { libc::poll(&mut pfd, 1, 0) };
+    assert_eq!(ready, 0, "drained");
+    assert!(ep.latest_obstacles().expect("read").is_some());
+}
+
+#[test]
+fn a_second_obstacle_publisher_is_refused_naming_the_first() {
+    use shm_ipc::ObstaclePublisher;
+    let config = unique_config("obstacle_source");
+    // Without a daemon there is nothing to open: a publisher never creates the service.
+    match ObstaclePublisher::new(&config) {
+        Err(IpcError::NotServed { service }) => assert!(service.ends_with("/v2/obstacles")),
+        other => panic!("expected NotServed, got {other:?}"),
+    }
+    let _ep = DaemonEndpoint::new(&config).expect("daemon");
+    let client = Client::new(&config).expect("client");
+    let first = client.obstacle_publisher().expect("first source");
+    for second in [ObstaclePublisher::new(&config), client.obstacle_publisher()] {
+        match second {
+            Err(e @ IpcError::ObstacleSourceTaken { .. }) => {
+                let text = e.to_string();
+                let pid = format!("node \"wlnav-client\" (pid {}", std::process::id());
+                assert!(text.contains(&pid), "{pid:?} missing in {text:?}");
+                assert!(text.contains("/v2/obstacles"), "{text}");
+                assert!(text.contains("one publisher"), "{text}");
+            }
+            other => panic!("expected ObstacleSourceTaken, got {other:?}"),
+        }
+    }
+    // Dropping the first frees the slot.
+    drop(first);
+    ObstaclePublisher::new(&config).expect("the slot is free again");
+}

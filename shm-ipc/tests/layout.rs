@@ -5,9 +5,10 @@ use core::mem::{align_of, offset_of, size_of};
 
 use iceoryx2::prelude::ZeroCopySend;
 use shm_ipc::{
-    pose_flags, AbortReason, Command, GoalKind, GoalOutcome, GoalReply, GoalRequest, MachineState,
-    Mode, Obstacle, Pose2, PoseEstimate, RejectCode, Telemetry, MAX_OBSTACLES, MAX_ROUTE,
-    MAX_TRAJECTORY, REASON_TEXT_CAPACITY, SITE_ID_CAPACITY,
+    pose_flags, AbortReason, Command, GoalKind, GoalOutcome, GoalReply, GoalRequest, LiveObstacle,
+    LiveObstacleError, LiveObstacleSet, MachineState, Mode, Obstacle, ObstacleClass, ObstacleShape,
+    Pose2, PoseEstimate, RejectCode, Telemetry, MAX_LIVE_OBSTACLES, MAX_OBSTACLES,
+    MAX_POLYGON_VERTICES, MAX_ROUTE, MAX_TRAJECTORY, REASON_TEXT_CAPACITY, SITE_ID_CAPACITY,
 };
 
 /// The bytes of a padding-free POD value.
@@ -101,7 +102,138 @@ fn type_names_are_stable() {
         assert_eq!(GoalReply::type_name(), "wlnav::v2::GoalReply");
         assert_eq!(PoseEstimate::type_name(), "wlnav::v2::PoseEstimate");
         assert_eq!(Telemetry::type_name(), "wlnav::v2::Telemetry");
+        assert_eq!(LiveObstacle::type_name(), "wlnav::v2::LiveObstacle");
+        assert_eq!(LiveObstacleSet::type_name(), "wlnav::v2::LiveObstacleSet");
     }
+}
+
+#[test]
+fn live_obstacle_sizes_and_offsets() {
+    assert_eq!((MAX_LIVE_OBSTACLES, MAX_POLYGON_VERTICES), (128, 8));
+    assert_eq!(
+        (size_of::<LiveObstacle>(), align_of::<LiveObstacle>()),
+        (192, 8)
+    );
+    // No implicit padding: the size is the sum of the fields.
+    assert_eq!(size_of::<LiveObstacle>(), 4 * 4 + 8 + 5 * 8 + 8 * 2 * 8);
+    assert_eq!(offset_of!(LiveObstacle, timestamp_ns), 16);
+    assert_eq!(offset_of!(LiveObstacle, vertices), 64);
+    assert_eq!(
+        (size_of::<LiveObstacleSet>(), align_of::<LiveObstacleSet>()),
+        (24592, 8)
+    );
+    assert_eq!(size_of::<LiveObstacleSet>(), 8 + 4 + 4 + 128 * 192);
+    assert_eq!(offset_of!(LiveObstacleSet, obstacles), 16);
+}
+
+#[test]
+fn live_obstacle_bytes() {
+    let circle = LiveObstacle::circle(
+        0xA1B2_C3D4,
+        ObstacleClass::Person,
+        [3.5, -1.25],
+        0.4,
+        [0.5, 1.4],
+        1_000_000_007,
+    );
+    let b = bytes(&circle);
+    assert_eq!(u32_at(b, 0), 0xA1B2_C3D4);
+    assert_eq!(u32_at(b, 4), 0, "shape: circle");
+    assert_eq!(u32_at(b, 8), 1, "class: person");
+    assert_eq!(u32_at(b, 12), 0, "a circle has no vertices");
+    assert_eq!(u64_at(b, 16), 1_000_000_007);
+    assert_eq!(
+        (f64_at(b, 24), f64_at(b, 32), f64_at(b, 40)),
+        (3.5, -1.25, 0.4)
+    );
+    assert_eq!((f64_at(b, 48), f64_at(b, 56)), (0.5, 1.4));
+    assert!(b[64..].iter().all(|&x| x == 0), "unused vertices are zero");
+
+    let square = [[0.0, 0.0], [2.0, 0.0], [2.0, 1.0], [0.0, 1.0]];
+    let poly =
+        LiveObstacle::polygon(9, ObstacleClass::Machine, &square, [-1.0, 0.0], 5).expect("polygon");
+    let b = bytes(&poly);
+    assert_eq!((u32_at(b, 4), u32_at(b, 8), u32_at(b, 12)), (1, 3, 4));
+    assert_eq!(
+        (f64_at(b, 24), f64_at(b, 32), f64_at(b, 40)),
+        (0.0, 0.0, 0.0)
+    );
+    assert_eq!((f64_at(b, 48), f64_at(b, 56)), (-1.0, 0.0));
+    // Vertex k at 64 + 16 k: x, then y.
+    assert_eq!(
+        (f64_at(b, 64 + 16 * 2), f64_at(b, 64 + 16 * 2 + 8)),
+        (2.0, 1.0)
+    );
+    assert!(b[64 + 16 * 4..].iter().all(|&x| x == 0));
+    assert_eq!(poly.vertices(), &square);
+
+    let mut set = LiveObstacleSet::empty(77, 3);
+    set.push(circle).expect("room");
+    set.push(poly).expect("room");
+    let b = bytes(&set);
+    assert_eq!((u64_at(b, 0), u32_at(b, 8), u32_at(b, 12)), (77, 3, 2));
+    assert_eq!(&b[16..16 + 192], bytes(&circle));
+    assert_eq!(&b[16 + 192..16 + 384], bytes(&poly));
+    assert!(b[16 + 384..].iter().all(|&x| x == 0));
+}
+
+#[test]
+fn live_obstacle_codes_and_constructors() {
+    for (code, class, name) in [
+        (0, ObstacleClass::Unknown, "unknown"),
+        (1, ObstacleClass::Person, "person"),
+        (2, ObstacleClass::Vehicle, "vehicle"),
+        (3, ObstacleClass::Machine, "machine"),
+        (4, ObstacleClass::Static, "static"),
+    ] {
+        assert_eq!(ObstacleClass::try_from(code), Ok(class));
+        assert_eq!((class.code(), class.name()), (code, name));
+        assert_eq!(ObstacleClass::from_name(name), Some(class));
+    }
+    assert_eq!(ObstacleClass::try_from(5), Err(5));
+    assert_eq!(ObstacleClass::from_name("Person"), None);
+    assert_eq!(ObstacleShape::try_from(0), Ok(ObstacleShape::Circle));
+    assert_eq!(ObstacleShape::try_from(1), Ok(ObstacleShape::Polygon));
+    assert_eq!(ObstacleShape::try_from(2), Err(2));
+    assert_eq!(ObstacleShape::Polygon.name(), "polygon");
+
+    let two = [[0.0, 0.0], [1.0, 0.0]];
+    let nine = [[0.0, 0.0]; 9];
+    for bad in [&two[..], &nine[..]] {
+        assert_eq!(
+            LiveObstacle::polygon(1, ObstacleClass::Unknown, bad, [0.0, 0.0], 0),
+            Err(LiveObstacleError::VertexCount(bad.len()))
+        );
+    }
+    // A corrupt vertex count from shared memory cannot make `vertices` panic.
+    let mut o = LiveObstacle::ZERO;
+    o.vertex_count = u32::MAX;
+    assert_eq!(o.vertices().len(), MAX_POLYGON_VERTICES);
+
+    let mut set = LiveObstacleSet::empty(1, 1);
+    for id in 0..MAX_LIVE_OBSTACLES as u32 {
+        set.push(LiveObstacle::circle(
+            id,
+            ObstacleClass::Unknown,
+            [0.0, 0.0],
+            1.0,
+            [0.0, 0.0],
+            1,
+        ))
+        .expect("room");
+    }
+    assert_eq!(set.as_slice().len(), MAX_LIVE_OBSTACLES);
+    assert_eq!(
+        set.push(LiveObstacle::ZERO),
+        Err(LiveObstacleError::SetFull)
+    );
+    // A count beyond the capacity is clamped, never trusted.
+    set.count = 1000;
+    assert_eq!(set.as_slice().len(), MAX_LIVE_OBSTACLES);
+    assert_eq!(
+        set.push(LiveObstacle::ZERO),
+        Err(LiveObstacleError::SetFull)
+    );
 }
 
 #[test]

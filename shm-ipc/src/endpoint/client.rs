@@ -1,5 +1,6 @@
 //! The client's side: [`Client`] sends goals, cancels, stops and resumes, publishes poses
-//! and subscribes to telemetry ([`TelemetrySubscriber`]); [`PendingGoal`] awaits a reply.
+//! (and, through [`Client::obstacle_publisher`], live obstacles) and subscribes to
+//! telemetry ([`TelemetrySubscriber`]); [`PendingGoal`] awaits a reply.
 
 use core::time::Duration;
 use std::os::fd::RawFd;
@@ -11,9 +12,13 @@ use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::subscriber::Subscriber;
 
 use super::events::{drain, listener_fd, notify, wait_error};
-use super::services::{client_port, Access, CleanupReport, Connection};
+use super::obstacles::ObstaclePublisher;
+use super::services::{client_port, single_publisher, Access, CleanupReport, Connection};
 use super::stop::{Attempt, StopClient, StopPath, StopReport};
-use super::{boxed, event_ids, qos, GoalClient, GoalPending, IpcService, PosePublisher};
+use super::{
+    boxed, event_ids, newest, qos, receive_copy, wait_for_daemon, GoalClient, GoalPending,
+    IpcService, PosePublisher,
+};
 use crate::config::{IpcConfig, ServiceNames};
 use crate::error::{ClientError, IpcError};
 use crate::msg::{GoalReply, GoalRequest, Obstacle, Pose2, PoseEstimate, Telemetry};
@@ -72,18 +77,7 @@ impl Client {
     /// Like [`Client::new`], but waits up to `timeout` for a daemon to create the services
     /// (polling every 20 ms); other errors return at once.
     pub fn connect(config: &IpcConfig, timeout: Duration) -> Result<Self, IpcError> {
-        let deadline = Instant::now() + timeout;
-        let mut config = config.clone();
-        loop {
-            match Self::new(&config) {
-                Err(IpcError::NotServed { .. }) if Instant::now() < deadline => {
-                    // Clean once; the retries need not list the nodes again.
-                    config.cleanup_stale_nodes = false;
-                    std::thread::sleep(Duration::from_millis(20));
-                }
-                other => return other,
-            }
-        }
+        wait_for_daemon(config, timeout, Self::new)
     }
 
     /// The service names in use.
@@ -218,19 +212,8 @@ impl Client {
             .lock()
             .unwrap_or_else(|poisoned| poisoned.into_inner());
         if guard.is_none() {
-            let publisher = self.conn.pose.publisher_builder().create().map_err(|e| {
-                if e == iceoryx2::port::publisher::PublisherCreateError::ExceedsMaxSupportedPublishers {
-                    IpcError::PoseSourceTaken {
-                        service: service.clone(),
-                        holders: crate::holders::publisher_holders(&self.conn.pose),
-                    }
-                } else {
-                    IpcError::Port {
-                        port: "publisher",
-                        service: service.clone(),
-                        source: boxed(e),
-                    }
-                }
+            let publisher = single_publisher(&self.conn.pose, service, |service, holders| {
+                IpcError::PoseSourceTaken { service, holders }
             })?;
             let notifier = Connection::notifier(&self.conn.pose_event, service)?;
             *guard = Some((publisher, notifier));
@@ -243,6 +226,19 @@ impl Client {
             source: boxed(e),
         })?;
         notify(notifier, event_ids::POSE, service)
+    }
+
+    /// The one publisher of live obstacles (`{prefix}/v2/obstacles`), on this client's
+    /// connection: see [`ObstaclePublisher`]. Fails with
+    /// [`IpcError::ObstacleSourceTaken`] when another process (or another
+    /// `ObstaclePublisher` of this one) holds it. A perception process that needs nothing
+    /// else should use [`ObstaclePublisher::new`], which takes no goal client slot.
+    pub fn obstacle_publisher(&self) -> Result<ObstaclePublisher, IpcError> {
+        ObstaclePublisher::from_factories(
+            &self.conn.obstacles,
+            &self.conn.obstacles_event,
+            &self.conn.names.obstacles,
+        )
     }
 
     /// A new telemetry subscription. It receives the latest sample already published (if
@@ -397,13 +393,7 @@ impl core::fmt::Debug for TelemetrySubscriber {
 impl TelemetrySubscriber {
     /// The next unread sample (oldest first), without blocking.
     pub fn try_recv(&self) -> Result<Option<Telemetry>, IpcError> {
-        self.subscriber
-            .receive()
-            .map(|s| s.map(|s| *s.payload()))
-            .map_err(|e| IpcError::Receive {
-                service: self.service.clone(),
-                source: boxed(e),
-            })
+        receive_copy(&self.subscriber, &self.service)
     }
 
     /// The next sample, waiting up to `timeout` for one to be published (`Ok(None)` on
@@ -426,11 +416,7 @@ impl TelemetrySubscriber {
 
     /// Drains everything unread and returns the newest sample.
     pub fn latest(&self) -> Result<Option<Telemetry>, IpcError> {
-        let mut latest = None;
-        while let Some(t) = self.try_recv()? {
-            latest = Some(t);
-        }
-        Ok(latest)
+        newest(|| self.try_recv())
     }
 
     /// Consumes pending notifications (after an `AsyncFd` readiness, before reading).

@@ -1,5 +1,5 @@
 //! The daemon's side: [`DaemonEndpoint`] serves goal and stop requests, publishes
-//! telemetry and subscribes to poses; [`IncomingGoal`] is a request awaiting its answer.
+//! telemetry and subscribes to poses and live obstacles; [`IncomingGoal`] is a request awaiting its answer.
 
 use core::time::Duration;
 use std::os::fd::RawFd;
@@ -12,10 +12,12 @@ use iceoryx2::service::port_factory::event;
 
 use super::events::{drain, listener_fd, notify, poll_fds};
 use super::services::{event_service, goal_service, Access, CleanupReport, Connection};
-use super::{boxed, event_ids, qos, GoalActive, GoalFactory, GoalServer, IpcService};
+use super::{
+    boxed, event_ids, newest, qos, receive_copy, GoalActive, GoalFactory, GoalServer, IpcService,
+};
 use crate::config::{IpcConfig, ServiceNames};
 use crate::error::IpcError;
-use crate::msg::{GoalReply, GoalRequest, PoseEstimate, Telemetry};
+use crate::msg::{GoalReply, GoalRequest, LiveObstacleSet, PoseEstimate, Telemetry};
 
 /// Which event sources woke [`DaemonEndpoint::wait`].
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -26,19 +28,23 @@ pub struct Wakeup {
     pub pose: bool,
     /// Stop requests may be waiting: call [`DaemonEndpoint::receive_stop`] until `None`.
     pub stop: bool,
+    /// A live obstacle set may be waiting: call [`DaemonEndpoint::latest_obstacles`].
+    pub obstacles: bool,
 }
 
 impl Wakeup {
     /// True if anything woke the wait (false on timeout or a signal).
     pub fn any(&self) -> bool {
-        self.goal || self.pose || self.stop
+        self.goal || self.pose || self.stop || self.obstacles
     }
 }
 
-/// The daemon's side: serves goal requests, publishes telemetry, subscribes to poses.
+/// The daemon's side: serves goal requests, publishes telemetry, subscribes to poses and
+/// live obstacles.
 ///
-/// Typical I/O loop (blocking thread; with tokio wrap [`DaemonEndpoint::goal_event_fd`] and
-/// [`DaemonEndpoint::pose_event_fd`] in `AsyncFd` instead of calling `wait`):
+/// Typical I/O loop (blocking thread; with tokio wrap [`DaemonEndpoint::goal_event_fd`],
+/// [`DaemonEndpoint::pose_event_fd`] and [`DaemonEndpoint::obstacles_event_fd`] in
+/// `AsyncFd` instead of calling `wait`):
 ///
 /// ```no_run
 /// use shm_ipc::{DaemonEndpoint, GoalValidator, IpcConfig};
@@ -56,6 +62,9 @@ impl Wakeup {
 ///     if let Some(pose) = ep.latest_pose()? {
 ///         println!("pose: {pose:?}");
 ///     }
+///     if let Some(set) = ep.latest_obstacles()? {
+///         println!("{} live obstacles", set.as_slice().len());
+///     }
 /// }
 /// # }
 /// ```
@@ -68,6 +77,8 @@ pub struct DaemonEndpoint {
     telemetry_notifier: Notifier<IpcService>,
     pose_sub: Subscriber<IpcService, PoseEstimate, ()>,
     pose_listener: Listener<IpcService>,
+    obstacles_sub: Subscriber<IpcService, LiveObstacleSet, ()>,
+    obstacles_listener: Listener<IpcService>,
     /// The reserved stop path: its own service, so it has its own client slots.
     _stop_factory: GoalFactory,
     _stop_event: event::PortFactory<IpcService>,
@@ -145,6 +156,18 @@ impl DaemonEndpoint {
                 source: boxed(e),
             })?;
         let pose_listener = Connection::listener(&conn.pose_event, &names.pose)?;
+        // One set: the newest replaces an unread one (qos::OBSTACLES_SUBSCRIBER_BUFFER).
+        let obstacles_sub = conn
+            .obstacles
+            .subscriber_builder()
+            .buffer_size(qos::OBSTACLES_SUBSCRIBER_BUFFER)
+            .create()
+            .map_err(|e| IpcError::Port {
+                port: "subscriber",
+                service: names.obstacles.clone(),
+                source: boxed(e),
+            })?;
+        let obstacles_listener = Connection::listener(&conn.obstacles_event, &names.obstacles)?;
         Ok(Self {
             conn,
             server,
@@ -154,6 +177,8 @@ impl DaemonEndpoint {
             telemetry_notifier,
             pose_sub,
             pose_listener,
+            obstacles_sub,
+            obstacles_listener,
             _stop_factory: stop_factory,
             _stop_event: stop_event,
             stop_server,
@@ -247,28 +272,32 @@ impl DaemonEndpoint {
 
     /// Takes the next pose sample without blocking (oldest first).
     pub fn receive_pose(&self) -> Result<Option<PoseEstimate>, IpcError> {
-        self.pose_sub
-            .receive()
-            .map(|s| s.map(|s| *s.payload()))
-            .map_err(|e| IpcError::Receive {
-                service: self.conn.names.pose.clone(),
-                source: boxed(e),
-            })
+        receive_copy(&self.pose_sub, &self.conn.names.pose)
     }
 
     /// Drains all pending pose samples and returns the newest, if any. Validity is not
     /// judged here: check [`PoseEstimate::is_usable`] and the timestamp.
     pub fn latest_pose(&self) -> Result<Option<PoseEstimate>, IpcError> {
-        let mut latest = None;
-        while let Some(p) = self.receive_pose()? {
-            latest = Some(p);
-        }
-        Ok(latest)
+        newest(|| self.receive_pose())
     }
 
-    /// Blocks until a goal request or pose notification arrives, or `timeout` passes
-    /// (`None`: forever). Consumes the notifications, so read the data afterwards until
-    /// empty. Spurious wake-ups are possible (e.g. the goal event service also carries the
+    /// Takes the next live obstacle set without blocking (the subscriber keeps one set,
+    /// the newest, so this is also the latest).
+    pub fn receive_obstacles(&self) -> Result<Option<LiveObstacleSet>, IpcError> {
+        receive_copy(&self.obstacles_sub, &self.conn.names.obstacles)
+    }
+
+    /// Drains the pending live obstacle sets and returns the newest, if any (a copy out of
+    /// shared memory). Nothing is judged here: check it with
+    /// [`crate::LiveObstacleValidator::validate`] and judge its age on
+    /// [`LiveObstacleSet::timestamp_ns`].
+    pub fn latest_obstacles(&self) -> Result<Option<LiveObstacleSet>, IpcError> {
+        newest(|| self.receive_obstacles())
+    }
+
+    /// Blocks until a goal, stop, pose or live-obstacle notification arrives, or `timeout`
+    /// passes (`None`: forever). Consumes the notifications, so read the data afterwards
+    /// until empty. Spurious wake-ups are possible (e.g. the goal event service also carries the
     /// daemon's own reply notifications); a signal returns an empty [`Wakeup`].
     pub fn wait(&self, timeout: Option<Duration>) -> Result<Wakeup, IpcError> {
         let ready = poll_fds(
@@ -276,6 +305,7 @@ impl DaemonEndpoint {
                 listener_fd(&self.goal_listener),
                 listener_fd(&self.pose_listener),
                 listener_fd(&self.stop_listener),
+                listener_fd(&self.obstacles_listener),
             ],
             timeout,
         )
@@ -284,15 +314,20 @@ impl DaemonEndpoint {
             source: boxed(e),
         })?;
         self.drain_events()?;
+        self.drain_obstacle_events()?;
         Ok(Wakeup {
             goal: ready.first().copied().unwrap_or(false),
             pose: ready.get(1).copied().unwrap_or(false),
             stop: ready.get(2).copied().unwrap_or(false),
+            obstacles: ready.get(3).copied().unwrap_or(false),
         })
     }
 
-    /// Consumes pending notifications on both listeners (call after an `AsyncFd` readiness
-    /// before reading the data, so the descriptors stop being readable).
+    /// Consumes pending notifications on the goal, pose and stop listeners (call after an
+    /// `AsyncFd` readiness before reading the data, so the descriptors stop being
+    /// readable). Not the obstacle listener's: a task that serves goals must not swallow
+    /// the wake-up another task waits for on [`DaemonEndpoint::obstacles_event_fd`]
+    /// (see [`DaemonEndpoint::drain_obstacle_events`]).
     pub fn drain_events(&self) -> Result<(), IpcError> {
         drain(&self.goal_listener, &self.conn.names.goal)?;
         drain(&self.pose_listener, &self.conn.names.pose)?;
@@ -313,6 +348,20 @@ impl DaemonEndpoint {
     /// File descriptor that becomes readable when a pose may be waiting.
     pub fn pose_event_fd(&self) -> RawFd {
         listener_fd(&self.pose_listener)
+    }
+
+    /// File descriptor that becomes readable when a live obstacle set may be waiting
+    /// (event id [`event_ids::OBSTACLES`]). After it is readable, call
+    /// [`DaemonEndpoint::drain_obstacle_events`], then
+    /// [`DaemonEndpoint::latest_obstacles`].
+    pub fn obstacles_event_fd(&self) -> RawFd {
+        listener_fd(&self.obstacles_listener)
+    }
+
+    /// Consumes pending notifications on the obstacle listener (call after an `AsyncFd`
+    /// readiness of [`DaemonEndpoint::obstacles_event_fd`], before reading the set).
+    pub fn drain_obstacle_events(&self) -> Result<(), IpcError> {
+        drain(&self.obstacles_listener, &self.conn.names.obstacles)
     }
 }
 

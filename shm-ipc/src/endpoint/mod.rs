@@ -26,11 +26,13 @@ use crate::msg::{GoalReply, GoalRequest, PoseEstimate};
 mod client;
 mod daemon;
 mod events;
+mod obstacles;
 mod services;
 mod stop;
 
 pub use client::{Client, PendingGoal, TelemetrySubscriber};
 pub use daemon::{DaemonEndpoint, IncomingGoal, Wakeup};
+pub use obstacles::ObstaclePublisher;
 pub use services::{cleanup_stale_nodes, CleanupReport};
 pub use stop::{StopClient, StopPath, StopReport};
 
@@ -53,6 +55,8 @@ pub mod event_ids {
     pub const STOP_REQUEST: usize = 5;
     /// The daemon replied to a stop request (on `{prefix}/v2/stop`).
     pub const STOP_REPLY: usize = 6;
+    /// A [`crate::LiveObstacleSet`] was published (on `{prefix}/v2/obstacles`).
+    pub const OBSTACLES: usize = 7;
 }
 
 /// Service quality-of-service settings. They are requirements when opening an existing
@@ -91,6 +95,19 @@ pub mod qos {
     pub const STOP_MAX_CLIENTS: usize = 16;
     /// Stop requests one stop client may have in flight.
     pub const STOP_MAX_ACTIVE_REQUESTS_PER_CLIENT: usize = 2;
+    /// Live-obstacle publishers: one, for any perception stack (DESIGN §18). A second is
+    /// refused ([`crate::IpcError::ObstacleSourceTaken`]): two sets interleaving would make
+    /// obstacles blink in and out, each set replacing the other's.
+    pub const OBSTACLES_MAX_PUBLISHERS: usize = 1;
+    /// Live-obstacle subscribers: the daemon, and room for a viewer or a recorder.
+    pub const OBSTACLES_MAX_SUBSCRIBERS: usize = 4;
+    /// Per-subscriber buffer of the obstacle service: **one** set. A set replaces the
+    /// previous one as a whole, so the daemon only ever needs the newest; with safe
+    /// overflow a new set overwrites an unread one. A flood of sets therefore never blocks
+    /// the publisher and never grows anything: the shared memory is sized once, at
+    /// creation, for one 24 592-byte set per subscriber (plus the history and the
+    /// publisher's loans), and a reader always finds the newest.
+    pub const OBSTACLES_SUBSCRIBER_BUFFER: usize = 1;
 }
 
 /// A pose publisher and the notifier that wakes its subscribers.
@@ -110,10 +127,60 @@ fn boxed<E: std::error::Error + Send + Sync + 'static>(e: E) -> crate::error::Bo
     Box::new(e)
 }
 
+/// The next sample of `subscriber` (oldest first), copied out of shared memory, without
+/// blocking.
+fn receive_copy<T: core::fmt::Debug + Copy + iceoryx2::prelude::ZeroCopySend>(
+    subscriber: &iceoryx2::port::subscriber::Subscriber<IpcService, T, ()>,
+    service: &str,
+) -> Result<Option<T>, crate::error::IpcError> {
+    subscriber
+        .receive()
+        .map(|s| s.map(|s| *s.payload()))
+        .map_err(|e| crate::error::IpcError::Receive {
+            service: service.to_owned(),
+            source: boxed(e),
+        })
+}
+
+/// Calls `next` until it has nothing more; the last item it gave.
+fn newest<T>(
+    mut next: impl FnMut() -> Result<Option<T>, crate::error::IpcError>,
+) -> Result<Option<T>, crate::error::IpcError> {
+    let mut latest = None;
+    while let Some(item) = next()? {
+        latest = Some(item);
+    }
+    Ok(latest)
+}
+
+/// Opens with `open`, retrying every 20 ms for up to `timeout` while no daemon has created
+/// the services ([`crate::IpcError::NotServed`]); other errors return at once.
+fn wait_for_daemon<T>(
+    config: &crate::config::IpcConfig,
+    timeout: core::time::Duration,
+    open: impl Fn(&crate::config::IpcConfig) -> Result<T, crate::error::IpcError>,
+) -> Result<T, crate::error::IpcError> {
+    let deadline = std::time::Instant::now() + timeout;
+    let mut config = config.clone();
+    loop {
+        match open(&config) {
+            Err(crate::error::IpcError::NotServed { .. })
+                if std::time::Instant::now() < deadline =>
+            {
+                // Clean once; the retries need not list the nodes again.
+                config.cleanup_stale_nodes = false;
+                std::thread::sleep(core::time::Duration::from_millis(20));
+            }
+            other => return other,
+        }
+    }
+}
+
 // The daemon moves endpoints between its tokio tasks and threads.
 const _: () = {
     const fn assert_send_sync<T: Send + Sync>() {}
     assert_send_sync::<DaemonEndpoint>();
     assert_send_sync::<Client>();
     assert_send_sync::<TelemetrySubscriber>();
+    assert_send_sync::<ObstaclePublisher>();
 };

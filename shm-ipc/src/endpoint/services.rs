@@ -1,4 +1,4 @@
-//! The node and the goal, pose, telemetry and stop services, opened or created with the
+//! The node and the goal, pose, telemetry, obstacle and stop services, opened or created with the
 //! crate's QoS ([`qos`]); when that fails, who holds them. Also the start-up clean-up of
 //! dead nodes, and the port constructors the endpoints share.
 
@@ -14,7 +14,7 @@ use iceoryx2::signal_handling_mode::SignalHandlingMode;
 use super::{boxed, qos, GoalClient, GoalFactory, IpcService};
 use crate::config::{IpcConfig, ServiceNames};
 use crate::error::IpcError;
-use crate::msg::{GoalReply, GoalRequest, PoseEstimate, Telemetry};
+use crate::msg::{GoalReply, GoalRequest, LiveObstacleSet, PoseEstimate, Telemetry};
 
 /// What stale-node clean-up found at start-up.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -42,8 +42,8 @@ pub(super) enum Access {
     Open,
 }
 
-/// The node and the goal, pose and telemetry services, opened or created. Shared setup of
-/// both endpoints.
+/// The node and the goal, pose, telemetry and obstacle services, opened or created.
+/// Shared setup of both endpoints.
 pub(super) struct Connection {
     /// Owns the node's registration; ports keep it alive too, this makes it explicit.
     pub(super) node: Node<IpcService>,
@@ -54,6 +54,8 @@ pub(super) struct Connection {
     pub(super) pose_event: event::PortFactory<IpcService>,
     pub(super) telemetry: publish_subscribe::PortFactory<IpcService, Telemetry, ()>,
     pub(super) telemetry_event: event::PortFactory<IpcService>,
+    pub(super) obstacles: ObstacleFactory,
+    pub(super) obstacles_event: event::PortFactory<IpcService>,
     pub(super) cleanup: CleanupReport,
 }
 
@@ -187,15 +189,38 @@ fn check_setting(
     })
 }
 
-/// A publish-subscribe service: created with the crate's buffer, history and overflow
-/// QoS, or opened as it is.
-fn pubsub<T: std::fmt::Debug + ZeroCopySend>(
+/// The live-obstacle service's port factory.
+pub(super) type ObstacleFactory = publish_subscribe::PortFactory<IpcService, LiveObstacleSet, ()>;
+
+/// A publish-subscribe service's limits, as the daemon creates it.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct PubSubLimits {
+    pub(super) max_publishers: usize,
+    pub(super) max_subscribers: usize,
+    /// The largest buffer a subscriber may ask for.
+    pub(super) subscriber_buffer: usize,
+}
+
+/// The live-obstacle service's limits ([`qos`]).
+pub(super) const OBSTACLE_LIMITS: PubSubLimits = PubSubLimits {
+    max_publishers: qos::OBSTACLES_MAX_PUBLISHERS,
+    max_subscribers: qos::OBSTACLES_MAX_SUBSCRIBERS,
+    subscriber_buffer: qos::OBSTACLES_SUBSCRIBER_BUFFER,
+};
+
+/// A publish-subscribe service: created with `limits` and the crate's history and
+/// overflow QoS, or opened as it is.
+pub(super) fn pubsub<T: std::fmt::Debug + ZeroCopySend>(
     node: &Node<IpcService>,
     name: &str,
-    max_publishers: usize,
-    max_subscribers: usize,
+    limits: PubSubLimits,
     access: Access,
 ) -> Result<publish_subscribe::PortFactory<IpcService, T, ()>, IpcError> {
+    let PubSubLimits {
+        max_publishers,
+        max_subscribers,
+        subscriber_buffer,
+    } = limits;
     const PATTERN: &str = "publish-subscribe";
     let builder = node
         .service_builder(&service_name(name)?)
@@ -221,7 +246,7 @@ fn pubsub<T: std::fmt::Debug + ZeroCopySend>(
             let factory = builder
                 .max_publishers(max_publishers)
                 .max_subscribers(max_subscribers)
-                .subscriber_max_buffer_size(qos::SUBSCRIBER_BUFFER)
+                .subscriber_max_buffer_size(subscriber_buffer)
                 .history_size(qos::HISTORY)
                 .enable_safe_overflow(true)
                 .max_nodes(qos::MAX_NODES)
@@ -239,6 +264,29 @@ fn pubsub<T: std::fmt::Debug + ZeroCopySend>(
             Ok(factory)
         }
     }
+}
+
+/// The publisher of a service that admits one (poses, live obstacles): the slot taken is
+/// `taken(service, holders)`, naming the process that holds it.
+pub(super) fn single_publisher<T: std::fmt::Debug + ZeroCopySend>(
+    factory: &publish_subscribe::PortFactory<IpcService, T, ()>,
+    service: &str,
+    taken: impl FnOnce(String, String) -> IpcError,
+) -> Result<iceoryx2::port::publisher::Publisher<IpcService, T, ()>, IpcError> {
+    factory.publisher_builder().create().map_err(|e| {
+        if e == iceoryx2::port::publisher::PublisherCreateError::ExceedsMaxSupportedPublishers {
+            taken(
+                service.to_owned(),
+                crate::holders::publisher_holders(factory),
+            )
+        } else {
+            IpcError::Port {
+                port: "publisher",
+                service: service.to_owned(),
+                source: boxed(e),
+            }
+        }
+    })
 }
 
 /// A request-response service of [`GoalRequest`] → [`GoalReply`] (the goal service and
@@ -366,20 +414,29 @@ impl Connection {
         let pose = pubsub::<PoseEstimate>(
             &node,
             &names.pose,
-            qos::POSE_MAX_PUBLISHERS,
-            qos::POSE_MAX_SUBSCRIBERS,
+            PubSubLimits {
+                max_publishers: qos::POSE_MAX_PUBLISHERS,
+                max_subscribers: qos::POSE_MAX_SUBSCRIBERS,
+                subscriber_buffer: qos::SUBSCRIBER_BUFFER,
+            },
             access,
         )?;
         let telemetry = pubsub::<Telemetry>(
             &node,
             &names.telemetry,
-            qos::TELEMETRY_MAX_PUBLISHERS,
-            qos::TELEMETRY_MAX_SUBSCRIBERS,
+            PubSubLimits {
+                max_publishers: qos::TELEMETRY_MAX_PUBLISHERS,
+                max_subscribers: qos::TELEMETRY_MAX_SUBSCRIBERS,
+                subscriber_buffer: qos::SUBSCRIBER_BUFFER,
+            },
             access,
         )?;
+        let obstacles =
+            pubsub::<LiveObstacleSet>(&node, &names.obstacles, OBSTACLE_LIMITS, access)?;
         let goal_event = event_service(&node, &names.goal, access)?;
         let pose_event = event_service(&node, &names.pose, access)?;
         let telemetry_event = event_service(&node, &names.telemetry, access)?;
+        let obstacles_event = event_service(&node, &names.obstacles, access)?;
         Ok(Self {
             node,
             names,
@@ -389,6 +446,8 @@ impl Connection {
             pose_event,
             telemetry,
             telemetry_event,
+            obstacles,
+            obstacles_event,
             cleanup,
         })
     }
