@@ -16,6 +16,7 @@ pub mod goal_check;
 pub mod live;
 pub mod mlp;
 pub mod model;
+pub mod movers;
 pub mod mpc;
 pub mod networks;
 pub mod obstacle;

@@ -132,7 +132,7 @@ impl MoverArgs {
             // The perturbations' seed (`--seed`), mixed with each scenario's name.
             seed: cfg.perturbation.seed,
         };
-        cfg.perception.validate()?;
+        cfg.perception.validate().map_err(anyhow::Error::msg)?;
         cfg.live = with_overrides(&self.live, "--live")?;
         cfg.live.validate()?;
         if let Some(path) = &self.movers {
