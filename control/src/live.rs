@@ -63,7 +63,7 @@ pub enum LiveClass {
     Person,
     Vehicle,
     Machine,
-    Other,
+    Static,
 }
 
 impl LiveClass {
@@ -73,7 +73,7 @@ impl LiveClass {
             LiveClass::Person => "person",
             LiveClass::Vehicle => "vehicle",
             LiveClass::Machine => "machine",
-            LiveClass::Other => "other",
+            LiveClass::Static => "static",
         }
     }
 }

@@ -248,6 +248,11 @@ impl<'a> Perception<'a> {
         ((z >> 11) as f64 / (1u64 << 53) as f64) < self.settings.dropout
     }
 
+    /// When the next measurement is delivered, if it is not lost.
+    pub fn next_at(&self) -> f64 {
+        self.next as f64 / self.settings.rate + self.settings.latency
+    }
+
     /// The next set delivered at or before `until`: (delivery time, set).
     pub fn next_delivery(&mut self, until: f64) -> Option<(f64, &LiveSet)> {
         loop {

@@ -76,8 +76,10 @@ pub struct PilotStep<'a> {
 /// The live obstacles' effect on a tick ([`Pilot::enable_live`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LiveStatus {
-    /// The perception's freshness (a stop unless `Fresh`, when required).
+    /// The perception's freshness.
     pub freshness: FreshnessState,
+    /// Perception is required and not fresh: the command is a stop.
+    pub stale_stop: bool,
     /// The slow-down field's factor on the speed (1: none).
     pub slow: f64,
     /// Held after a protective stop until the way has been clear for
@@ -115,6 +117,10 @@ pub enum PilotDecision<'a> {
     },
 }
 
+/// Between ticks a set's slow-down is sent only when it takes at least this
+/// off the speed [m/s] (smaller ones wait for the tick).
+pub const ARRIVAL_SLOWDOWN: f64 = 0.05;
+
 /// Navigator + MPC + envelope, built once.
 pub struct Pilot<C: StageCost> {
     params: MachineParams,
@@ -142,6 +148,8 @@ pub struct Pilot<C: StageCost> {
     progress: ProgressChecker,
     /// Live obstacles from perception (`None`: not configured).
     live: Option<Live>,
+    /// When the last step ran (the MPC's plan starts a delay after it).
+    last_step_at: f64,
 }
 
 impl<C: StageCost> Pilot<C> {
@@ -174,6 +182,7 @@ impl<C: StageCost> Pilot<C> {
             plans_seen: 0,
             progress: ProgressChecker::new(progress),
             live: None,
+            last_step_at: 0.0,
             mpc,
         })
     }
@@ -209,20 +218,42 @@ impl<C: StageCost> Pilot<C> {
 
     /// The check when a set arrives between ticks (DESIGN §18): the command
     /// last sent, as if sent at `now` from the state `x` measured then,
-    /// against the newest set. `Some`: send its stop at once (and record
-    /// it through [`Self::sent`]); the hold after a protective stop starts.
+    /// against the newest set, and the slow-down field along the last plan.
+    /// `Some`: send its command at once (and record it through
+    /// [`Self::sent`]): a protective stop (the hold starts), or the last
+    /// command slowed down by the field (when that is at least
+    /// [`ARRIVAL_SLOWDOWN`] slower).
     pub fn check_live(&mut self, x: &State, now: f64) -> Option<Guarded> {
-        if self.live.as_ref()?.set.is_empty() || self.last == VelocityCommand::ZERO {
+        let l = self.live.as_ref()?;
+        if l.set.is_empty() || self.last == VelocityCommand::ZERO || l.hold.is_some() {
             return None;
         }
         let guarded = envelope::guard(&self.envelope_input(x, now), self.last);
         let protective = guarded.overridden() && guarded.live.is_some_and(|c| c.excess < 0.0);
         if protective {
             if let Some(l) = &mut self.live {
-                l.hold = Some((l.hold.map_or(now, |h| h.0), None));
+                l.hold = Some((now, None));
             }
+            return Some(guarded);
         }
-        protective.then_some(guarded)
+        // The slow-down field along the plan of the last tick (its states
+        // from then on).
+        let slow = slow_factor(
+            &self.world,
+            l,
+            self.assumptions.effective(),
+            self.mpc.solution(),
+            self.last_step_at + self.sent.delay(),
+            self.dt,
+        );
+        let slowed = VelocityCommand {
+            v: self.last.v * slow,
+            ..self.last
+        };
+        if (self.last.v - slowed.v).abs() < ARRIVAL_SLOWDOWN {
+            return None;
+        }
+        Some(envelope::guard(&self.envelope_input(x, now), slowed))
     }
 
     /// What the envelope checks against at `now` from the state `x`.
@@ -329,6 +360,7 @@ impl<C: StageCost> Pilot<C> {
         now: f64,
         tick_start: Instant,
     ) -> Result<PilotDecision<'_>, PilotError> {
+        self.last_step_at = now;
         // What the machine did against the envelope's model, before any
         // decision that relies on it (the estimates are last tick's).
         let assumptions = self.assumptions.observe(&assumption_check::TickInput {
@@ -454,6 +486,7 @@ impl<C: StageCost> Pilot<C> {
             }
             LiveStatus {
                 freshness,
+                stale_stop: stale,
                 slow,
                 holding: l.hold.is_some(),
                 contact: guarded.live,

@@ -135,6 +135,10 @@ pub struct Config {
     pub site: SiteConfig,
     /// The machine's outline (DESIGN §17).
     pub outline: OutlineConfig,
+    /// Live obstacles from perception (DESIGN §18): their stop and slow-down
+    /// fields, the freshness rule (`required`: a machine without perception
+    /// declares it not required), the hold after a protective stop.
+    pub live: control::live::LiveSettings,
     /// Which keys the configuration text set (not a setting).
     #[serde(skip)]
     pub given: KeysGiven,
@@ -478,6 +482,53 @@ pub struct SimConfig {
     pub plant: PlantConfig,
     /// Fault injection.
     pub faults: SimFaults,
+    /// The simulated perception (`[sim.perception]`, DESIGN §18).
+    pub perception: SimPerception,
+}
+
+/// `[sim.perception]`: the simulated machine's perception publishes live
+/// obstacle sets on `{prefix}/v2/obstacles` through the real service (the
+/// one publisher): the movers of `movers` (a movers CSV, DESIGN §18; times
+/// after the daemon's start), measured every 1 / `rate_hz`, published
+/// `latency` later, a set lost with probability `dropout` (seeded).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SimPerception {
+    /// Publish sets (default true; false: a test or an external program is
+    /// the perception).
+    pub publish: bool,
+    /// A movers file, relative to the configuration file (empty: none; the
+    /// sets are empty, and fresh).
+    pub movers: PathBuf,
+    pub latency: f64,
+    pub rate_hz: f64,
+    pub dropout: f64,
+    pub seed: u64,
+}
+
+impl Default for SimPerception {
+    fn default() -> Self {
+        let p = control::movers::PerceptionSettings::default();
+        Self {
+            publish: true,
+            movers: PathBuf::new(),
+            latency: p.latency,
+            rate_hz: p.rate,
+            dropout: p.dropout,
+            seed: p.seed,
+        }
+    }
+}
+
+impl SimPerception {
+    pub fn settings(&self) -> control::movers::PerceptionSettings {
+        control::movers::PerceptionSettings {
+            latency: self.latency,
+            rate: self.rate_hz,
+            dropout: self.dropout,
+            seed: self.seed,
+        }
+    }
 }
 
 impl Default for SimConfig {
@@ -490,6 +541,7 @@ impl Default for SimConfig {
             initial_state: [0.0; 6],
             plant: PlantConfig::default(),
             faults: SimFaults::default(),
+            perception: SimPerception::default(),
         }
     }
 }
@@ -723,6 +775,7 @@ impl Config {
         self.weights.critic = resolve(&self.weights.critic);
         self.weights.actor = resolve(&self.weights.actor);
         self.site.file = resolve(&self.site.file);
+        self.sim.perception.movers = resolve(&self.sim.perception.movers);
         if let Some(b) = bases.first() {
             if !self.can.log.as_os_str().is_empty() && self.can.log.is_relative() {
                 self.can.log = b.join(&self.can.log);
@@ -741,6 +794,14 @@ impl Config {
         self.envelope
             .validate()
             .map_err(|e| invalid_in("envelope", Some(e.name), &e))?;
+        self.live
+            .validate()
+            .map_err(|e| invalid_in("live", Some(e.name), &e))?;
+        self.sim
+            .perception
+            .settings()
+            .validate()
+            .map_err(|e| invalid("sim.perception", e))?;
         self.outline.outline()?;
         let l = &self.control;
         if let Some(hz) = l.rate_hz {

@@ -16,8 +16,9 @@ use std::time::{Duration, Instant};
 
 use control::assumption_check::{Decision, Finding};
 use control::envelope::Guarded;
+use control::live::LiveSet;
 use control::mpc::{Mpc, MpcSettings, QuadraticCost, StageCost, StepStatus};
-use control::pilot::{Pilot, PilotDecision};
+use control::pilot::{LiveStatus, Pilot, PilotDecision};
 use control::planner::{self, Navigator, NavigatorSettings, PlannerThread, RoutePlanner};
 use control::site::{Outline, SiteIndex};
 use control::weights::{self, NetworkRole};
@@ -79,6 +80,8 @@ pub struct Plan<'a> {
     /// tick, if any (issue 43).
     pub assumptions_broken: u8,
     pub widened: Option<Finding>,
+    /// What the live obstacles did to this step (DESIGN §18).
+    pub live: Option<LiveStatus>,
 }
 
 impl Plan<'_> {
@@ -175,6 +178,17 @@ pub trait Controller {
     fn planner_working(&self) -> bool {
         false
     }
+
+    /// The newest live-obstacle set (validated, stamps on the daemon's
+    /// clock): the envelope keeps its stop fields from now on.
+    fn set_live(&mut self, _set: &LiveSet) {}
+
+    /// The check when a set arrives between ticks: `Some` with the stop to
+    /// send at once if the command last sent, from the state `x` measured at
+    /// `now`, would enter a live obstacle's stop field.
+    fn check_live(&mut self, _x: &State, _now: f64) -> Option<Guarded> {
+        None
+    }
 }
 
 /// Builds the controller on the control thread.
@@ -269,6 +283,7 @@ impl<C: StageCost> Controller for PilotController<C> {
                 .assumptions
                 .finding
                 .filter(|_| p.assumptions.decision == Decision::Widen),
+            live: p.live,
         }))
     }
 
@@ -282,6 +297,14 @@ impl<C: StageCost> Controller for PilotController<C> {
 
     fn planner_working(&self) -> bool {
         self.pilot.navigator().is_some_and(|n| n.planner_working())
+    }
+
+    fn set_live(&mut self, set: &LiveSet) {
+        self.pilot.set_live(set);
+    }
+
+    fn check_live(&mut self, x: &State, now: f64) -> Option<Guarded> {
+        self.pilot.check_live(x, now)
     }
 }
 
@@ -341,6 +364,7 @@ pub fn load_controller(config: &Config) -> Result<ControllerFactory, LoadError> 
             .outline
             .outline()
             .map_err(|e| LoadError::Outline(e.to_string()))?,
+        live: config.live,
     };
     if let Some(s) = &parts.navigator {
         s.validate()
@@ -410,6 +434,7 @@ fn controller<C: StageCost + 'static>(
     )
     .map_err(err)?;
     pilot.set_outline(config.outline.clone());
+    pilot.enable_live(config.live).map_err(err)?;
     Ok(Box::new(PilotController::new(pilot)))
 }
 
@@ -421,6 +446,7 @@ struct ControllerParts {
     envelope: control::envelope::EnvelopeSettings,
     progress: control::progress::ProgressSettings,
     outline: Outline,
+    live: control::live::LiveSettings,
 }
 
 /// The start-up self-test: a first solve from rest towards a goal 3 m ahead must

@@ -18,6 +18,7 @@ pub mod controller;
 pub mod daemon;
 pub mod goal_lifecycle;
 pub mod ipc;
+pub mod live_input;
 pub mod log_limit;
 pub mod logging;
 pub mod notify;

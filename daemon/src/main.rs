@@ -37,6 +37,11 @@ struct Args {
     /// The site file (overrides site.file): a wlnav-site-v1 JSON, or a Nav2 map YAML.
     #[arg(long, value_name = "FILE")]
     site: Option<PathBuf>,
+    /// Things that move for the simulated machine's perception (overrides
+    /// sim.perception.movers): a movers CSV (DESIGN §18; times after the
+    /// daemon's start), published on the live-obstacle service.
+    #[arg(long, value_name = "FILE")]
+    movers: Option<PathBuf>,
     /// Log every CAN frame to FILE in candump -L format (overrides can.log).
     #[arg(long, value_name = "FILE")]
     can_log: Option<PathBuf>,
@@ -120,6 +125,11 @@ fn build_config(args: &Args) -> Result<Config, String> {
     if let Some(f) = &args.site {
         // Relative to where wlnavd was started, as a shell user expects.
         config.site.file = std::env::current_dir()
+            .map(|d| d.join(f))
+            .unwrap_or_else(|_| f.clone());
+    }
+    if let Some(f) = &args.movers {
+        config.sim.perception.movers = std::env::current_dir()
             .map(|d| d.join(f))
             .unwrap_or_else(|_| f.clone());
     }

@@ -25,8 +25,9 @@
 use std::sync::{Arc, Mutex};
 
 use control::model::ix;
+use control::movers::{Mover, Perception};
 use control::{Plant, State};
-use shm_ipc::{pose_flags, Client, IpcConfig, Pose2, PoseEstimate};
+use shm_ipc::{pose_flags, Client, IpcConfig, LiveObstacleSet, Pose2, PoseEstimate};
 use thiserror::Error;
 use tokio::task::JoinHandle;
 
@@ -100,6 +101,9 @@ pub enum SimError {
     /// The pose publisher could not be created.
     #[error("simulated localization: {0}")]
     Ipc(#[from] shm_ipc::IpcError),
+    /// The perception's movers file could not be read.
+    #[error("config key `sim.perception.movers`: {0}")]
+    Movers(String),
 }
 
 /// Starts the simulated machine on the current tokio runtime. Returns the daemon's
@@ -145,8 +149,70 @@ pub fn spawn(
         burst_sent: 0,
         frozen_sent: 0,
     };
+    if s.perception.publish {
+        let movers = load_movers(&s.perception.movers)?;
+        let publisher =
+            shm_ipc::ObstaclePublisher::new(&IpcConfig::new(config.ipc.prefix.clone()))?;
+        tokio::spawn(perceive(publisher, movers, s.perception.settings(), clock));
+    }
     let task = tokio::spawn(machine.run());
     Ok((daemon_end, handle, task))
+}
+
+/// The movers of `path` (none for an empty path).
+fn load_movers(path: &std::path::Path) -> Result<Vec<Mover>, SimError> {
+    if path.as_os_str().is_empty() {
+        return Ok(Vec::new());
+    }
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| SimError::Movers(format!("{}: {e}", path.display())))?;
+    control::movers::parse(&text, &path.display().to_string())
+        .map_err(|e| SimError::Movers(e.to_string()))
+}
+
+/// The simulated perception (`[sim.perception]`, DESIGN §18): the movers'
+/// sets published through the real live-obstacle service as they are
+/// delivered (measured, then `latency` later, some lost), stamped with their
+/// measurement time; mover times are daemon times. Ends when the daemon's
+/// service is gone.
+async fn perceive(
+    publisher: shm_ipc::ObstaclePublisher,
+    movers: Vec<Mover>,
+    settings: control::movers::PerceptionSettings,
+    clock: DaemonClock,
+) {
+    let mut perception = Perception::new(&movers, settings, "wlnavd --sim");
+    let mut wire = Box::new(LiveObstacleSet::ZERO);
+    loop {
+        let now = clock.now();
+        let mut newest = None;
+        while let Some((_, set)) = perception.next_delivery(now) {
+            newest = Some(wire_set(set, &clock, &mut wire));
+        }
+        if newest.is_some() && publisher.publish(&wire).is_err() {
+            return;
+        }
+        let next = tokio::time::Instant::from_std(clock.instant_at(perception.next_at()));
+        tokio::time::sleep_until(next).await;
+    }
+}
+
+/// `set` on the wire (movers are circles of unknown class).
+fn wire_set(set: &control::live::LiveSet, clock: &DaemonClock, out: &mut LiveObstacleSet) {
+    let stamp = clock.to_monotonic_ns(set.stamp().unwrap_or(0.0));
+    *out = LiveObstacleSet::empty(stamp, out.sequence.wrapping_add(1));
+    for o in set.obstacles() {
+        if let control::live::LiveShape::Circle { center, radius } = o.shape {
+            let _ = out.push(shm_ipc::LiveObstacle::circle(
+                o.id,
+                shm_ipc::ObstacleClass::Unknown,
+                center,
+                radius,
+                o.velocity,
+                clock.to_monotonic_ns(o.stamp),
+            ));
+        }
+    }
 }
 
 struct Machine {

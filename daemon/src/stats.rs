@@ -83,6 +83,10 @@ pub struct LoopStats {
     pub missed_deadlines: u64,
     /// Ticks whose command the safety envelope replaced (DESIGN §14).
     pub envelope_overrides: u64,
+    /// Commands sent between ticks when a live-obstacle set arrived (DESIGN
+    /// §18): protective stops, and slow-downs.
+    pub protective_stops: u64,
+    pub arrival_slowdowns: u64,
     /// Resident memory after warm-up (tick [`LoopStats::WARM_TICK`]).
     pub rss_warm: Option<u64>,
     jitter: Ring,
@@ -111,6 +115,8 @@ impl LoopStats {
             overruns: 0,
             missed_deadlines: 0,
             envelope_overrides: 0,
+            protective_stops: 0,
+            arrival_slowdowns: 0,
             rss_warm: None,
             jitter: Ring::new(Self::WINDOW),
             solve: Ring::new(Self::WINDOW),

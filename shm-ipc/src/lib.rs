@@ -345,7 +345,7 @@
 //! | 2704 | f64 | plan_time_us | wall time of the last route plan (planner thread) \[µs\] |
 //! | 2712 | f64 | route_age_s | age of the route followed when it arrived \[s\] |
 //! | 2720 | u32 | at_rest | 1: \|v_f\| and \|β̇\| below `loop.rest_speed` (the one "at rest") |
-//! | 2724 | u32 | _reserved | zero |
+//! | 2724 | u32 | live_id | the live obstacle the command comes nearest to, with `live-near` (DESIGN §18; else 0) |
 //! | 2728 | u64 | site_version | the loaded site's version (DESIGN §17; 0: no site) |
 //! | 2736 | u64 | site_hash | the site file's content hash (FNV-1a 64; 0: no site) |
 //! | 2744 | u32 | site_id_len | valid bytes in `site_id` (≤ 64) |
@@ -433,7 +433,7 @@
 //!                  uint32_t subgoal_active, route_len;
 //!                  wlnav_pose2 subgoal, route[16];
 //!                  double plan_time_us, route_age_s;
-//!                  uint32_t at_rest, _reserved;
+//!                  uint32_t at_rest, live_id;
 //!                  uint64_t site_version, site_hash;
 //!                  uint32_t site_id_len, _reserved_site;
 //!                  uint8_t site_id[64]; } wlnav_telemetry; /* 2816 */

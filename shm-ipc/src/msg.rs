@@ -721,8 +721,9 @@ pub struct Telemetry {
     /// `loop.rest_speed` (the one definition; clients read it, they do not
     /// keep a threshold of their own). 0 while moving or with no machine state.
     pub at_rest: u32,
-    /// Zero (keeps the size a multiple of 8).
-    pub _reserved: u32,
+    /// Perception's id of the live obstacle the command comes nearest to, with
+    /// [`fault_flags::LIVE_NEAR`] (DESIGN §18); 0 without it.
+    pub live_id: u32,
     /// The loaded site's `version` (DESIGN §17; 0 with no site).
     pub site_version: u64,
     /// The loaded site file's content hash (64-bit FNV-1a of its bytes; 0 with no site).
@@ -774,7 +775,7 @@ impl Telemetry {
         plan_time_us: 0.0,
         route_age_s: 0.0,
         at_rest: 0,
-        _reserved: 0,
+        live_id: 0,
         site_version: 0,
         site_hash: 0,
         site_id_len: 0,
@@ -1281,6 +1282,7 @@ const _: () = assert!(offset_of!(Telemetry, route) == 2320);
 const _: () = assert!(offset_of!(Telemetry, plan_time_us) == 2704);
 const _: () = assert!(offset_of!(Telemetry, route_age_s) == 2712);
 const _: () = assert!(offset_of!(Telemetry, at_rest) == 2720);
+const _: () = assert!(offset_of!(Telemetry, live_id) == 2724);
 const _: () = assert!(offset_of!(Telemetry, site_version) == 2728);
 const _: () = assert!(offset_of!(Telemetry, site_hash) == 2736);
 const _: () = assert!(offset_of!(Telemetry, site_id_len) == 2744);

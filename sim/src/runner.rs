@@ -594,11 +594,13 @@ pub fn run_mpc(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run> 
                 &plant.measure(),
                 plant.perturbation().pose_latency,
             );
-            if let Some(stop) = pilot.check_live(&x, t) {
-                plant.command(stop.command)?;
-                pilot.sent(t, stop.command);
-                protective_stops += usize::from(!held);
-                held = true;
+            if let Some(g) = pilot.check_live(&x, t) {
+                plant.command(g.command)?;
+                pilot.sent(t, g.command);
+                if g.overridden() {
+                    protective_stops += usize::from(!held);
+                    held = true;
+                }
             }
         }
     }

@@ -11,6 +11,8 @@
 
 use std::time::{Duration, Instant};
 
+use control::envelope::Guarded;
+use control::live::LiveSet;
 use control::mpc::Obstacle;
 use control::site::SiteIndex;
 use control::{Goal, State, VelocityCommand};
@@ -59,6 +61,14 @@ pub trait Hooks {
     /// `Controller::planner_working`.
     fn planner_working(&self, inner: &dyn Controller) -> bool {
         inner.planner_working()
+    }
+    /// `Controller::set_live`.
+    fn set_live(&mut self, inner: &mut dyn Controller, set: &LiveSet) {
+        inner.set_live(set)
+    }
+    /// `Controller::check_live`.
+    fn check_live(&mut self, inner: &mut dyn Controller, x: &State, now: f64) -> Option<Guarded> {
+        inner.check_live(x, now)
     }
 }
 
@@ -115,6 +125,12 @@ impl<H: Hooks> Controller for Forwarding<H> {
     fn planner_working(&self) -> bool {
         self.hooks.planner_working(self.inner.as_ref())
     }
+    fn set_live(&mut self, set: &LiveSet) {
+        self.hooks.set_live(self.inner.as_mut(), set)
+    }
+    fn check_live(&mut self, x: &State, now: f64) -> Option<Guarded> {
+        self.hooks.check_live(self.inner.as_mut(), x, now)
+    }
 }
 
 /// Sleeps `d` (times `WLNAV_TIMING_SCALE`): for hooks that stall.
@@ -163,6 +179,13 @@ mod tests {
             self.0.borrow_mut().push("planner_working");
             true
         }
+        fn set_live(&mut self, _: &LiveSet) {
+            self.0.borrow_mut().push("set_live");
+        }
+        fn check_live(&mut self, _: &State, _: f64) -> Option<Guarded> {
+            self.0.borrow_mut().push("check_live");
+            None
+        }
     }
 
     #[test]
@@ -183,6 +206,8 @@ mod tests {
         assert_eq!(c.compensated_delay(), Some(0.37));
         c.set_site(None);
         assert!(c.planner_working());
+        c.set_live(&LiveSet::new());
+        assert_eq!(c.check_live(&x, 0.0), None);
         assert_eq!(
             *calls.borrow(),
             [
@@ -192,7 +217,9 @@ mod tests {
                 "sent",
                 "compensated_delay",
                 "set_site",
-                "planner_working"
+                "planner_working",
+                "set_live",
+                "check_live"
             ]
         );
     }

@@ -5,6 +5,7 @@
 mod assumptions;
 mod common;
 mod faults;
+mod live;
 mod outcomes;
 mod process;
 mod realtime;
@@ -260,6 +261,7 @@ impl Hooks for Failing {
                 route_age: 0.0,
                 assumptions_broken: 0,
                 widened: None,
+                live: None,
             }));
         }
         inner.step(state, now, tick_start)

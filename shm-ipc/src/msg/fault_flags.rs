@@ -41,9 +41,25 @@ pub const ASSUMPTION_DELAY: u32 = 1 << 13;
 pub const ASSUMPTION_GAIN: u32 = 1 << 14;
 /// … the pose estimate's noise (`envelope.pose_noise_xy` or `pose_noise_theta`).
 pub const ASSUMPTION_POSE_NOISE: u32 = 1 << 15;
+/// Live obstacles are required (`live.required`) and the newest set on
+/// `{prefix}/v2/obstacles` is older than `live.max_age` (or none came, or they
+/// came again for less than `live.recover_span`): controlled stop; the machine
+/// moves again once sets have been fresh for the span (DESIGN §18).
+pub const PERCEPTION_STALE: u32 = 1 << 16;
+/// Held after a protective stop for a live obstacle ([`super::Telemetry::live_id`]
+/// names it) until the way has been clear for `live.resume_wait`.
+pub const PROTECTIVE_STOP: u32 = 1 << 17;
+/// A live-obstacle set was rejected since the last tick (the log names the rule
+/// and the obstacle); the sets before it stay in force, and they age.
+pub const LIVE_REJECTED: u32 = 1 << 18;
+/// The speed is scaled down in a live obstacle's slow-down field.
+pub const LIVE_SLOWING: u32 = 1 << 19;
+/// [`super::Telemetry::live_id`] holds the id of the live obstacle the command
+/// comes nearest to (within 1 m of its stop field).
+pub const LIVE_NEAR: u32 = 1 << 20;
 
 /// Every bit and its name, in bit order (logs, reject reasons, `wlnav watch`).
-pub const NAMES: [(u32, &str); 16] = [
+pub const NAMES: [(u32, &str); 21] = [
     (POSE_STALE, "pose-stale"),
     (MACHINE_STATE_STALE, "machine-state-stale"),
     (CAN_CRC, "can-crc"),
@@ -60,6 +76,11 @@ pub const NAMES: [(u32, &str); 16] = [
     (ASSUMPTION_DELAY, "assumption-delay"),
     (ASSUMPTION_GAIN, "assumption-gain"),
     (ASSUMPTION_POSE_NOISE, "assumption-pose-noise"),
+    (PERCEPTION_STALE, "perception-stale"),
+    (PROTECTIVE_STOP, "protective-stop"),
+    (LIVE_REJECTED, "live-rejected"),
+    (LIVE_SLOWING, "live-slowing"),
+    (LIVE_NEAR, "live-near"),
 ];
 
 /// Names of the bits set in `flags`, in bit order ([`NAMES`]); bits
