@@ -15,6 +15,7 @@ use std::time::{Duration, Instant};
 use anyhow::Context;
 use clap::Args;
 
+use shm_ipc::fault_flags;
 use shm_ipc::Client;
 use shm_ipc::ClientError;
 use shm_ipc::IpcConfig;
@@ -69,18 +70,29 @@ pub const LOADING_CYCLE: [Leg; 4] = [
 /// executable, `target/{debug,release}/wlnav`, or the working directory), or
 /// `<prefix>/share/wlnav/sites/demo.json` of an installed package.
 pub fn locate_demo_site() -> Option<PathBuf> {
+    locate_demo_file("sites/demo.json")
+}
+
+/// The demo's movers file, `sim/movers/demo.csv`, found as the site is.
+pub fn locate_demo_movers() -> Option<PathBuf> {
+    locate_demo_file("movers/demo.csv")
+}
+
+/// `sim/<name>` of the repository or `share/wlnav/<name>` of a package (see
+/// [`locate_demo_site`]).
+fn locate_demo_file(name: &str) -> Option<PathBuf> {
     let mut candidates = Vec::new();
     if let Ok(exe) = std::env::current_exe() {
         let dirs: Vec<&std::path::Path> = exe.ancestors().skip(1).take(3).collect();
         for d in &dirs {
-            candidates.push(d.join("sim/sites/demo.json"));
-            candidates.push(d.join("share/wlnav/sites/demo.json"));
+            candidates.push(d.join("sim").join(name));
+            candidates.push(d.join("share/wlnav").join(name));
         }
     }
     if let Ok(d) = std::env::current_dir() {
-        candidates.push(d.join("sim/sites/demo.json"));
+        candidates.push(d.join("sim").join(name));
     }
-    candidates.push(PathBuf::from("/usr/share/wlnav/sites/demo.json"));
+    candidates.push(PathBuf::from("/usr/share/wlnav").join(name));
     candidates.into_iter().find(|p| p.is_file())
 }
 
@@ -115,6 +127,11 @@ pub struct DemoArgs {
     /// The site wlnavd drives in [default: the demo's, sim/sites/demo.json]
     #[arg(long, value_name = "FILE")]
     pub site: Option<PathBuf>,
+    /// Things that move for the simulated perception (wlnavd --movers; times from the
+    /// first leg's start) [default: the demo's, sim/movers/demo.csv: a person crossing
+    /// the first leg]
+    #[arg(long, value_name = "FILE")]
+    pub movers: Option<PathBuf>,
 }
 
 /// What happened on one leg.
@@ -178,6 +195,7 @@ pub fn run(cli: &Cli, a: &DemoArgs) -> anyhow::Result<u8> {
     let started = Instant::now();
     let mut cost = a.cost.clone();
     let site = a.site.clone().or_else(locate_demo_site);
+    let movers = a.movers.clone().or_else(locate_demo_movers);
     let drawn_site = match &site {
         // The daemon validates the site; one this drawing cannot read (a Nav2 map) is
         // driven in, not drawn.
@@ -197,6 +215,10 @@ pub fn run(cli: &Cli, a: &DemoArgs) -> anyhow::Result<u8> {
         let mut extra: Vec<OsString> = Vec::new();
         if let Some(path) = &site {
             extra.push("--site".into());
+            extra.push(path.into());
+        }
+        if let Some(path) = &movers {
+            extra.push("--movers".into());
             extra.push(path.into());
         }
         if let Some(cost) = &cost {
@@ -350,6 +372,12 @@ pub fn run(cli: &Cli, a: &DemoArgs) -> anyhow::Result<u8> {
                     return;
                 }
                 trace.path.push((t.state.x_f, t.state.y_f));
+                let at = (t.state.x_f, t.state.y_f);
+                if t.fault_flags & fault_flags::PROTECTIVE_STOP != 0 {
+                    trace.held.push(at);
+                } else if t.fault_flags & fault_flags::LIVE_SLOWING != 0 {
+                    trace.slowed.push(at);
+                }
                 trace.end = Some([t.state.x_f, t.state.y_f, t.state.theta_f, t.state.beta]);
                 if trace.route.is_empty() && t.route().len() > 1 {
                     trace.route = t.route().iter().map(|p| (p.x, p.y)).collect();
@@ -376,6 +404,13 @@ pub fn run(cli: &Cli, a: &DemoArgs) -> anyhow::Result<u8> {
                 tracker.time_out("interrupted");
                 interrupted = true;
             }
+        }
+        if !(trace.slowed.is_empty() && trace.held.is_empty()) {
+            emit(&format!(
+                "  live     slowed for a live obstacle {} tick(s), held after a protective stop {} tick(s) (marked in the picture)",
+                trace.slowed.len(),
+                trace.held.len()
+            ));
         }
         emit(&format!("  {}", outcome_line(&tracker)));
         let secs = |tick: Option<u64>| tick.and_then(|t| tracker.seconds_since_start(t));

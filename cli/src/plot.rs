@@ -36,6 +36,10 @@ pub struct LegTrace {
     pub route: Vec<(f64, f64)>,
     /// The machine where the leg ended: front axle x, y, heading θ, articulation β.
     pub end: Option<[f64; 4]>,
+    /// Where the daemon slowed down for a live obstacle (`live-slowing`) [m].
+    pub slowed: Vec<(f64, f64)>,
+    /// Where it held after a protective stop for one (`protective-stop`) [m].
+    pub held: Vec<(f64, f64)>,
 }
 
 /// The demo machine's geometry for drawing its outline: the Avant 635 (DESIGN §2: L_f =
@@ -204,8 +208,16 @@ pub fn write_svg(
         all.extend(leg.horizons.iter().flatten());
         all.push((leg.goal.x, leg.goal.y));
     }
-    // The legend's rows (one per leg and the key) at about 19 px each, and its frame.
-    let legend_px = 19.0 * (legs.len() + 1) as f64 + 16.0;
+    // The legend's rows (one per leg, the live obstacles' two and the key) at about
+    // 19 px each, and its frame.
+    let live_rows = [
+        legs.iter().any(|l| !l.slowed.is_empty()),
+        legs.iter().any(|l| !l.held.is_empty()),
+    ]
+    .iter()
+    .filter(|&&r| r)
+    .count();
+    let legend_px = 19.0 * (legs.len() + 1 + live_rows) as f64 + 16.0;
     let ((x0, x1), (y0, y1), size) = layout(&all, legend_px);
     let err = |e: DrawingAreaErrorKind<_>| anyhow!("cannot draw {}: {e}", path.display());
 
@@ -314,6 +326,30 @@ pub fn write_svg(
         chart
             .draw_series([Circle::new((g.x, g.y), 5, color.filled())])
             .map_err(err)?;
+    }
+    // Where live obstacles slowed the machine (orange rings) and held it after a
+    // protective stop (red squares), every leg's.
+    let slowed: Vec<(f64, f64)> = legs.iter().flat_map(|l| l.slowed.iter().copied()).collect();
+    let held: Vec<(f64, f64)> = legs.iter().flat_map(|l| l.held.iter().copied()).collect();
+    let orange = RGBColor(255, 127, 14);
+    let red = RGBColor(214, 39, 40);
+    if !slowed.is_empty() {
+        chart
+            .draw_series(
+                slowed
+                    .iter()
+                    .map(|&p| Circle::new(p, 5, orange.stroke_width(2))),
+            )
+            .map_err(err)?
+            .label("slowed for a live obstacle")
+            .legend(move |(x, y)| Circle::new((x + 10, y), 5, orange.stroke_width(2)));
+    }
+    if !held.is_empty() {
+        chart
+            .draw_series(held.iter().map(|&p| Circle::new(p, 6, red.filled())))
+            .map_err(err)?
+            .label("held after a protective stop (a live obstacle in the way)")
+            .legend(move |(x, y)| Circle::new((x + 10, y), 6, red.filled()));
     }
     let tip = (
         start.x + 0.8 * start.heading.cos(),

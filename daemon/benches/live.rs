@@ -89,22 +89,34 @@ impl Daemon {
         self.sim.snapshot().true_state[5]
     }
 
+    /// A goal 12 m ahead (towards the origin once 25 m out, so that the
+    /// trials stay in the workspace).
     fn goal_ahead(&self, seq: &mut u32) {
         let x = self.sim.snapshot().true_state;
-        let far = Pose2::new(x[0] + 40.0 * x[2].cos(), x[1] + 40.0 * x[2].sin(), x[2]);
+        let heading = if x[0].hypot(x[1]) > 25.0 {
+            (-x[1]).atan2(-x[0])
+        } else {
+            x[2]
+        };
+        let goal = Pose2::new(
+            x[0] + 12.0 * heading.cos(),
+            x[1] + 12.0 * heading.sin(),
+            heading,
+        );
         let t0 = Instant::now();
+        let mut last = String::new();
         loop {
             *seq += 1;
             self.publisher.publish(&set_of(*seq, &[])).expect("publish");
-            if let Ok(r) = self.client.set_goal(far, &[], Duration::from_secs(1)) {
-                if r.is_accepted() {
-                    return;
-                }
+            match self.client.set_goal(goal, &[], Duration::from_secs(1)) {
+                Ok(r) if r.is_accepted() => return,
+                Ok(r) => last = r.reason_text().to_string(),
+                Err(e) => last = e.to_string(),
             }
             std::thread::sleep(Duration::from_millis(50));
             assert!(
                 t0.elapsed() < Duration::from_secs(30),
-                "goal never accepted"
+                "goal {goal:?} never accepted: {last}"
             );
         }
     }

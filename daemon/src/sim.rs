@@ -151,9 +151,23 @@ pub fn spawn(
     };
     if s.perception.publish {
         let movers = load_movers(&s.perception.movers)?;
-        let publisher =
-            shm_ipc::ObstaclePublisher::new(&IpcConfig::new(config.ipc.prefix.clone()))?;
-        tokio::spawn(perceive(publisher, movers, s.perception.settings(), clock));
+        let ipc = IpcConfig::new(config.ipc.prefix.clone());
+        let publisher = shm_ipc::ObstaclePublisher::new(&ipc)?;
+        // With movers, their times count from the first goal: its telemetry says when.
+        let telemetry = if movers.is_empty() {
+            None
+        } else {
+            let client = Client::new(&ipc)?;
+            let subscriber = client.subscribe_telemetry()?;
+            Some((client, subscriber))
+        };
+        tokio::spawn(perceive(
+            publisher,
+            movers,
+            s.perception.settings(),
+            clock,
+            telemetry,
+        ));
     }
     let task = tokio::spawn(machine.run());
     Ok((daemon_end, handle, task))
@@ -173,33 +187,66 @@ fn load_movers(path: &std::path::Path) -> Result<Vec<Mover>, SimError> {
 /// The simulated perception (`[sim.perception]`, DESIGN §18): the movers'
 /// sets published through the real live-obstacle service as they are
 /// delivered (measured, then `latency` later, some lost), stamped with their
-/// measurement time; mover times are daemon times. Ends when the daemon's
-/// service is gone.
+/// measurement time. Mover times count from the first goal's first tick
+/// (`telemetry` tells it); until then the sets are empty. Ends when the
+/// daemon's service is gone.
 async fn perceive(
     publisher: shm_ipc::ObstaclePublisher,
     movers: Vec<Mover>,
     settings: control::movers::PerceptionSettings,
     clock: DaemonClock,
+    telemetry: Option<(Client, shm_ipc::TelemetrySubscriber)>,
 ) {
+    let mut origin = telemetry.is_none().then_some(0.0);
     let mut perception = Perception::new(&movers, settings, "wlnavd --sim");
     let mut wire = Box::new(LiveObstacleSet::ZERO);
     loop {
         let now = clock.now();
-        let mut newest = None;
-        while let Some((_, set)) = perception.next_delivery(now) {
-            newest = Some(wire_set(set, &clock, &mut wire));
+        if origin.is_none() {
+            let first_goal = telemetry
+                .as_ref()
+                .and_then(|(_, s)| s.latest().ok().flatten())
+                .filter(|t| t.goal_active == 1);
+            origin = first_goal.map(|t| clock.from_monotonic_ns(t.timestamp_ns));
         }
-        if newest.is_some() && publisher.publish(&wire).is_err() {
+        let next = match origin {
+            None => {
+                *wire = LiveObstacleSet::empty(
+                    clock.to_monotonic_ns(now),
+                    wire.sequence.wrapping_add(1),
+                );
+                now + 1.0 / settings.rate
+            }
+            Some(o) => {
+                let mut newest = None;
+                while let Some((_, set)) = perception.next_delivery(now - o) {
+                    newest = Some(wire_set(set, &clock, o, &mut wire));
+                }
+                if newest.is_none() {
+                    let next =
+                        tokio::time::Instant::from_std(clock.instant_at(o + perception.next_at()));
+                    tokio::time::sleep_until(next).await;
+                    continue;
+                }
+                o + perception.next_at()
+            }
+        };
+        if publisher.publish(&wire).is_err() {
             return;
         }
-        let next = tokio::time::Instant::from_std(clock.instant_at(perception.next_at()));
-        tokio::time::sleep_until(next).await;
+        tokio::time::sleep_until(tokio::time::Instant::from_std(clock.instant_at(next))).await;
     }
 }
 
-/// `set` on the wire (movers are circles of unknown class).
-fn wire_set(set: &control::live::LiveSet, clock: &DaemonClock, out: &mut LiveObstacleSet) {
-    let stamp = clock.to_monotonic_ns(set.stamp().unwrap_or(0.0));
+/// `set` on the wire, its times `origin` later on the daemon's clock
+/// (movers are circles of unknown class).
+fn wire_set(
+    set: &control::live::LiveSet,
+    clock: &DaemonClock,
+    origin: f64,
+    out: &mut LiveObstacleSet,
+) {
+    let stamp = clock.to_monotonic_ns(origin + set.stamp().unwrap_or(0.0));
     *out = LiveObstacleSet::empty(stamp, out.sequence.wrapping_add(1));
     for o in set.obstacles() {
         if let control::live::LiveShape::Circle { center, radius } = o.shape {
@@ -209,7 +256,7 @@ fn wire_set(set: &control::live::LiveSet, clock: &DaemonClock, out: &mut LiveObs
                 center,
                 radius,
                 o.velocity,
-                clock.to_monotonic_ns(o.stamp),
+                clock.to_monotonic_ns(origin + o.stamp),
             ));
         }
     }

@@ -207,6 +207,17 @@ fn demo_drives_the_loading_cycle_and_stops_the_daemon() {
     );
     assert!(out.contains("3 features drawn"), "{out}");
     assert!(picture.matches("<polygon").count() >= 3, "no site drawn");
+    // The demo's person (sim/movers/demo.csv) crosses the first leg: wlnavd's
+    // simulated perception publishes it, the machine holds for it, and the
+    // picture marks where (DESIGN §18).
+    assert!(
+        out.contains("--movers") && out.contains("held after a protective stop"),
+        "the machine did not hold for the demo's person: {out}"
+    );
+    assert!(
+        picture.contains("held after a protective stop"),
+        "not marked"
+    );
     assert!(std::fs::metadata(&rec).expect("recording").len() > 1000);
     // 0 = every leg reached, 3 = a leg not reached (reported honestly); never a crash.
     assert!(matches!(o.status.code(), Some(0) | Some(3)), "{out}");
