@@ -276,7 +276,9 @@ class Placer:
             if why:
                 if t <= t_meet + 1e-9:
                     return None
-                return Mover(m.id, m.r, m.t0, m.p, m.v, max(t_meet + 1e-6, t - STEP / max(1e-9, math.hypot(*m.v))))
+                t1 = max(t_meet, t - STEP / max(1e-9, math.hypot(*m.v)))
+                # Too short a leg to be one (a walk blocked as it starts): none.
+                return Mover(m.id, m.r, m.t0, m.p, m.v, t1) if t1 >= m.t0 + 0.1 else None
         return m
 
     def ok(self, legs, own):
