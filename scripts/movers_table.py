@@ -7,7 +7,9 @@ min_clearance_moving is below 0 and the least value, protective stops; then ever
 docs/movers/failures.csv (the runs listed), the open-ground truck's runs at 60 s a goal when
 there are some, and copies each run's results.csv to
 docs/movers/results/; replaces the part of docs/movers.md between the markers
-`<!-- movers_table begin -->` and `<!-- movers_table end -->` when it has them. Usage:
+`<!-- movers_table begin -->` and `<!-- movers_table end -->` (and the headline, all files of
+a set pooled, between `<!-- headline begin -->` and `<!-- headline end -->`) when it has
+them. Usage:
     python3 scripts/movers_table.py [OUT] [COMMIT]
 """
 import csv
@@ -140,6 +142,24 @@ for name, rows in (("table.csv", table), ("failures.csv", failures)):
             w = csv.DictWriter(f, fieldnames=list(rows[0].keys()))
             w.writeheader()
             w.writerows(rows)
+# The headline: per set and case, all its mover files pooled.
+head = ["| set | case | files | reached (worst file) | t / T* with / without (n) | runs < 0 | least clearance [m] |",
+        "|---|---|---|---|---|---|---|"]
+for key, title, _, _ in SETS:
+    for case, label in CASES:
+        rs = [r for r in table if r["set"] == key and r["case"] == case]
+        if not rs:
+            continue
+        got, n = sum(r["reached"] for r in rs), sum(r["n"] for r in rs)
+        worst = min(rs, key=lambda r: r["reached"] / r["n"])
+        nb = sum(r["n_both"] for r in rs)
+        w = sum(float(r["t_over_tstar_with"]) * r["n_both"] for r in rs) / nb
+        wo = sum(float(r["t_over_tstar_without"]) * r["n_both"] for r in rs) / nb
+        head.append(f"| {key} | {label} | {len(rs)} | {got}/{n} = {100 * got / n:.1f} % ({worst['movers']} "
+                    f"{100 * worst['reached'] / worst['n']:.1f} %) | {w:.3f} / {wo:.3f} ({nb}) | "
+                    f"{sum(r['runs_below_0'] for r in rs)} | {min(float(r['least_clearance_moving']) for r in rs):.3f} |")
+headline = "\n".join(head) + "\n"
+(out / "movers_headline.md").write_text(headline)
 text = "\n".join(lines) + "\n"
 (out / "movers_table.md").write_text(text)
 doc = root / "docs/movers.md"
@@ -147,5 +167,9 @@ if doc.exists():
     d = doc.read_text()
     m = re.search(r"<!-- movers_table begin -->\n.*?<!-- movers_table end -->", d, re.S)
     if m:
-        doc.write_text(d[:m.start()] + "<!-- movers_table begin -->\n" + text + "<!-- movers_table end -->" + d[m.end():])
+        d = d[:m.start()] + "<!-- movers_table begin -->\n" + text + "<!-- movers_table end -->" + d[m.end():]
+    m = re.search(r"<!-- headline begin -->\n.*?<!-- headline end -->", d, re.S)
+    if m:
+        d = d[:m.start()] + "<!-- headline begin -->\n" + headline + "<!-- headline end -->" + d[m.end():]
+    doc.write_text(d)
 print(text)
