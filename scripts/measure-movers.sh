@@ -8,7 +8,7 @@
 #   lat0.1        latency 0.1 s, the live settings' defaults (the issue's acceptance)
 #   lat0.3        latency 0.3 s, the defaults
 #   lat0.3-large  latency 0.3 s, larger fields: --live $LARGE (default stop_margin=0.8)
-# Then the open-ground truck once more with 60 s a goal (below). About 25 min on 2 free cores
+# Then the open-ground truck once more with 60 s a goal (below). About 20 min on 2 free cores
 # (one eval at a time, --jobs 2).
 #   scripts/measure-movers.sh [OUT]    # OUT: target/movers; then
 #   python3 scripts/movers_table.py OUT COMMIT
