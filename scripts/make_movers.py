@@ -21,6 +21,7 @@ no warning at all; perception has to see that far):
   there for 10 s, then driving off;
 - person-standing: a person standing on each ray 3 m out from the start for 6 s, then
   walking off sideways;
+- crowd128: the set's capacity of 128 movers, for the tick's time (crowd's docstring);
 - machine-crossing: four machines (r 1.5 m) at 3 m/s along the sides of a 10 m square
   round the origin, which crosses every ray beyond the 4.5 m goals.
 
@@ -393,6 +394,24 @@ def site_files(site, scenarios):
     return files
 
 
+def crowd():
+    """128 movers (the live-obstacle set's capacity), for the tick's time with a full set:
+    120 people (r 0.3 m) and vehicles (r 1.2 m) milling about 12-40 m out at up to 1.5 m/s
+    for 60 s (seeded), and the 8 crossing persons of person-crossing-w2."""
+    import random
+
+    rnd = random.Random(1)
+    rows = []
+    for i in range(120):
+        r, a = rnd.uniform(12, 40), rnd.uniform(0, 2 * math.pi)
+        h, sp = rnd.uniform(0, 2 * math.pi), rnd.uniform(0, 1.5)
+        radius = rnd.choice([0.3, 0.3, 0.3, 1.2])
+        rows.append(row(i + 1, radius, 0.0, r * math.cos(a), r * math.sin(a), sp * math.cos(h), sp * math.sin(h), 60.0))
+    for k, line in enumerate(crossing(2)):
+        rows.append(f"{200 + k}," + line.split(",", 1)[1])
+    return rows
+
+
 def main():
     out = sys.argv[1] if len(sys.argv) > 1 else "sim/movers"
     os.makedirs(out, exist_ok=True)
@@ -400,6 +419,7 @@ def main():
     files["truck-reversing"] = truck()
     files["person-standing"] = standing()
     files["machine-crossing"] = machines()
+    files["crowd128"] = crowd()
     for name, rows in files.items():
         path = os.path.join(out, name + ".csv")
         with open(path, "w") as f:

@@ -356,7 +356,8 @@ pub struct LiveSettings {
     /// After staleness, fresh sets must arrive for this long before the
     /// machine moves again [s] (default 0.5).
     pub recover_span: f64,
-    /// A protective hold longer than this ends the goal `no-progress` [s]
+    /// Waiting for live obstacles (a protective hold, or slowed by their
+    /// slow-down field) longer than this ends the goal `no-progress` [s]
     /// (default 30). While it lasts, the goal's progress windows are
     /// paused: a person crossing is no stall.
     pub max_hold: f64,

@@ -35,9 +35,12 @@ pub struct Mover {
 }
 
 impl Mover {
-    /// Its centre at `t`, if it is there then.
+    /// Its centre at `t`, if it is there then. A mover of `t0` = 0 was there
+    /// before the goal started too (on its line, as perception saw it
+    /// during its pre-roll): a person standing in the way from the start is
+    /// known from the first tick.
     pub fn at(&self, t: f64) -> Option<[f64; 2]> {
-        (t >= self.t0 && t < self.t1).then(|| {
+        (t < self.t1 && (t >= self.t0 || self.t0 == 0.0)).then(|| {
             let s = t - self.t0;
             [
                 self.start[0] + self.velocity[0] * s,
@@ -304,6 +307,9 @@ mod tests {
         assert_eq!(m[0].at(2.0), Some([5.0, -1.6]));
         assert_eq!(m[0].at(0.5), None);
         assert_eq!(m[1].at(4.0), None);
+        // A mover of t0 = 0 was there before the start too, on its line.
+        assert_eq!(m[1].at(-1.0), Some([23.0, 0.0]));
+        assert_eq!(m[0].at(-1.0), None);
         for (bad, says) in [
             ("id,r\n", "bad header"),
             ("", "empty"),

@@ -98,6 +98,9 @@ struct Live {
     freshness: Freshness,
     /// Held since a protective stop: (since, clear since).
     hold: Option<(f64, Option<f64>)>,
+    /// Held, or slowed by the slow-down field, since: waiting for a live
+    /// obstacle (the progress windows pause, up to `max_hold`).
+    waiting_since: Option<f64>,
 }
 
 /// One tick's decision.
@@ -200,6 +203,7 @@ impl<C: StageCost> Pilot<C> {
             set: LiveSet::new(),
             freshness: Freshness::default(),
             hold: None,
+            waiting_since: None,
         });
         Ok(())
     }
@@ -375,8 +379,9 @@ impl<C: StageCost> Pilot<C> {
                 broken: assumptions.broken,
             });
         }
-        // A protective hold pauses the progress windows, up to `max_hold`.
-        if let Some((since, _)) = self.live.as_ref().and_then(|l| l.hold) {
+        // Waiting for a live obstacle (held, or slowed by its field) pauses
+        // the progress windows, up to `max_hold`.
+        if let Some(since) = self.live.as_ref().and_then(|l| l.waiting_since) {
             let max_hold = self
                 .live
                 .as_ref()
@@ -480,6 +485,11 @@ impl<C: StageCost> Pilot<C> {
                     clear => Some((since, clear)),
                 };
             }
+            l.waiting_since = if l.hold.is_some() || slow < 1.0 {
+                l.waiting_since.or(Some(now))
+            } else {
+                None
+            };
             let stale = l.settings.required && freshness != FreshnessState::Fresh;
             if l.hold.is_some() || stale {
                 command = stop;

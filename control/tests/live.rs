@@ -245,3 +245,23 @@ fn silent_perception_stops_a_moving_machine_and_only_a_span_of_sets_restarts_it(
         "{moving_again}"
     );
 }
+
+#[test]
+fn waiting_longer_than_the_progress_window_for_a_person_in_the_way_does_not_end_the_goal() {
+    // The person stands in the way from 2 s to 15 s: 13 s, beyond the goal's
+    // 10 s progress window; the goal waits (slowed, then held) and is
+    // reached once the person has gone (`drive` fails on any abort).
+    let person = [6.5, 0.0];
+    let run = drive(true, 30.0, person, |t| (2.0..15.0).contains(&t), |_| true);
+    assert!(run.clearance > 0.3, "clearance {}", run.clearance);
+    // It reached the goal only after the person had gone.
+    let arrived = run
+        .ticks
+        .iter()
+        .find(|k| (k.x[ix::X] - 10.0).abs() < 0.1)
+        .map(|k| k.t)
+        .expect("reached");
+    assert!(arrived > 15.0, "reached at {arrived} s");
+    let end = run.ticks.last().unwrap().x;
+    assert!((end[ix::X] - 10.0).abs() < 0.1, "ended at {end:?}");
+}
