@@ -3,7 +3,7 @@
 //! 1.4 m/s, 4 m ahead, from 5 m on its right to 5 m on its left, one set every 100 ms.
 //!
 //! ```sh
-//! wlnavd --sim --prefix demo &
+//! wlnavd --sim --prefix demo --config examples/external-perception.toml &
 //! cargo run --release -p wlnav-examples --bin person-publisher -- --prefix demo
 //! ```
 //!

@@ -7,7 +7,7 @@ once the person has crossed and a set without the person went out (1 on an error
 usage or connection error).
 
     python3 -m venv .venv && .venv/bin/pip install -r examples/requirements.txt
-    wlnavd --sim --prefix demo &
+    wlnavd --sim --prefix demo --config examples/external-perception.toml &
     .venv/bin/python examples/python_obstacles.py --prefix demo
 
 The payloads are the `#[repr(C)]` structs of `shm-ipc/src/msg.rs` (wire v2): the type

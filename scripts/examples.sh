@@ -61,6 +61,6 @@ run() {
 run goal-client "" "$bin/goal-client"
 run pose-publisher examples/external-pose.toml "$bin/pose-publisher"
 run python-client "" "$venv/bin/python" examples/python_client.py
-run person-publisher "" "$bin/person-publisher"
-run python-obstacles "" "$venv/bin/python" examples/python_obstacles.py
+run person-publisher examples/external-perception.toml "$bin/person-publisher"
+run python-obstacles examples/external-perception.toml "$venv/bin/python" examples/python_obstacles.py
 echo "examples: all five exit 0"

@@ -201,7 +201,7 @@ fn views_show_mode_goal_and_faults() {
     let row = view::table_row(&t);
     assert!(header.contains("mode") && row.contains("tracking"));
     assert_eq!(view::fault_text(0), "-");
-    assert_eq!(view::fault_names(1 << 20), vec!["bit-20"]);
+    assert_eq!(view::fault_names(1 << 30), vec!["bit-30"]);
     assert_eq!(view::mode_name(99), "mode-99");
 }
 

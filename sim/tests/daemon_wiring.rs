@@ -43,13 +43,17 @@ fn repo() -> PathBuf {
 
 /// `wlnavd --sim` without a configuration file: the built-in defaults, the
 /// repository's shipped weights (critic-weights/avant635) and their machine.
-/// The one change: a time budget no solve reaches, so the comparison does not
-/// depend on the wall clock (the same value reaches both sides).
+/// The changes: a time budget no solve reaches, so the comparison does not
+/// depend on the wall clock (the same value reaches both sides), and live
+/// obstacles not required (no perception in either).
 fn daemon_config() -> Config {
     let mut c = Config::default();
     c.resolve_paths(&[repo()]);
     c.adopt_trained_machine();
     c.mpc.time_budget = 10.0;
+    // No perception on either side: the sim's pilot runs without movers, and
+    // the daemon's, without sets, would stop for stale perception.
+    c.live.required = false;
     c.validate().expect("the defaults are valid");
     c
 }
