@@ -454,6 +454,35 @@ pub fn stop_distance(
         + margin
 }
 
+/// Farther than this [m] from where the previous set predicted it (plus
+/// [`LiveSettings::speed_uncertainty`] per second between the two), an
+/// obstacle of the same id has jumped.
+pub const JUMP_TOLERANCE: f64 = 1.0;
+
+/// Whether an obstacle of `new` is farther from where `old` predicts it (the
+/// same id, moved along its velocity to `new`'s stamp) than
+/// [`JUMP_TOLERANCE`] plus the speed uncertainty over the time between: a
+/// track that teleported (perception re-initialised, a glitch). Obstacles
+/// new or gone are no jump.
+pub fn jumped(old: &LiveSet, new: &LiveSet, s: &LiveSettings) -> bool {
+    let (Some(t0), Some(t1)) = (old.stamp(), new.stamp()) else {
+        return false;
+    };
+    let allowed = JUMP_TOLERANCE + s.speed_uncertainty * (t1 - t0).abs();
+    new.obstacles().iter().any(|n| {
+        old.obstacles()
+            .iter()
+            .find(|o| o.id == n.id)
+            .is_some_and(|o| {
+                let (c, _) = n.shape.bounding_circle();
+                let (p, _) = o.shape.bounding_circle();
+                let dt = n.stamp - o.stamp;
+                let predicted = [p[0] + o.velocity[0] * dt, p[1] + o.velocity[1] * dt];
+                (c[0] - predicted[0]).hypot(c[1] - predicted[1]) > allowed
+            })
+    })
+}
+
 /// Whether the newest set is fresh enough for the machine to move.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum FreshnessState {
@@ -490,15 +519,20 @@ impl Default for Freshness {
 
 impl Freshness {
     /// A set measured at `stamp` arrived (stamps from the set, in order;
-    /// an older or equal one is ignored).
-    pub fn arrived(&mut self, stamp: f64, s: &LiveSettings) {
+    /// an older or equal one is ignored); `consistent`: its obstacles are
+    /// where the previous set's predicted them ([`jumped`] is false). While
+    /// recovering, a jump restarts the span, as a pose that teleports does
+    /// at the pose gate.
+    pub fn arrived(&mut self, stamp: f64, consistent: bool, s: &LiveSettings) {
         if self.last.is_some_and(|l| stamp <= l) {
             return;
         }
         let gap_ok = self.last.is_some_and(|l| stamp - l <= s.max_age);
         self.state = match self.state {
             FreshnessState::Fresh if gap_ok => FreshnessState::Fresh,
-            FreshnessState::Recovering { since } if gap_ok => FreshnessState::Recovering { since },
+            FreshnessState::Recovering { since } if gap_ok && consistent => {
+                FreshnessState::Recovering { since }
+            }
             _ => FreshnessState::Recovering { since: stamp },
         };
         self.last = Some(stamp);
@@ -626,13 +660,13 @@ mod tests {
         let mut f = Freshness::default();
         assert!(matches!(f.update(0.0, &s), FreshnessState::Stale { .. }));
         // One set does not re-arm the machine.
-        f.arrived(0.0, &s);
+        f.arrived(0.0, true, &s);
         assert!(matches!(
             f.update(0.05, &s),
             FreshnessState::Recovering { .. }
         ));
         for k in 1..=5 {
-            f.arrived(0.1 * k as f64, &s);
+            f.arrived(0.1 * k as f64, true, &s);
         }
         assert_eq!(f.update(0.5, &s), FreshnessState::Fresh);
         // Silence beyond max_age: stale, with the age.
@@ -641,19 +675,52 @@ mod tests {
             other => panic!("{other:?}"),
         }
         // A stamp from before the last is ignored and cannot refresh.
-        f.arrived(0.4, &s);
+        f.arrived(0.4, true, &s);
         assert!(matches!(f.update(1.02, &s), FreshnessState::Stale { .. }));
         // A gap larger than max_age restarts the span.
-        f.arrived(1.1, &s);
-        f.arrived(1.2, &s);
-        f.arrived(1.8, &s);
+        f.arrived(1.1, true, &s);
+        f.arrived(1.2, true, &s);
+        f.arrived(1.8, true, &s);
         assert!(matches!(
             f.update(1.8, &s),
             FreshnessState::Recovering { .. }
         ));
-        f.arrived(2.0, &s);
-        f.arrived(2.35, &s);
+        f.arrived(2.0, true, &s);
+        f.arrived(2.35, true, &s);
         assert_eq!(f.update(2.35, &s), FreshnessState::Fresh);
+    }
+
+    #[test]
+    fn a_track_that_jumps_restarts_the_recovery_span() {
+        let s = LiveSettings::default();
+        let person = |x: f64, t: f64| {
+            let shape = LiveShape::circle([x, 0.0], 0.3).unwrap();
+            let mut set = LiveSet::new();
+            set.set(
+                t,
+                &[LiveObstacle::new(4, LiveClass::Person, shape, [1.0, 0.0], t).unwrap()],
+            )
+            .unwrap();
+            set
+        };
+        // Walking at 1 m/s: 0.1 s later 0.1 m on is no jump; 2 m on is.
+        assert!(!jumped(&person(0.0, 0.0), &person(0.1, 0.1), &s));
+        assert!(!jumped(&person(0.0, 0.0), &person(1.0, 0.1), &s));
+        assert!(jumped(&person(0.0, 0.0), &person(2.0, 0.1), &s));
+        // A new id, or no stamp yet, is no jump.
+        assert!(!jumped(&LiveSet::new(), &person(5.0, 0.1), &s));
+        let mut f = Freshness::default();
+        f.arrived(0.0, true, &s);
+        f.arrived(0.3, true, &s);
+        // A jump at 0.4 s: the span starts again there.
+        f.arrived(0.4, false, &s);
+        f.arrived(0.6, true, &s);
+        assert!(matches!(f.update(0.6, &s), FreshnessState::Recovering { since } if since == 0.4));
+        f.arrived(0.9, true, &s);
+        assert_eq!(f.update(0.9, &s), FreshnessState::Fresh);
+        // Once fresh, a jump is the new truth, not a fault.
+        f.arrived(1.0, false, &s);
+        assert_eq!(f.update(1.0, &s), FreshnessState::Fresh);
     }
 
     #[test]

@@ -214,7 +214,8 @@ impl<C: StageCost> Pilot<C> {
     pub fn set_live(&mut self, set: &LiveSet) {
         if let Some(l) = &mut self.live {
             if let Some(stamp) = set.stamp() {
-                l.freshness.arrived(stamp, &l.settings);
+                let consistent = !live::jumped(&l.set, set, &l.settings);
+                l.freshness.arrived(stamp, consistent, &l.settings);
             }
             l.set.copy_from(set);
         }
