@@ -232,7 +232,15 @@ fn the_global_layer_and_the_pilot_do_not_allocate() {
                     } else {
                         LiveShape::polygon(&[[x, y], [x + 0.4, y], [x + 0.4, y + 0.3]]).unwrap()
                     };
-                    LiveObstacle::new(i, LiveClass::Person, shape, [0.0, 0.5], 0.0).unwrap()
+                    // Other tracks in each set (ids 0.., 1000..): none teleports.
+                    LiveObstacle::new(
+                        i + 1000 * j as u32,
+                        LiveClass::Person,
+                        shape,
+                        [0.0, 0.5],
+                        0.0,
+                    )
+                    .unwrap()
                 })
                 .collect();
             let mut set = LiveSet::new();
