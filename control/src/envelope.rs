@@ -535,25 +535,20 @@ pub fn braking_time(p: &MachineParams, s: &EnvelopeSettings, dt: f64) -> f64 {
     s.actuator_gain_max * (p.v_max / p.a_max).max(p.beta_dot_max / p.beta_ddot_max) + dt
 }
 
-/// The smallest clearance beyond the margins of [`predict`].
-pub fn predicted_excess(input: &EnvelopeInput, command: VelocityCommand) -> f64 {
-    predict(input, command).excess
-}
-
-/// With a site, [`predicted_excess`] measures exactly up to this [m] and
+/// With a site, [`predict`] measures exactly up to this [m] and
 /// reports this beyond (a lower bound; every decision compares with 0).
 pub const SITE_REACH: f64 = 1.0;
 
-/// Most site features [`predicted_excess`] takes from one region query
+/// Most site features [`predict`] takes from one region query
 /// before it asks the index for each predicted state instead.
 const NEAR_FEATURES: usize = 48;
 
-/// Largest step between the response lags [`predicted_excess`] samples [s]
+/// Largest step between the response lags [`predict`] samples [s]
 /// (issue 43: with only the two ends sampled, a true delay between them went
 /// unchecked).
 pub const LATE_STEP: f64 = 0.02;
 
-/// The response lags [`predicted_excess`] samples: `n` + 1 of them, `step`
+/// The response lags [`predict`] samples: `n` + 1 of them, `step`
 /// apart from 0 to `response_lag`, and the margin `pad` [m] that covers the
 /// lags between two samples: there every command acts at most step / 2
 /// earlier or later than at the nearer sample, and the axle points move at
@@ -925,8 +920,8 @@ mod tests {
             actuator_gain_max: 1.2,
             ..nominal
         };
-        let a = predicted_excess(&input(&p, &nominal, &sent, &x, &wall, cmd), cmd);
-        let b = predicted_excess(&input(&p, &fast, &sent, &x, &wall, cmd), cmd);
+        let a = predict(&input(&p, &nominal, &sent, &x, &wall, cmd), cmd).excess;
+        let b = predict(&input(&p, &fast, &sent, &x, &wall, cmd), cmd).excess;
         let expected = (0.2 * 0.96 + 0.96 * 0.96 / 2.0) - (0.2 * 0.8 + 0.8 * 0.8 / 2.0);
         assert!(((a - b) - expected).abs() < 0.03, "{a} {b} vs {expected}");
         // A circle that the nominal prediction clears by 0.1 m (the excess is
@@ -961,7 +956,7 @@ mod tests {
             ..EnvelopeSettings::exact()
         };
         let stop = VelocityCommand::ZERO;
-        let e = predicted_excess(&input(&p, &fast, &sent, &x, &wall, stop), stop);
+        let e = predict(&input(&p, &fast, &sent, &x, &wall, stop), stop).excess;
         let expected = 1.0 - 1.2 * 1.2 / (2.0 * p.a_max) - fast.margin;
         assert!((e - expected).abs() < 2e-3, "{e} vs {expected}");
     }
@@ -992,8 +987,8 @@ mod tests {
         let wall = [Obstacle::new(1.5, 0.0, 0.5)];
         let stop = VelocityCommand::ZERO;
         let on_time = EnvelopeSettings::exact();
-        let a = predicted_excess(&input(&p, &on_time, &sent, &x, &wall, stop), stop);
-        let b = predicted_excess(&input(&p, &late, &sent, &x, &wall, stop), stop);
+        let a = predict(&input(&p, &on_time, &sent, &x, &wall, stop), stop).excess;
+        let b = predict(&input(&p, &late, &sent, &x, &wall, stop), stop).excess;
         assert!((a - (1.0 - 0.5 - on_time.margin)).abs() < 2e-3, "{a}");
         let (_, _, pad) = late_samples(&late, &p);
         assert!((pad - 0.01).abs() < 1e-12, "{pad}");
