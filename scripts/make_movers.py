@@ -4,19 +4,34 @@ the sites, sim/movers/sites/<site>/*.csv (below).
 
     python3 scripts/make_movers.py sim/movers
 
-Open ground is the paper's 128: every start at the origin, the goals on eight rays
-(0°, 45°, …) at 4.5 m and 9 m. A movers file applies to every scenario, so each file
-puts its mover on every ray, timed to meet a machine that leaves the origin at once
-(about 5 m along its ray after 5.5 s). Every mover appears where no machine can be
-within its stopping distance then (a person who appears beside a moving machine gives
-no warning at all; perception has to see that far):
+Open ground is the paper's 128: every start at the origin, heading 0°, the goals on
+eight rays (0°, 45°, …) at 4.5 m and 9 m. A movers file applies to every scenario, so
+each file puts its mover on every ray, timed to meet a machine that leaves the origin at
+once (its leading axle about 5 m along its ray after 5.5 s). Every mover appears where no
+machine can be within its stopping distance then (a person who appears beside a moving
+machine gives no warning at all; perception has to see that far):
 
-- person-crossing-w{1,2,4}: a person (r 0.3 m) crossing each ray 5 m out at 1.4 m/s,
-  seen w seconds before it reaches the ray, walking on out of sight; it reaches the ray
-  at 4 s, about 1.5 s before a machine on its nominal schedule would, and 0.3 s before
-  the rear of one that reverses there at once (a person who steps into a machine
-  already there cannot be avoided by stopping: from 1 m/s the stop takes 1 s and 0.5 m
-  after the perception's latency);
+- person-crossing-w{1,2,4}: a person (r 0.3 m) crossing at 1.4 m/s, across the ray's
+  direction u, the point c = a + 5u, 5 m out from the start a of the machine's leading
+  axle; seen w seconds before it reaches c, walking on out of sight; it reaches c at 4 s,
+  about 1.5 s before the leading axle on its nominal schedule would (a person who steps
+  into a machine already there cannot be avoided by stopping: from 1 m/s the stop takes
+  1 s and 0.5 m after the perception's latency). The leading axle is the rear one,
+  a = the origin − (l_f + l_r)·(cos θ0, sin θ0) = (−1.2, 0), on the rays behind the start
+  (135°, 180°, 225°: more than 90° from the start's heading), where the machine reverses
+  towards its goal, rear axle first (without movers, 12, 14 and 10 of their 16 goals
+  reverse at 0.67–1 m/s through 2–5 s; the others turn round and drive forward, a longer
+  way that meets the person later); it is the front one, a = the origin (c on the ray),
+  elsewhere (on 90° and 270°, where 6 and 5 goals reverse, the rear axle starts farther
+  from c than the front one). So a reversing machine's rear axle gets the warning a
+  forward machine's front axle gets: the person's path and timing relative to the
+  leading axle are those of a forward ray, translated by a (on 180° c is on the ray, 6.2 m
+  out; on 135° and 225° the path is 0.85 m off the ray through the origin, c 5.85 m out
+  along it). By the sites' appearance test (below), the w1 person now clears every axle's
+  reach by 0.08–0.12 m more than its stopping distance on every ray; with c 5 m out on
+  every ray, as before, it did not on 135°, 180° and 225° (by 0.48, 1.07 and 0.80 m): the
+  reversing rear axle met the person on 180° 0.3 s after it reached the ray
+  (docs/movers.md, section 4.1);
 - truck-reversing: a truck (r 1.2 m) reversing at 1 m/s onto each ray 6 m out, parked
   there for 10 s, then driving off;
 - person-standing: a person standing on each ray 3 m out from the start for 6 s, then
@@ -40,9 +55,11 @@ truck, a crossing machine or a person 5.6 m to the side).
 For scenario i, start s (front axle), goal g, u the unit vector s → g, L = |g − s|, n = u
 turned left (right when the left side fails):
 
-- person-crossing-w{1,2,4}: as on open ground: the crossing point c = s + 5u (L ≥ 6.5 m),
-  reached at 4 s at 1.4 m/s across u, appearing 1.4·w m before c at t0 = 4 − w, walking on
-  for 6 s;
+- person-crossing-w{1,2,4}: as on an open-ground ray ahead of the start: the crossing
+  point c = s + 5u from the front axle (L ≥ 6.5 m), reached at 4 s at 1.4 m/s across u,
+  appearing 1.4·w m before c at t0 = 4 − w, walking on for 6 s (a scenario whose machine
+  reverses rear axle first is covered by the appearance test below, which bounds each
+  axle's reach: a placement inside the rear axle's stopping distance is skipped);
 - truck-reversing (r 1.2 m): parked at p = s + 6u (L ≥ 4.5 m) from 5 s to 15 s, reversing in
   at 1 m/s from p − 5n over 0–5 s, driving off along +n over 15–25 s (back along −n if
   that side is not free);
@@ -97,10 +114,26 @@ def row(mid, r, t0, x, y, vx, vy, t1):
     return ",".join([str(mid)] + [fmt(v) for v in (r, t0, x, y, vx, vy, t1)])
 
 
-def crossing(warning):
+OPEN_THETA0 = 0.0  # the paper's 128 all start at the origin heading 0
+
+
+def leading_axle(a):
+    """The start of the axle that leads towards a goal on the ray of bearing a from the
+    origin (open ground): the rear axle on the rays behind the start (more than 90° from
+    its heading: the machine reverses), else the front axle (the origin)."""
+    hx, hy = math.cos(OPEN_THETA0), math.sin(OPEN_THETA0)
+    if math.cos(a) * hx + math.sin(a) * hy < -1e-9:
+        return -L_WHEELBASE * hx, -L_WHEELBASE * hy  # l_f + l_r (the sites' constants, below)
+    return 0.0, 0.0
+
+
+def crossing(warning, lead=True):
+    """Each ray's crossing person, 5 m out from the leading axle's start (the docstring);
+    lead=False: 5 m out from the origin on every ray (the crowd's persons, as first written)."""
     rows = []
     for k, a in enumerate(RAYS):
-        px, py = 5.0 * math.cos(a), 5.0 * math.sin(a)
+        ax, ay = leading_axle(a) if lead else (0.0, 0.0)
+        px, py = ax + 5.0 * math.cos(a), ay + 5.0 * math.sin(a)
         nx, ny = -math.sin(a), math.cos(a)
         d = 1.4 * warning
         t0 = max(0.0, 4.0 - warning)
@@ -397,7 +430,8 @@ def site_files(site, scenarios):
 def crowd():
     """128 movers (the live-obstacle set's capacity), for the tick's time with a full set:
     120 people (r 0.3 m) and vehicles (r 1.2 m) milling about 12-40 m out at up to 1.5 m/s
-    for 60 s (seeded), and the 8 crossing persons of person-crossing-w2."""
+    for 60 s (seeded), and 8 crossing persons as person-crossing-w2 first had them (5 m out
+    from the origin on every ray: the crowd is for the tick's time, kept as measured)."""
     import random
 
     rnd = random.Random(1)
@@ -407,7 +441,7 @@ def crowd():
         h, sp = rnd.uniform(0, 2 * math.pi), rnd.uniform(0, 1.5)
         radius = rnd.choice([0.3, 0.3, 0.3, 1.2])
         rows.append(row(i + 1, radius, 0.0, r * math.cos(a), r * math.sin(a), sp * math.cos(h), sp * math.sin(h), 60.0))
-    for k, line in enumerate(crossing(2)):
+    for k, line in enumerate(crossing(2, lead=False)):
         rows.append(f"{200 + k}," + line.split(",", 1)[1])
     return rows
 
