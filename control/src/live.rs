@@ -147,6 +147,27 @@ impl LiveShape {
         }
     }
 
+    /// Signed distance of `p` and its unit gradient (away from the shape
+    /// outside; at a circle's centre, +x).
+    pub fn nearest(&self, p: P2) -> (f64, P2) {
+        match self {
+            LiveShape::Circle { center, radius } => {
+                let (dx, dy) = (p[0] - center[0], p[1] - center[1]);
+                let d = dx.hypot(dy);
+                let n = if d > 1e-9 {
+                    [dx / d, dy / d]
+                } else {
+                    [1.0, 0.0]
+                };
+                (d - radius, n)
+            }
+            LiveShape::Polygon { ring, len, winding } => {
+                let near = ring_nearest(p, &ring[..*len], *winding);
+                (near.distance, near.normal)
+            }
+        }
+    }
+
     /// A disc holding the shape: (centre, radius).
     pub fn bounding_circle(&self) -> (P2, f64) {
         match *self {
@@ -209,10 +230,15 @@ impl LiveObstacle {
     /// obstacle moved along its velocity from its stamp.
     #[inline]
     pub fn clearance_at(&self, c: P2, r: f64, t: f64) -> f64 {
+        self.shape.signed_distance(self.relative(c, t)) - r
+    }
+
+    /// Where the point `c` is at time `t` relative to the obstacle seen at
+    /// its stamp: `c` moved back along the obstacle's velocity.
+    #[inline]
+    pub fn relative(&self, c: P2, t: f64) -> P2 {
         let dt = t - self.stamp;
-        self.shape
-            .signed_distance([c[0] - self.velocity[0] * dt, c[1] - self.velocity[1] * dt])
-            - r
+        [c[0] - self.velocity[0] * dt, c[1] - self.velocity[1] * dt]
     }
 
     /// Its speed [m/s].
@@ -361,6 +387,13 @@ pub struct LiveSettings {
     /// (default 30). While it lasts, the goal's progress windows are
     /// paused: a person crossing is no stall.
     pub max_hold: f64,
+    /// A live obstacle standing in the way (slower than
+    /// [`STANDING_SPEED`]) that has kept the machine waiting this long is
+    /// planned around: the route is planned again with it as a circle
+    /// [s] (default 10: a truck being loaded stays minutes, a person
+    /// stepping aside seconds, and a detour that is not needed costs more
+    /// than the wait).
+    pub replan_after: f64,
 }
 
 impl Default for LiveSettings {
@@ -374,6 +407,7 @@ impl Default for LiveSettings {
             resume_wait: 1.0,
             recover_span: 0.5,
             max_hold: 30.0,
+            replan_after: 10.0,
         }
     }
 }
@@ -389,7 +423,7 @@ pub struct LiveSettingsError {
 
 impl LiveSettings {
     /// Every value finite, ≥ 0, at most 10 s or m; `max_age` and
-    /// `slow_time` > 0; `max_hold` in (0, 600] s.
+    /// `slow_time` > 0; `max_hold` and `replan_after` in (0, 600] s.
     pub fn validate(&self) -> Result<(), LiveSettingsError> {
         for (name, value) in [
             ("stop_margin", self.stop_margin),
@@ -414,12 +448,17 @@ impl LiveSettings {
                 });
             }
         }
-        if !(self.max_hold > 0.0 && self.max_hold <= 600.0) {
-            return Err(LiveSettingsError {
-                name: "max_hold",
-                requirement: "must be in (0, 600] s",
-                value: self.max_hold,
-            });
+        for (name, value) in [
+            ("max_hold", self.max_hold),
+            ("replan_after", self.replan_after),
+        ] {
+            if !(value > 0.0 && value <= 600.0) {
+                return Err(LiveSettingsError {
+                    name,
+                    requirement: "must be in (0, 600] s",
+                    value,
+                });
+            }
         }
         Ok(())
     }
@@ -431,6 +470,10 @@ impl LiveSettings {
         self.stop_margin + self.speed_uncertainty * ahead.max(0.0)
     }
 }
+
+/// Slower than this [m/s], a live obstacle stands: one that keeps the
+/// machine waiting is planned around ([`LiveSettings::replan_after`]).
+pub const STANDING_SPEED: f64 = 0.2;
 
 /// The head-on stop distance S_stop of the module docs [m]: machine speed
 /// `v`, obstacle closing at `u`, `response` = T_react + d + T_lag (from now
@@ -741,5 +784,12 @@ mod tests {
             ..LiveSettings::default()
         };
         assert_eq!(bad.validate().unwrap_err().name, "max_age");
+        for replan_after in [0.0, 601.0, f64::NAN] {
+            let bad = LiveSettings {
+                replan_after,
+                ..LiveSettings::default()
+            };
+            assert_eq!(bad.validate().unwrap_err().name, "replan_after");
+        }
     }
 }

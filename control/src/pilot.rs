@@ -23,13 +23,14 @@ use crate::assumption_check::{self, Assessment, AssumptionMonitor, Decision, Fin
 use crate::delay::DelayCompensator;
 use crate::envelope::{self, EnvelopeInput, EnvelopeSettings, Guarded, LiveContact, LiveView};
 use crate::live::{self, Freshness, FreshnessState, LiveSet, LiveSettings};
-use crate::model::{Goal, MachineParams, State, VelocityCommand};
+use crate::model::{ix, Goal, MachineParams, State, VelocityCommand};
 use crate::mpc::{Mpc, MpcError, Solution, StageCost};
 use crate::obstacle::Obstacle;
 use crate::planner::{AbortReason, NavError, NavStep, Navigator};
 use crate::progress::{ProgressChecker, ProgressSettings};
 use crate::site::outline::{Body, Outline, MAX_OUTLINE_CIRCLES};
 use crate::site::SiteIndex;
+use crate::site::P2;
 use crate::world::World;
 use std::sync::Arc;
 
@@ -98,10 +99,37 @@ struct Live {
     freshness: Freshness,
     /// Held since a protective stop: (since, clear since).
     hold: Option<(f64, Option<f64>)>,
-    /// Held, or slowed by the slow-down field, since: waiting for a live
-    /// obstacle (the progress windows pause, up to `max_hold`).
+    /// Held, slowed by the slow-down field, or stopped short by the MPC's
+    /// live rows, since: waiting for a live obstacle (the progress windows
+    /// pause, up to `max_hold`).
     waiting_since: Option<f64>,
+    /// The standing obstacle the machine waits for, and since when (its
+    /// id; [`LiveSettings::replan_after`]).
+    blocked: Option<(u32, f64)>,
+    /// Obstacles planned around for this goal: their ids and where they
+    /// stood (each once, while it stays).
+    avoided: [(u32, P2); MAX_AVOIDED],
+    n_avoided: usize,
+    /// What to tell the navigator at the next step.
+    route_change: Option<RouteChange>,
 }
+
+/// A change of the route's world for a live obstacle (issue 41 item 4).
+#[derive(Debug, Clone, Copy)]
+enum RouteChange {
+    /// Plan round this circle (wire radius).
+    Avoid(Obstacle),
+    /// What was planned round has gone: plan without it.
+    Forget,
+}
+
+/// At most this many live obstacles are planned around per goal.
+pub const MAX_AVOIDED: usize = 8;
+
+/// A plan whose clearance to a live obstacle's stop field is below this
+/// [m] is pressed against it: a machine nearly at rest with such a plan is
+/// waiting for that obstacle.
+const PRESSED: f64 = 0.1;
 
 /// One tick's decision.
 #[derive(Debug, Clone, Copy)]
@@ -198,12 +226,17 @@ impl<C: StageCost> Pilot<C> {
         settings
             .validate()
             .map_err(|e| PilotError::Envelope(e.to_string()))?;
+        self.mpc.enable_live(settings);
         self.live = Some(Live {
             settings,
             set: LiveSet::new(),
             freshness: Freshness::default(),
             hold: None,
             waiting_since: None,
+            blocked: None,
+            avoided: [(0, [0.0; 2]); MAX_AVOIDED],
+            n_avoided: 0,
+            route_change: None,
         });
         Ok(())
     }
@@ -218,6 +251,7 @@ impl<C: StageCost> Pilot<C> {
                 l.freshness.arrived(stamp, consistent, &l.settings);
             }
             l.set.copy_from(set);
+            self.mpc.set_live(set);
         }
     }
 
@@ -347,6 +381,11 @@ impl<C: StageCost> Pilot<C> {
 
     /// Forgets goal and plan (not the commands sent: they still act).
     pub fn reset(&mut self) {
+        if let Some(l) = &mut self.live {
+            l.blocked = None;
+            l.n_avoided = 0;
+            l.route_change = None;
+        }
         self.mpc.clear_goal();
         self.world.clear_circles();
         self.costs_seen = None;
@@ -397,6 +436,16 @@ impl<C: StageCost> Pilot<C> {
         }
         let mut subgoal = None;
         let mut holding = false;
+        let change = self.live.as_mut().and_then(|l| l.route_change.take());
+        match (change, &mut self.navigator) {
+            (Some(RouteChange::Avoid(circle)), Some(nav)) => {
+                // A goal without room for it goes on as it was (the
+                // hold's bound, `max_hold`, decides).
+                let _ = nav.avoid(circle, x, now);
+            }
+            (Some(RouteChange::Forget), Some(nav)) => nav.forget_avoided(x, now),
+            _ => {}
+        }
         if let Some(nav) = &mut self.navigator {
             match nav.update(x, now) {
                 NavStep::Drive {
@@ -435,6 +484,16 @@ impl<C: StageCost> Pilot<C> {
             ),
             None => (&[][..], 0.0, Duration::ZERO),
         };
+        if self.live.is_some() {
+            // The MPC's live rows keep the envelope's margins (as they are
+            // now, widened or not by the assumptions' check).
+            let margins = self
+                .assumptions
+                .effective()
+                .circle_margins(&self.params, self.world.outline());
+            self.mpc
+                .set_live_margins(&margins[..self.world.outline().len()]);
+        }
         let mut proposed = if holding {
             // Holding for the first route: a stop at the limits (at rest, rest).
             envelope::stop_command(self.last, Some(x), &self.params, self.dt)
@@ -467,8 +526,23 @@ impl<C: StageCost> Pilot<C> {
         let blocked = self.live.as_ref().is_some_and(|l| {
             l.hold.is_some() && (slow < 1.0 || inside(envelope::predict(&input, unscaled).live))
         });
+        // The standing live obstacle the MPC's plan is pressed against
+        // while the machine is nearly at rest: what it waits for.
+        let pressed = if holding || x[ix::V].abs() >= live::STANDING_SPEED {
+            None
+        } else {
+            self.pressed_against()
+        };
         let stop = envelope::stop_command(self.last, Some(x), &self.params, self.dt);
         let mut command = guarded.command;
+        let half_width = self.world.outline().half_width();
+        let margin = self
+            .assumptions
+            .effective()
+            .circle_margins(&self.params, self.world.outline())
+            .iter()
+            .fold(0.0, |m: f64, v| m.max(*v))
+            + crate::mpc::live_rows::PLAN_MARGIN;
         let live_status = self.live.as_mut().map(|l| {
             let freshness = l.freshness.update(now, &l.settings);
             if guarded.overridden() && inside(guarded.live) {
@@ -486,11 +560,57 @@ impl<C: StageCost> Pilot<C> {
                     clear => Some((since, clear)),
                 };
             }
-            l.waiting_since = if l.hold.is_some() || slow < 1.0 {
+            l.waiting_since = if l.hold.is_some() || slow < 1.0 || pressed.is_some() {
                 l.waiting_since.or(Some(now))
             } else {
                 None
             };
+            // A standing obstacle that keeps it waiting `replan_after` is
+            // planned around (issue 41 item 4), once per goal.
+            let standing = pressed.or_else(|| {
+                guarded
+                    .live
+                    .filter(|c| l.hold.is_some() && c.excess < PRESSED)
+                    .and_then(|c| l.set.obstacles().iter().position(|o| o.id == c.id))
+                    .filter(|&i| l.set.obstacles()[i].speed() < live::STANDING_SPEED)
+            });
+            l.blocked = match (standing, l.blocked) {
+                (Some(i), Some((id, since))) if l.set.obstacles()[i].id == id => Some((id, since)),
+                (Some(i), _) => Some((l.set.obstacles()[i].id, now)),
+                (None, _) => None,
+            };
+            // What was planned round and has gone (out of the set, or
+            // moved on) is forgotten, all of it: a route round nothing is
+            // a detour; what still stands is planned round again.
+            let gone = l.avoided[..l.n_avoided].iter().any(|&(id, at)| {
+                !l.set.obstacles().iter().any(|o| {
+                    o.id == id && {
+                        let p = standing_at(o, now);
+                        (p[0] - at[0]).hypot(p[1] - at[1]) < live::JUMP_TOLERANCE
+                    }
+                })
+            });
+            if gone {
+                l.n_avoided = 0;
+                l.route_change = Some(RouteChange::Forget);
+            }
+            if let (Some(i), Some((id, since))) = (standing, l.blocked) {
+                let done = l.avoided[..l.n_avoided].iter().any(|a| a.0 == id);
+                if !done && now - since >= l.settings.replan_after && l.n_avoided < MAX_AVOIDED {
+                    let o = &l.set.obstacles()[i];
+                    let (_, r) = o.shape.bounding_circle();
+                    let at = standing_at(o, now);
+                    l.avoided[l.n_avoided] = (id, at);
+                    l.n_avoided += 1;
+                    // Its stop field while the set is fresh (C_stop + σ_u ·
+                    // max_age; the MPC's rows grow it further along their
+                    // horizon), the rows' margins and the half-width (a
+                    // wire circle's radius holds it). Not larger: a start
+                    // inside the circle would leave no route.
+                    let radius = r + l.settings.reach(l.settings.max_age) + margin + half_width;
+                    l.route_change = Some(RouteChange::Avoid(Obstacle::new(at[0], at[1], radius)));
+                }
+            }
             let stale = l.settings.required && freshness != FreshnessState::Fresh;
             if l.hold.is_some() || stale {
                 command = stop;
@@ -551,6 +671,40 @@ impl<C: StageCost> Pilot<C> {
     pub fn params(&self) -> &MachineParams {
         &self.params
     }
+}
+
+impl<C: StageCost> Pilot<C> {
+    /// The standing live obstacle (its index in the set) whose stop field
+    /// the MPC's plan comes nearest, if within [`PRESSED`] of it.
+    fn pressed_against(&self) -> Option<usize> {
+        let rows = self.mpc.live_rows()?;
+        let l = self.live.as_ref()?;
+        let states = &self.mpc.solution().states;
+        let circles = self.world.outline().len();
+        let mut best: Option<(usize, f64)> = None;
+        for &i in rows.near() {
+            if l.set.obstacles()[i].speed() >= live::STANDING_SPEED {
+                continue;
+            }
+            for (k, x) in states.iter().enumerate().skip(1) {
+                for c in 0..circles {
+                    let (h, _) = rows.row(self.mpc.world(), x, k, c, i);
+                    if h < PRESSED && best.is_none_or(|b| h < b.1) {
+                        best = Some((i, h));
+                    }
+                }
+            }
+        }
+        best.map(|b| b.0)
+    }
+}
+
+/// Where obstacle `o`'s bounding disc is at `now` (predicted along its
+/// velocity).
+fn standing_at(o: &live::LiveObstacle, now: f64) -> P2 {
+    let (c, _) = o.shape.bounding_circle();
+    let dt = now - o.stamp;
+    [c[0] + o.velocity[0] * dt, c[1] + o.velocity[1] * dt]
 }
 
 /// The slow-down field's factor ([`live::slow_factor`]) along the MPC's plan

@@ -16,6 +16,7 @@
 
 use std::sync::Arc;
 
+use crate::live::LiveObstacle;
 use crate::model::{MachineParams, State};
 use crate::obstacle::{BadObstacle, Obstacle};
 use crate::site::geometry::P2;
@@ -36,6 +37,10 @@ pub enum Target {
     Bounds,
     /// The goal's circle `j`.
     Circle(usize),
+    /// A live obstacle `i` (`LiveSet::obstacles()[i]`): an MPC row only,
+    /// measured by [`World::live_row`] at the row's time, never by the
+    /// world's own queries.
+    Live(usize),
 }
 
 /// The least clearance of the outline: to what, by which of its circles.
@@ -185,6 +190,25 @@ impl World {
         self.circles.clear();
         self.circles.extend_from_slice(circles);
         Ok(())
+    }
+
+    /// Adds one circle (validated; `TooManyObstacles` when full, so no
+    /// allocation).
+    pub fn push_circle(&mut self, o: Obstacle) -> Result<(), WorldError> {
+        if self.circles.len() == self.circles.capacity() {
+            return Err(WorldError::TooManyObstacles {
+                given: self.circles.len() + 1,
+                max: self.circles.capacity(),
+            });
+        }
+        o.validate(self.circles.len())?;
+        self.circles.push(o);
+        Ok(())
+    }
+
+    /// Keeps the first `n` circles.
+    pub fn truncate_circles(&mut self, n: usize) {
+        self.circles.truncate(n);
     }
 
     pub fn clear_circles(&mut self) {
@@ -401,6 +425,7 @@ impl World {
             (Target::Feature(f), None) => format!("feature {f}"),
             (Target::Bounds, Some(site)) => format!("the bounds of site `{}`", site.site().id()),
             (Target::Bounds, None) => "the site's bounds".to_string(),
+            (Target::Live(i), _) => format!("live obstacle {i}"),
             (Target::Circle(j), _) => match self.circles.get(j) {
                 Some(o) => format!(
                     "obstacle {j} at ({:.2}, {:.2}) r {:.2} m",
@@ -450,7 +475,35 @@ impl World {
                 }
                 None => (f64::INFINITY, [0.0, 0.0]),
             },
+            // Not the world's: [`World::live_row`] measures it.
+            Target::Live(_) => (f64::INFINITY, [0.0, 0.0]),
         };
+        self.row_gradient(x, circle, n, h)
+    }
+
+    /// [`World::row`] for the live obstacle `o` predicted to time `t` (its
+    /// shape moved along its velocity from its stamp, DESIGN §18), less
+    /// `grow` (the prediction's reach, [`crate::live::LiveSettings::reach`]):
+    /// the obstacle's position is the row's constant, so the gradient is
+    /// the outline circle's alone (paper eq. 18 on a moving obstacle).
+    pub fn live_row(
+        &self,
+        x: &State,
+        circle: usize,
+        o: &LiveObstacle,
+        t: f64,
+        grow: f64,
+    ) -> (f64, [f64; 4]) {
+        let oc = &self.outline.circles()[circle];
+        let q = oc.center(&self.params, x);
+        let (d, n) = o.shape.nearest(o.relative(q, t));
+        self.row_gradient(x, circle, n, d - oc.radius - grow)
+    }
+
+    /// (h, ∇h) of outline circle `circle` for a clearance h whose gradient
+    /// in the plane at the circle's centre is `n`.
+    fn row_gradient(&self, x: &State, circle: usize, n: P2, h: f64) -> (f64, [f64; 4]) {
+        let oc = &self.outline.circles()[circle];
         let j = oc.jacobian(&self.params, x);
         let mut g = [0.0; 4];
         for (k, gk) in g.iter_mut().enumerate() {

@@ -8,7 +8,9 @@ pub use crate::obstacle::Obstacle;
 
 use crate::model::{Control, MachineParams, State};
 use crate::site::outline::MAX_OUTLINE_CIRCLES;
-use crate::world::{RowPair, World};
+use crate::world::{RowPair, Target, World};
+
+use super::live_rows::LiveRows;
 
 use super::layout::{QpLayout, AXLE_POINTS, OBS_STATES, SOFT_STATES};
 use super::settings::ObstacleConstraint;
@@ -49,6 +51,8 @@ pub struct ObstacleRows<'a> {
     pub pairs: &'a [RowPair],
     pub len: &'a [usize],
     pub stride: usize,
+    /// The live obstacles' rows (pairs of target `Target::Live`).
+    pub live: Option<&'a LiveRows>,
 }
 
 /// Obstacle rows (paper eq. 18 on the outline, DESIGN §17): for each row
@@ -59,7 +63,8 @@ pub struct ObstacleRows<'a> {
 /// * CBF form: h(x̄_{k+1}) + ∇h_{k+1}·Δx_{k+1} − (1 − γ)(h(x̄_k) + ∇h_k·Δx_k) + s ≥ 0,
 ///
 /// with h the clearance of c to t less c's margin ([`World::row`]: a
-/// feature's nearest edge is its half-plane at x̄) and ∇h over
+/// feature's nearest edge is its half-plane at x̄; a live obstacle is
+/// predicted to the stage's time, [`LiveRows::row`]) and ∇h over
 /// (x_f, y_f, θ, β), written as A w ≤ b. Empty slots get zero coefficients
 /// and b = 1 (always satisfied with a zero slack).
 pub fn fill_obstacles(
@@ -87,14 +92,22 @@ pub fn fill_obstacles(
                     b[r] = 1.0;
                     continue;
                 };
-                let margin = rows.margins[pair.circle];
-                let (h1, g1) = rows.world.row(&xbar[k + 1], pair.circle, pair.target);
+                // A live row's margins are in its h ([`LiveRows::row`]).
+                let (row, margin) = match (pair.target, rows.live) {
+                    (Target::Live(i), Some(live)) => (Some((live, i)), 0.0),
+                    _ => (None, rows.margins[pair.circle]),
+                };
+                let h = |n: usize| match row {
+                    Some((live, i)) => live.row(rows.world, &xbar[n], n, pair.circle, i),
+                    None => rows.world.row(&xbar[n], pair.circle, pair.target),
+                };
+                let (h1, g1) = h(k + 1);
                 for c in 0..m {
                     a[e[c]] = -g1[c];
                 }
                 b[r] = h1 - margin;
                 if cbf {
-                    let (h0, g0) = rows.world.row(&xbar[k], pair.circle, pair.target);
+                    let (h0, g0) = h(k);
                     let keep = 1.0 - gamma;
                     for c in 0..m {
                         a[e[m + c]] = keep * g0[c];
@@ -138,6 +151,7 @@ mod tests {
                 pairs: &[pair(0), pair(1), pair(0), pair(1)],
                 len: &[2, 2],
                 stride: 2,
+                live: None,
             },
             ObstacleConstraint::Distance,
             0.0,

@@ -42,6 +42,7 @@ pub mod constraints;
 pub mod cost;
 pub mod dynamics;
 pub mod layout;
+pub mod live_rows;
 pub mod path_cost;
 pub mod qp;
 pub mod riccati;
@@ -53,6 +54,7 @@ pub use constraints::Obstacle;
 pub use cost::{QuadraticCost, StageCost};
 pub use dynamics::{Dynamics, LinearDynamics, Rk4Model};
 pub use layout::QpLayout;
+pub use live_rows::LiveRows;
 pub use path_cost::{PathCost, PathWeights, MAX_PATH_POSES};
 pub use qp::{ClarabelBackend, QpBackend, QpData, QpOutcome, QpSolverBackend, QpStatus};
 pub use riccati::RiccatiBackend;
@@ -63,6 +65,7 @@ use crate::actor::{Actor, ActorWorkspace};
 use crate::delay::DelayCompensator;
 use crate::delay_estimate::DelayEstimator;
 use crate::gain::GainEstimator;
+use crate::live::{LiveSet, LiveSettings};
 use crate::model::{Control, Goal, MachineParams, State, VelocityCommand};
 use crate::site::index::Near;
 use crate::site::outline::Outline;
@@ -106,6 +109,8 @@ pub struct Mpc<C: StageCost, D: Dynamics = Rk4Model, B: QpBackend = QpSolverBack
     rows: Vec<RowPair>,
     row_len: Vec<usize>,
     near: Vec<Near>,
+    /// Live obstacles the rows keep off (`None`: not configured).
+    live: Option<LiveRows>,
     /// The plan, which is also the next linearisation point once shifted.
     xs: Vec<State>,
     us: Vec<Control>,
@@ -142,7 +147,7 @@ pub fn reachable_obstacles(
     out: &mut [usize; MAX_OBSTACLES],
 ) -> usize {
     let params = world.params();
-    let reach = settings.obstacle_reach(params) + outline_extent_beyond_axles(world, params);
+    let reach = plan_reach(settings, world);
     let q = crate::obstacle::AxlePoint::Front.position(params, x);
     let mut n = 0;
     for (j, o) in world.circles().iter().enumerate() {
@@ -153,6 +158,13 @@ pub fn reachable_obstacles(
         }
     }
     n
+}
+
+/// How far from x̂'s front axle a plan's outline can reach, margin
+/// included ([`reachable_obstacles`]).
+fn plan_reach(settings: &MpcSettings, world: &World) -> f64 {
+    let params = world.params();
+    settings.obstacle_reach(params) + outline_extent_beyond_axles(world, params)
 }
 
 /// How much farther from the front axle the outline reaches than the
@@ -264,6 +276,7 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
             rows: vec![RowPair::default(); n * row_stride(&settings)],
             row_len: vec![0; n],
             near: vec![Near::default(); row_stride(&settings)],
+            live: None,
             xs: vec![State::zeros(); n + 1],
             us: vec![Control::zeros(); n],
             backup_xs: vec![State::zeros(); n + 1],
@@ -315,6 +328,35 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
     pub fn set_outline(&mut self, outline: Outline, extra: &[f64]) {
         self.world.set_outline(outline);
         self.world.set_extra_margins(extra);
+    }
+
+    /// Keeps live obstacles off from now on, with rows predicted to each
+    /// stage's time ([`LiveRows`]).
+    pub fn enable_live(&mut self, settings: LiveSettings) {
+        self.live = Some(LiveRows::new(settings, self.settings.dt));
+    }
+
+    /// The newest live set, its stamps on the clock of [`Self::step`]'s
+    /// `now` (ignored unless [`Self::enable_live`]). No allocation.
+    pub fn set_live(&mut self, set: &LiveSet) {
+        if let Some(l) = &mut self.live {
+            l.set_obstacles(set);
+        }
+    }
+
+    /// Each outline circle's margin to a live obstacle beyond the stop
+    /// field's reach: the envelope's (`margins`, one per circle), to which
+    /// the rows add [`live_rows::PLAN_MARGIN`], so that its plan keeps out
+    /// of what the envelope stops for.
+    pub fn set_live_margins(&mut self, margins: &[f64]) {
+        if let Some(l) = &mut self.live {
+            l.set_margins(margins);
+        }
+    }
+
+    /// The live obstacles' rows (`None`: not configured).
+    pub fn live_rows(&self) -> Option<&LiveRows> {
+        self.live.as_ref()
     }
 
     /// The last tick's result.

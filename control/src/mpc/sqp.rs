@@ -109,6 +109,15 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
         // The QP of this tick: rows for the circles within reach of x̂.
         self.n_reach =
             super::reachable_obstacles(&self.settings, &self.world, &x_hat, &mut self.active);
+        if let Some(l) = &mut self.live {
+            let reach = super::plan_reach(&self.settings, &self.world);
+            l.select(
+                &x_hat,
+                now + self.delay.delay(),
+                self.settings.horizon,
+                reach,
+            );
+        }
         self.n_active = self.layout_for(self.n_reach);
         self.solution.qp_iterations = 0;
         self.solution.sqp_iterations = 0;
@@ -438,6 +447,7 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
                 pairs: &self.rows,
                 len: &self.row_len,
                 stride: super::row_stride(&s),
+                live: self.live.as_ref(),
             },
             s.obstacle_constraint,
             s.cbf_gamma,
@@ -451,16 +461,21 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
     }
 
     /// The QP of a tick with `n_reach` of the goal's circles within reach:
-    /// with a site, the one with every row; else the fewest slots that hold
-    /// every (outline circle, circle) pair (for the default outline: one
-    /// slot per circle, as before the site).
+    /// with a site or live obstacles near, the one with every row; else the
+    /// fewest slots that hold every (outline circle, circle) pair (for the
+    /// default outline: one slot per circle, as before the site).
     fn layout_for(&self, n_reach: usize) -> usize {
         let max = self.settings.max_obstacles;
-        if self.world.site().is_some() {
+        if self.world.site().is_some() || self.live_near() {
             return max;
         }
         let pairs = n_reach * self.world.outline().len();
         pairs.div_ceil(super::layout::AXLE_POINTS).min(max)
+    }
+
+    /// Whether live obstacles are near this tick's plan.
+    fn live_near(&self) -> bool {
+        self.live.as_ref().is_some_and(|l| !l.near().is_empty())
     }
 
     /// Each outline circle's margin [m]: its body's, plus its own extra.
@@ -477,7 +492,7 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
     }
 
     /// Chooses each row k's (outline circle, target) pairs at x̄_{k+1}
-    /// (DESIGN §17). Without a site, when every pair of the goal's circles
+    /// (DESIGN §17, §18). Without a site or live obstacles, when every pair of the goal's circles
     /// within reach has a slot, all of them in a fixed order (circle j, then
     /// outline circle: the rows of before the site, for the default
     /// outline); otherwise the pairs of least excess over their margins,
@@ -487,7 +502,8 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
         let stride = super::row_stride(&self.settings);
         let slots = super::layout::AXLE_POINTS * self.qps[self.n_active].layout.n_obs;
         let circles = self.world.outline().len();
-        let fixed = self.world.site().is_none() && self.n_reach * circles <= slots;
+        let fixed =
+            self.world.site().is_none() && !self.live_near() && self.n_reach * circles <= slots;
         let margins = self.row_margins();
         let body = [
             self.settings.obstacle_margin,
@@ -524,6 +540,21 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
                 }
                 self.world
                     .site_rows(x, body, reach, &mut self.near, out, &mut len);
+                if let Some(l) = &self.live {
+                    for &i in l.near() {
+                        for c in 0..circles {
+                            let (h, _) = l.row(&self.world, x, k + 1, c, i);
+                            if h < reach {
+                                let pair = RowPair {
+                                    circle: c,
+                                    target: Target::Live(i),
+                                    excess: h,
+                                };
+                                push_smallest(out, &mut len, pair);
+                            }
+                        }
+                    }
+                }
             }
             self.row_len[k] = len;
         }

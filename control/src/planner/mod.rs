@@ -107,6 +107,8 @@ pub enum NavError {
     TooManyObstacles { given: usize, max: usize },
     #[error(transparent)]
     BadObstacle(BadObstacle),
+    #[error("no goal is being driven")]
+    NoGoal,
 }
 
 /// How the last plan ended.

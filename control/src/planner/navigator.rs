@@ -81,6 +81,9 @@ pub struct Navigator {
     /// counts on a window that was already running (a replan's new target
     /// restarts the window, which is no progress).
     window_target: Option<Goal>,
+    /// How many of the world's circles are the goal's (the rest were
+    /// added by [`Navigator::avoid`]).
+    goal_circles: usize,
     /// Set by `set_goal`: the first `update` starts the clocks.
     clocks_pending: bool,
     last_progress: f64,
@@ -157,6 +160,7 @@ impl Navigator {
             goal: None,
             checker: ProgressChecker::new(settings.stall.progress),
             window_target: None,
+            goal_circles: 0,
             clocks_pending: false,
             last_progress: 0.0,
             last_replan: 0.0,
@@ -203,6 +207,7 @@ impl Navigator {
         }
         self.clear();
         self.world.set(obstacles)?;
+        self.goal_circles = obstacles.len();
         if let Err(conflict) = crate::goal_check::check_goal(self.world.world(), Some(start), &goal)
         {
             self.world.clear();
@@ -212,12 +217,7 @@ impl Navigator {
         self.clocks_pending = true;
         if self.world.is_empty() {
             // Nothing to plan: the critic drives to the goal.
-            self.route.clear();
-            self.route.targets.push(goal);
-            self.route.target_path_index.push(0);
-            self.route.report.outcome = PlanOutcome::Direct;
-            self.last_plan = Some(self.route.report);
-            self.plans += 1;
+            self.go_direct(goal);
         } else {
             self.ask(PlanKind::First, start, now);
         }
@@ -235,6 +235,52 @@ impl Navigator {
         self.last_progress = self.last_progress.max(now);
         self.last_replan = self.last_replan.max(now);
         self.checker.hold(now);
+    }
+
+    /// Something that stays in the way (a live obstacle that has kept the
+    /// machine waiting, DESIGN §18), as a circle of wire radius (the
+    /// half-width included): every plan of this goal from now on keeps off
+    /// it, and one is asked for at once from `x`. Errors: no goal, or no
+    /// room left among the circles; the route stays as it was.
+    pub fn avoid(&mut self, circle: Obstacle, x: &State, now: f64) -> Result<(), NavError> {
+        if self.goal.is_none() || self.aborted.is_some() {
+            return Err(NavError::NoGoal);
+        }
+        self.world.push(circle)?;
+        self.last_replan = now;
+        self.ask(PlanKind::Replan, x, now);
+        Ok(())
+    }
+
+    /// Forgets every circle [`Self::avoid`] added (what stayed has gone)
+    /// and asks for a plan from `x` without them. Nothing to forget: no
+    /// change.
+    pub fn forget_avoided(&mut self, x: &State, now: f64) {
+        if self.world.obstacles().len() == self.goal_circles
+            || self.goal.is_none()
+            || self.aborted.is_some()
+        {
+            return;
+        }
+        self.world.truncate(self.goal_circles);
+        self.last_replan = now;
+        match self.goal {
+            // Open ground again: the critic drives to the goal.
+            Some(goal) if self.world.is_empty() => self.go_direct(goal),
+            _ => self.ask(PlanKind::Replan, x, now),
+        }
+    }
+
+    /// The route is the goal alone (open ground: the critic drives there).
+    fn go_direct(&mut self, goal: Goal) {
+        self.route.clear();
+        self.route.targets.push(goal);
+        self.route.target_path_index.push(0);
+        self.route.report.outcome = PlanOutcome::Direct;
+        self.route_index = 0;
+        self.path_index = 0;
+        self.last_plan = Some(self.route.report);
+        self.plans += 1;
     }
 
     /// Every tick: what the MPC should drive to now. Allocation-free, and

@@ -46,6 +46,21 @@ impl CheckedWorld {
         })
     }
 
+    /// Adds one circle to the goal's (within the capacity).
+    pub fn push(&mut self, o: Obstacle) -> Result<(), NavError> {
+        self.world.push_circle(o).map_err(|e| match e {
+            WorldError::TooManyObstacles { given, max } => {
+                NavError::TooManyObstacles { given, max }
+            }
+            WorldError::BadObstacle(b) => NavError::BadObstacle(b),
+        })
+    }
+
+    /// Keeps the first `n` circles.
+    pub fn truncate(&mut self, n: usize) {
+        self.world.truncate_circles(n);
+    }
+
     /// Becomes `world` (no allocation while the outline stays).
     pub fn copy_from(&mut self, world: &World) {
         self.world.copy_from(world);

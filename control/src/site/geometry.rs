@@ -99,7 +99,7 @@ pub fn closest_on_segment(p: P2, a: P2, b: P2) -> (P2, f64) {
 /// Closest point to `p` on segment a–b and its squared distance: what a
 /// search over many segments compares (one square root for the winner; the
 /// envelope and the MPC ask every polygon near the machine each tick).
-fn closest_on_segment_squared(p: P2, a: P2, b: P2) -> (P2, f64) {
+pub fn closest_on_segment_squared(p: P2, a: P2, b: P2) -> (P2, f64) {
     let ab = sub(b, a);
     let l2 = dot(ab, ab);
     let t = if l2 > 0.0 {

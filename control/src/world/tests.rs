@@ -291,3 +291,52 @@ fn excess_among_the_features_near_is_the_index_answer_within_reach() {
     // Only the cases with something within the cap compare two distances.
     assert!(compared > 300, "{compared}");
 }
+
+/// A live obstacle's row: its value is the obstacle's own clearance at the
+/// row's time ([`LiveObstacle::clearance_at`], a second implementation)
+/// less the reach, and its gradient the finite differences' (circles and
+/// polygons, moving, both outlines).
+#[test]
+fn live_rows_are_the_predicted_clearance_and_its_gradient() {
+    use crate::live::{LiveClass, LiveShape};
+    let p = MachineParams::default();
+    let mut rng = ChaCha8Rng::seed_from_u64(11);
+    let shapes = [
+        LiveShape::circle([4.0, 1.0], 0.4).unwrap(),
+        LiveShape::polygon(&[[3.0, -1.0], [5.5, -0.5], [5.0, 1.5], [3.2, 1.0]]).unwrap(),
+    ];
+    for outline in [default_outline(), Outline::avant635()] {
+        let w = World::new(p, outline.clone(), 8);
+        for shape in shapes {
+            let o = LiveObstacle::new(7, LiveClass::Vehicle, shape, [-0.8, 0.6], 1.0).unwrap();
+            for _ in 0..200 {
+                let x = State::new(
+                    rng.gen_range(-2.0..6.0),
+                    rng.gen_range(-3.0..3.0),
+                    rng.gen_range(-3.2..3.2),
+                    rng.gen_range(-0.7..0.7),
+                    0.0,
+                    0.0,
+                );
+                let t = rng.gen_range(1.0..4.0);
+                for (c, placed) in w.place(&x)[..outline.len()].iter().enumerate() {
+                    let (h, g) = w.live_row(&x, c, &o, t, 0.3);
+                    let want = o.clearance_at(placed.center, placed.radius, t) - 0.3;
+                    assert!((h - want).abs() < 1e-12, "{h} {want}");
+                    for k in 0..4 {
+                        let e = 1e-6;
+                        let (mut xp, mut xm) = (x, x);
+                        xp[k] += e;
+                        xm[k] -= e;
+                        let fd = (w.live_row(&xp, c, &o, t, 0.3).0
+                            - w.live_row(&xm, c, &o, t, 0.3).0)
+                            / (2.0 * e);
+                        // Away from the polygon's corners' switch the
+                        // distance is smooth.
+                        assert!((g[k] - fd).abs() < 1e-5, "k {k}: {} vs {fd}", g[k]);
+                    }
+                }
+            }
+        }
+    }
+}
