@@ -76,18 +76,6 @@ impl LiveRows {
         self.t0 + k as f64 * self.dt
     }
 
-    /// MEASUREMENT SWITCH (removed in the next commit): WLNAV_LOOKAHEAD=s
-    /// grows the reach only up to s past x₀ (docs/decisions.md).
-    fn reach_time(&self, t: f64) -> f64 {
-        match std::env::var("WLNAV_LOOKAHEAD")
-            .ok()
-            .and_then(|v| v.parse::<f64>().ok())
-        {
-            Some(l) => t.min(self.t0 + l),
-            None => t,
-        }
-    }
-
     /// The obstacles near this tick.
     pub fn near(&self) -> &[usize] {
         &self.near
@@ -109,7 +97,7 @@ impl LiveRows {
             let (c, r) = o.shape.bounding_circle();
             let a = moved(c, o, t0);
             let b = moved(c, o, t_end);
-            let grow = self.settings.reach(self.reach_time(t_end) - o.stamp) + margin + r;
+            let grow = self.settings.reach(t_end - o.stamp) + margin + r;
             // A non-finite pose keeps every obstacle: the tick falls back anyway.
             if !(closest_on_segment_squared(p, a, b).1.sqrt() - grow > reach) {
                 self.near.push(i);
@@ -130,7 +118,7 @@ impl LiveRows {
     ) -> (f64, [f64; 4]) {
         let o = &self.set.obstacles()[i];
         let t = self.stage_time(k);
-        let grow = self.settings.reach(self.reach_time(t) - o.stamp) + self.margins[circle];
+        let grow = self.settings.reach(t - o.stamp) + self.margins[circle];
         world.live_row(x, circle, o, t, grow)
     }
 }
