@@ -29,6 +29,11 @@
 //! goes on, whereas the compensator continues the ramp from the measured β̇
 //! (errors of order 1e-4 in the pose over a 0.2 s window).
 
+/// Most commands recorded per command period: the tick's, and between
+/// ticks at most one slow-down and one protective stop when a live set
+/// arrives ([`crate::pilot::Pilot::check_live`]). The history is reserved
+/// for this many, so recording never allocates.
+pub const MAX_COMMANDS_PER_PERIOD: usize = 3;
 use std::collections::VecDeque;
 
 use crate::model::VelocityCommand;
@@ -124,7 +129,7 @@ impl DelayCompensator {
             });
         }
         // Commands issued one ramp apart: those in the window plus the active one.
-        let capacity = (delay / ramp).ceil() as usize + 4;
+        let capacity = MAX_COMMANDS_PER_PERIOD * ((delay / ramp).ceil() as usize + 4);
         Ok(Self {
             params,
             delay,
@@ -163,7 +168,8 @@ impl DelayCompensator {
     /// Makes room for the command history of delays up to `max_delay`, so that
     /// a later [`Self::set_delay`] does not allocate in a tick.
     pub fn reserve_for(&mut self, max_delay: f64) {
-        let n = ((max_delay.max(self.delay) + self.late_max) / self.ramp).ceil() as usize + 4;
+        let periods = ((max_delay.max(self.delay) + self.late_max) / self.ramp).ceil() as usize + 4;
+        let n = MAX_COMMANDS_PER_PERIOD * periods;
         self.history.reserve(n.saturating_sub(self.history.len()));
     }
 

@@ -112,6 +112,8 @@ struct Live {
     n_avoided: usize,
     /// What to tell the navigator at the next step.
     route_change: Option<RouteChange>,
+    /// A set's arrival slowed the machine since the last tick.
+    slowed_between_ticks: bool,
 }
 
 /// A change of the route's world for a live obstacle (issue 41 item 4).
@@ -237,6 +239,7 @@ impl<C: StageCost> Pilot<C> {
             avoided: [(0, [0.0; 2]); MAX_AVOIDED],
             n_avoided: 0,
             route_change: None,
+            slowed_between_ticks: false,
         });
         Ok(())
     }
@@ -261,12 +264,13 @@ impl<C: StageCost> Pilot<C> {
     /// `Some`: send its command at once (and record it through
     /// [`Self::sent`]): a protective stop (the hold starts), or the last
     /// command slowed down by the field (when that is at least
-    /// [`ARRIVAL_SLOWDOWN`] slower).
+    /// [`ARRIVAL_SLOWDOWN`] slower; once between two ticks).
     pub fn check_live(&mut self, x: &State, now: f64) -> Option<Guarded> {
         let l = self.live.as_ref()?;
         if l.set.is_empty() || self.last == VelocityCommand::ZERO || l.hold.is_some() {
             return None;
         }
+        let slowed_already = l.slowed_between_ticks;
         let guarded = envelope::guard(&self.envelope_input(x, now), self.last);
         let protective = guarded.overridden() && guarded.live.is_some_and(|c| c.excess < 0.0);
         if protective {
@@ -289,8 +293,14 @@ impl<C: StageCost> Pilot<C> {
             v: self.last.v * slow,
             ..self.last
         };
-        if (self.last.v - slowed.v).abs() < ARRIVAL_SLOWDOWN {
+        // One slow-down between ticks (the next tick slows on): with the
+        // protective stop, at most three commands a period
+        // ([`crate::delay::MAX_COMMANDS_PER_PERIOD`]).
+        if slowed_already || (self.last.v - slowed.v).abs() < ARRIVAL_SLOWDOWN {
             return None;
+        }
+        if let Some(l) = &mut self.live {
+            l.slowed_between_ticks = true;
         }
         Some(envelope::guard(&self.envelope_input(x, now), slowed))
     }
@@ -436,6 +446,9 @@ impl<C: StageCost> Pilot<C> {
         }
         let mut subgoal = None;
         let mut holding = false;
+        if let Some(l) = &mut self.live {
+            l.slowed_between_ticks = false;
+        }
         let change = self.live.as_mut().and_then(|l| l.route_change.take());
         match (change, &mut self.navigator) {
             (Some(RouteChange::Avoid(circle)), Some(nav)) => {

@@ -215,14 +215,17 @@ fn the_global_layer_and_the_pilot_do_not_allocate() {
 
     // The pilot with 128 live obstacles (DESIGN §18): a set taken every
     // tick and checked on arrival between ticks, the slow-down field, the
-    // hold after a protective stop. At the ticks they are off the way (set
-    // 0), between them in it (set 1).
+    // hold after a protective stop, the MPC's live rows, and a standing one
+    // planned round. For 20 ticks they are beside the way at the ticks (set
+    // 0: in reach of the MPC's rows) and in it between them (set 1), then
+    // in it at the ticks as well (the hold, and what stands is planned
+    // round); every other one stands.
     use control::live::{LiveClass, LiveObstacle, LiveSet, LiveSettings, LiveShape};
     let sets: Vec<LiveSet> = (0..2)
         .map(|j| {
             let obstacles: Vec<LiveObstacle> = (0..128)
                 .map(|i| {
-                    let off = if j == 0 { 30.0 } else { 0.0 };
+                    let off = if j == 0 { 9.0 } else { 0.0 };
                     let (x, y) = (
                         2.0 + 0.5 * (i % 16) as f64,
                         off - 6.0 + 1.5 * (i / 16) as f64,
@@ -237,7 +240,7 @@ fn the_global_layer_and_the_pilot_do_not_allocate() {
                         i + 1000 * j as u32,
                         LiveClass::Person,
                         shape,
-                        [0.0, 0.5],
+                        [0.0, 0.5 * (i % 2) as f64],
                         0.0,
                     )
                     .unwrap()
@@ -257,7 +260,12 @@ fn the_global_layer_and_the_pilot_do_not_allocate() {
         Default::default(),
     )
     .unwrap();
-    pilot.enable_live(LiveSettings::default()).unwrap();
+    pilot
+        .enable_live(LiveSettings {
+            replan_after: 1.0,
+            ..LiveSettings::default()
+        })
+        .unwrap();
     let start = State::new(0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
     let mut fresh = LiveSet::new();
     // A copy of `sets[j]` seen at `t`: fresh, the obstacles moving on.
@@ -271,11 +279,11 @@ fn the_global_layer_and_the_pilot_do_not_allocate() {
     pilot
         .set_goal(&start, Goal::new(12.0, 0.0, 0.0), &[], 0.0)
         .unwrap();
-    let (mut stopped, mut ticks) = (0, 0);
+    let (mut stopped, mut ticks, mut rows) = (0, 0, 0);
     for k in 0..40 {
         let now = k as f64 * 0.2;
         let x = State::new(0.05 * k as f64, 0.0, 0.0, 0.0, 0.0, 0.5);
-        restamp(&mut fresh, 0, now);
+        restamp(&mut fresh, usize::from(k >= 20), now);
         pilot.set_live(&fresh);
         let command = match pilot.step(&x, now, Instant::now()).unwrap() {
             PilotDecision::Drive(s) => {
@@ -285,6 +293,12 @@ fn the_global_layer_and_the_pilot_do_not_allocate() {
             PilotDecision::Abort(_) | PilotDecision::Stop { .. } => VelocityCommand::ZERO,
         };
         pilot.sent(now, command);
+        rows += usize::from(
+            pilot
+                .mpc()
+                .live_rows()
+                .is_some_and(|r| !r.near().is_empty()),
+        );
         restamp(&mut fresh, 1, now + 0.1);
         pilot.set_live(&fresh);
         if let Some(g) = pilot.check_live(&x, now + 0.1) {
@@ -295,6 +309,9 @@ fn the_global_layer_and_the_pilot_do_not_allocate() {
     let after = common::allocations();
     assert_eq!(ticks, 40);
     assert!(stopped > 0, "the obstacles are in the way");
+    assert!(rows > 20, "the MPC's live rows at {rows} ticks");
+    let plans = pilot.navigator().map_or(0, |n| n.plans());
+    assert!(plans >= 2, "planned round what stands: {plans} plans");
     assert_eq!(
         after - before,
         0,
