@@ -8,8 +8,8 @@ docs/movers/failures.csv (the runs listed), the open-ground truck's runs at 60 s
 there are some, and copies each run's results.csv to
 docs/movers/results/; replaces the part of docs/movers.md between the markers
 `<!-- movers_table begin -->` and `<!-- movers_table end -->` (and the headline, all files of
-a set pooled, between `<!-- headline begin -->` and `<!-- headline end -->`) when it has
-them. Usage:
+a set pooled, with their protective stops, between `<!-- headline begin -->` and
+`<!-- headline end -->`) when it has them. Usage:
     python3 scripts/movers_table.py [OUT] [COMMIT]
 """
 import csv
@@ -143,8 +143,8 @@ for name, rows in (("table.csv", table), ("failures.csv", failures)):
             w.writeheader()
             w.writerows(rows)
 # The headline: per set and case, all its mover files pooled.
-head = ["| set | case | files | reached (worst file) | t / T* with / without (n) | runs < 0 | least clearance [m] |",
-        "|---|---|---|---|---|---|---|"]
+head = ["| set | case | files | reached (worst file) | t / T* with / without (n) | runs < 0 | least clearance [m] | stops (runs) |",
+        "|---|---|---|---|---|---|---|---|"]
 for key, title, _, _ in SETS:
     for case, label in CASES:
         rs = [r for r in table if r["set"] == key and r["case"] == case]
@@ -157,7 +157,8 @@ for key, title, _, _ in SETS:
         wo = sum(float(r["t_over_tstar_without"]) * r["n_both"] for r in rs) / nb
         head.append(f"| {key} | {label} | {len(rs)} | {got}/{n} = {100 * got / n:.1f} % ({worst['movers']} "
                     f"{100 * worst['reached'] / worst['n']:.1f} %) | {w:.3f} / {wo:.3f} ({nb}) | "
-                    f"{sum(r['runs_below_0'] for r in rs)} | {min(float(r['least_clearance_moving']) for r in rs):.3f} |")
+                    f"{sum(r['runs_below_0'] for r in rs)} | {min(float(r['least_clearance_moving']) for r in rs):.3f} | "
+                    f"{sum(r['protective_stops'] for r in rs)} ({sum(r['runs_with_stops'] for r in rs)}) |")
 headline = "\n".join(head) + "\n"
 (out / "movers_headline.md").write_text(headline)
 text = "\n".join(lines) + "\n"
