@@ -42,9 +42,6 @@ pub struct LiveRows {
     /// The obstacles a plan from this tick's x̂ can come near (indices into
     /// the set), [`LiveRows::select`].
     near: Vec<usize>,
-    /// Per obstacle of the set: how deep x̂ already is in its field [m]
-    /// (0 outside), which its rows give up ([`LiveRows::select`]).
-    relief: Vec<f64>,
 }
 
 impl LiveRows {
@@ -57,7 +54,6 @@ impl LiveRows {
             t0: 0.0,
             dt,
             near: Vec::with_capacity(MAX_LIVE_OBSTACLES),
-            relief: Vec::with_capacity(MAX_LIVE_OBSTACLES),
         }
     }
 
@@ -91,17 +87,9 @@ impl LiveRows {
     /// circles): those whose swept disc (its bounding disc along its
     /// velocity over the horizon, grown by the prediction's reach and the
     /// largest margin) comes that near.
-    ///
-    /// A machine already inside an obstacle's field (a person who stepped
-    /// up to it at rest) gets rows that keep it from going deeper, not rows
-    /// that push it out: the envelope holds it until the field is clear,
-    /// and a plan pushed out to wherever the slack is cheapest was the one
-    /// it then drove (docs/movers.md, D4).
-    pub fn select(&mut self, world: &World, x_hat: &State, t0: f64, horizon: usize, reach: f64) {
+    pub fn select(&mut self, x_hat: &State, t0: f64, horizon: usize, reach: f64) {
         self.t0 = t0;
         self.near.clear();
-        self.relief.clear();
-        self.relief.resize(self.set.obstacles().len(), 0.0);
         let p = [x_hat[ix::X], x_hat[ix::Y]];
         let t_end = self.stage_time(horizon);
         let margin = self.margins.iter().copied().fold(0.0, f64::max);
@@ -115,19 +103,11 @@ impl LiveRows {
                 self.near.push(i);
             }
         }
-        for k in 0..self.near.len() {
-            let i = self.near[k];
-            let depth = (0..world.outline().len())
-                .map(|c| -self.row(world, x_hat, 0, c, i).0)
-                .fold(0.0, f64::max);
-            self.relief[i] = depth;
-        }
     }
 
     /// (h, ∇h) of the row of outline circle `circle` against obstacle `i` at
     /// stage k's state `x`: the clearance less the margin and the reach
-    /// ([`World::live_row`]), plus how deep x̂ is in the field
-    /// ([`LiveRows::select`]).
+    /// ([`World::live_row`]).
     pub fn row(
         &self,
         world: &World,
@@ -139,8 +119,7 @@ impl LiveRows {
         let o = &self.set.obstacles()[i];
         let t = self.stage_time(k);
         let grow = self.settings.reach(t - o.stamp) + self.margins[circle];
-        let (h, g) = world.live_row(x, circle, o, t, grow);
-        (h + self.relief.get(i).copied().unwrap_or(0.0), g)
+        world.live_row(x, circle, o, t, grow)
     }
 }
 
@@ -148,52 +127,4 @@ impl LiveRows {
 fn moved(c: [f64; 2], o: &LiveObstacle, t: f64) -> [f64; 2] {
     let dt = t - o.stamp;
     [c[0] + o.velocity[0] * dt, c[1] + o.velocity[1] * dt]
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::live::{LiveClass, LiveShape};
-    use crate::model::MachineParams;
-
-    fn rows_with(at: [f64; 2]) -> (LiveRows, World) {
-        let world = World::with_axle_circles(MachineParams::default(), 8);
-        let mut rows = LiveRows::new(LiveSettings::default(), 0.2);
-        let mut set = LiveSet::new();
-        set.start(0.0).unwrap();
-        let shape = LiveShape::circle(at, 0.3).unwrap();
-        set.push(LiveObstacle::new(1, LiveClass::Person, shape, [0.0, 0.0], 0.0).unwrap())
-            .unwrap();
-        rows.set_obstacles(&set);
-        rows.set_margins(&[0.1, 0.1]);
-        (rows, world)
-    }
-
-    /// Outside the field, a row is the predicted clearance less the margins
-    /// and the reach; from inside it, the rows give up exactly the depth at
-    /// x̂ (no deeper, not pushed out), and a state farther in goes negative.
-    #[test]
-    fn a_machine_inside_a_field_is_kept_from_going_deeper_not_pushed_out() {
-        let x = State::zeros();
-        let world = World::with_axle_circles(MachineParams::default(), 8);
-        let s = LiveSettings::default();
-        let margin = 0.1 + PLAN_MARGIN;
-        for (at, inside) in [([4.0, 0.0], false), ([1.5, 0.0], true)] {
-            let (mut rows, _) = rows_with(at);
-            rows.select(&world, &x, 0.0, 10, 10.0);
-            assert_eq!(rows.near(), &[0]);
-            let (h, _) = rows.row(&world, &x, 0, 0, 0);
-            let clearance = at[0] - 0.3 - 0.65;
-            let raw = clearance - margin - s.reach(0.0);
-            if inside {
-                assert!(raw < 0.0);
-                assert!(h.abs() < 1e-12, "{h}");
-                let deeper = State::new(0.3, 0.0, 0.0, 0.0, 0.0, 0.0);
-                assert!((rows.row(&world, &deeper, 0, 0, 0).0 + 0.3).abs() < 1e-9);
-            } else {
-                assert!(raw > 0.0);
-                assert!((h - raw).abs() < 1e-12, "{h} {raw}");
-            }
-        }
-    }
 }

@@ -112,7 +112,6 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
         if let Some(l) = &mut self.live {
             let reach = super::plan_reach(&self.settings, &self.world);
             l.select(
-                &self.world,
                 &x_hat,
                 now + self.delay.delay(),
                 self.settings.horizon,
