@@ -106,14 +106,58 @@ struct Live {
     /// The standing obstacle the machine waits for, and since when (its
     /// id; [`LiveSettings::replan_after`]).
     blocked: Option<(u32, f64)>,
-    /// Obstacles planned around for this goal: their ids and where they
-    /// stood (each once, while it stays).
+    /// Obstacles planned round for this goal: their ids and where they
+    /// stood (each once, while it stays; [`Live::plan_round`]).
     avoided: [(u32, P2); MAX_AVOIDED],
     n_avoided: usize,
     /// What to tell the navigator at the next step.
     route_change: Option<RouteChange>,
     /// A set's arrival slowed the machine since the last tick.
     slowed_between_ticks: bool,
+}
+
+impl Live {
+    /// Replanning round what stays (issue 41 item 4), given the standing
+    /// obstacle (index in the set) the machine waits for this tick: one
+    /// that has kept it waiting for `replan_after` is planned round, as a
+    /// circle of its stop field while the set is fresh (C_stop + σ_u ·
+    /// max_age; the MPC's rows grow it further along their horizon) plus
+    /// `extra`; not larger, as a start inside the circle would leave no
+    /// route. Once one of them has gone (out of the set, or moved on), all
+    /// are forgotten (a route round nothing is a detour) and what still
+    /// stands is planned round again when it keeps the machine waiting.
+    fn plan_round(&mut self, standing: Option<usize>, now: f64, extra: f64) {
+        let obstacles = self.set.obstacles();
+        self.blocked = match (standing, self.blocked) {
+            (Some(i), Some((id, since))) if obstacles[i].id == id => Some((id, since)),
+            (Some(i), _) => Some((obstacles[i].id, now)),
+            (None, _) => None,
+        };
+        let gone = self.avoided[..self.n_avoided].iter().any(|&(id, at)| {
+            !obstacles.iter().any(|o| {
+                let p = standing_at(o, now);
+                o.id == id && (p[0] - at[0]).hypot(p[1] - at[1]) < live::JUMP_TOLERANCE
+            })
+        });
+        if gone {
+            self.n_avoided = 0;
+            self.route_change = Some(RouteChange::Forget);
+        }
+        let (Some(i), Some((id, since))) = (standing, self.blocked) else {
+            return;
+        };
+        let done = self.avoided[..self.n_avoided].iter().any(|a| a.0 == id);
+        if done || now - since < self.settings.replan_after || self.n_avoided == MAX_AVOIDED {
+            return;
+        }
+        let o = &obstacles[i];
+        let (_, r) = o.shape.bounding_circle();
+        let at = standing_at(o, now);
+        self.avoided[self.n_avoided] = (id, at);
+        self.n_avoided += 1;
+        let radius = r + self.settings.reach(self.settings.max_age) + extra;
+        self.route_change = Some(RouteChange::Avoid(Obstacle::new(at[0], at[1], radius)));
+    }
 }
 
 /// A change of the route's world for a live obstacle (issue 41 item 4).
@@ -497,15 +541,15 @@ impl<C: StageCost> Pilot<C> {
             ),
             None => (&[][..], 0.0, Duration::ZERO),
         };
+        // The envelope's margins as they are now (widened or not by the
+        // assumptions' check): the MPC's live rows keep them.
+        let live_margins = self
+            .assumptions
+            .effective()
+            .circle_margins(&self.params, self.world.outline());
         if self.live.is_some() {
-            // The MPC's live rows keep the envelope's margins (as they are
-            // now, widened or not by the assumptions' check).
-            let margins = self
-                .assumptions
-                .effective()
-                .circle_margins(&self.params, self.world.outline());
             self.mpc
-                .set_live_margins(&margins[..self.world.outline().len()]);
+                .set_live_margins(&live_margins[..self.world.outline().len()]);
         }
         let mut proposed = if holding {
             // Holding for the first route: a stop at the limits (at rest, rest).
@@ -548,14 +592,12 @@ impl<C: StageCost> Pilot<C> {
         };
         let stop = envelope::stop_command(self.last, Some(x), &self.params, self.dt);
         let mut command = guarded.command;
-        let half_width = self.world.outline().half_width();
-        let margin = self
-            .assumptions
-            .effective()
-            .circle_margins(&self.params, self.world.outline())
-            .iter()
-            .fold(0.0, |m: f64, v| m.max(*v))
-            + crate::mpc::live_rows::PLAN_MARGIN;
+        // What a circle planned round adds to the obstacle's stop field:
+        // the rows' largest margin and the half-width (a wire circle's
+        // radius holds it).
+        let round_extra = live_margins.iter().fold(0.0, |m: f64, v| m.max(*v))
+            + crate::mpc::live_rows::PLAN_MARGIN
+            + self.world.outline().half_width();
         let live_status = self.live.as_mut().map(|l| {
             let freshness = l.freshness.update(now, &l.settings);
             if guarded.overridden() && inside(guarded.live) {
@@ -578,8 +620,7 @@ impl<C: StageCost> Pilot<C> {
             } else {
                 None
             };
-            // A standing obstacle that keeps it waiting `replan_after` is
-            // planned around (issue 41 item 4), once per goal.
+            // A standing obstacle that keeps it waiting is planned round.
             let standing = pressed.or_else(|| {
                 guarded
                     .live
@@ -587,43 +628,7 @@ impl<C: StageCost> Pilot<C> {
                     .and_then(|c| l.set.obstacles().iter().position(|o| o.id == c.id))
                     .filter(|&i| l.set.obstacles()[i].speed() < live::STANDING_SPEED)
             });
-            l.blocked = match (standing, l.blocked) {
-                (Some(i), Some((id, since))) if l.set.obstacles()[i].id == id => Some((id, since)),
-                (Some(i), _) => Some((l.set.obstacles()[i].id, now)),
-                (None, _) => None,
-            };
-            // What was planned round and has gone (out of the set, or
-            // moved on) is forgotten, all of it: a route round nothing is
-            // a detour; what still stands is planned round again.
-            let gone = l.avoided[..l.n_avoided].iter().any(|&(id, at)| {
-                !l.set.obstacles().iter().any(|o| {
-                    o.id == id && {
-                        let p = standing_at(o, now);
-                        (p[0] - at[0]).hypot(p[1] - at[1]) < live::JUMP_TOLERANCE
-                    }
-                })
-            });
-            if gone {
-                l.n_avoided = 0;
-                l.route_change = Some(RouteChange::Forget);
-            }
-            if let (Some(i), Some((id, since))) = (standing, l.blocked) {
-                let done = l.avoided[..l.n_avoided].iter().any(|a| a.0 == id);
-                if !done && now - since >= l.settings.replan_after && l.n_avoided < MAX_AVOIDED {
-                    let o = &l.set.obstacles()[i];
-                    let (_, r) = o.shape.bounding_circle();
-                    let at = standing_at(o, now);
-                    l.avoided[l.n_avoided] = (id, at);
-                    l.n_avoided += 1;
-                    // Its stop field while the set is fresh (C_stop + σ_u ·
-                    // max_age; the MPC's rows grow it further along their
-                    // horizon), the rows' margins and the half-width (a
-                    // wire circle's radius holds it). Not larger: a start
-                    // inside the circle would leave no route.
-                    let radius = r + l.settings.reach(l.settings.max_age) + margin + half_width;
-                    l.route_change = Some(RouteChange::Avoid(Obstacle::new(at[0], at[1], radius)));
-                }
-            }
+            l.plan_round(standing, now, round_extra);
             let stale = l.settings.required && freshness != FreshnessState::Fresh;
             if l.hold.is_some() || stale {
                 command = stop;

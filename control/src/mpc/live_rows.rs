@@ -1,8 +1,8 @@
 //! The MPC's rows for live obstacles (DESIGN §18, issue 41): perception's
 //! newest set, each obstacle predicted along its velocity from its own stamp
-//! to the time of the row's stage, kept outside its stop field there (C_stop
-//! + σ_u per second of prediction, as the envelope and the slow-down field
-//! see it) with the envelope's margins and [`PLAN_MARGIN`]. A plan the MPC
+//! to the time of the row's stage, kept outside its stop field there
+//! (C_stop plus σ_u per second of prediction, as the envelope and the
+//! slow-down field see it) with the envelope's margins and [`PLAN_MARGIN`]. A plan the MPC
 //! finds is then one the slow-down field does not slow and the envelope
 //! lets through: the MPC steers round what it can and the envelope stops
 //! for what it cannot. The rows are soft, like every obstacle row.
