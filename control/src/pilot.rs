@@ -598,10 +598,8 @@ impl<C: StageCost> Pilot<C> {
         let round_extra = live_margins.iter().fold(0.0, |m: f64, v| m.max(*v))
             + crate::mpc::live_rows::PLAN_MARGIN
             + self.world.outline().half_width();
-        let mut released = false;
         let live_status = self.live.as_mut().map(|l| {
             let freshness = l.freshness.update(now, &l.settings);
-            let was_held = l.hold.is_some();
             if guarded.overridden() && inside(guarded.live) {
                 // A protective stop: held until the way clears.
                 l.hold = Some((l.hold.map_or(now, |h| h.0), None));
@@ -617,7 +615,6 @@ impl<C: StageCost> Pilot<C> {
                     clear => Some((since, clear)),
                 };
             }
-            released = was_held && l.hold.is_none();
             l.waiting_since = if l.hold.is_some() || slow < 1.0 || pressed.is_some() {
                 l.waiting_since.or(Some(now))
             } else {
@@ -644,9 +641,6 @@ impl<C: StageCost> Pilot<C> {
                 contact: guarded.live,
             }
         });
-        if released && std::env::var_os("WLNAV_RESTART").is_some() {
-            self.mpc.restart_plan();
-        }
         Ok(PilotDecision::Drive(PilotStep {
             command,
             proposed,

@@ -397,12 +397,6 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
         self.set_obstacle_weight(self.settings.obstacle_slack_weight);
     }
 
-    /// Forgets the plan (not the goal): the next step starts from an actor
-    /// roll-out, as for a new goal.
-    pub fn restart_plan(&mut self) {
-        self.has_plan = false;
-    }
-
     /// Forgets the goal, the plan and the command history: for a new machine
     /// (e.g. the simulator's next scenario), not for a new goal of the same one.
     pub fn reset(&mut self) {
