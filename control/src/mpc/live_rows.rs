@@ -2,12 +2,13 @@
 //! newest set, each obstacle predicted along its velocity from its own stamp
 //! to the time of the row's stage, kept outside its stop field there
 //! (C_stop plus σ_u per second of prediction, as the envelope and the
-//! slow-down field see it) with the envelope's margins and [`PLAN_MARGIN`]. A plan the MPC
-//! finds is then one the slow-down field does not slow and the envelope
-//! lets through: the MPC steers round what it can and the envelope stops
-//! for what it cannot. The rows are soft, like every obstacle row.
+//! slow-down field see it) with the envelope's margins and
+//! [`PLAN_MARGIN`]. A plan the MPC finds is then one the slow-down field
+//! does not slow and the envelope lets through: the MPC steers round what
+//! it can and the envelope stops for what it cannot. The rows are soft,
+//! like every obstacle row.
 //!
-//! Measured (docs/movers.md, "The MPC's live rows"): the reach grown along
+//! Measured (docs/decisions.md, "The MPC's live rows"): the reach grown along
 //! the whole horizon against grown only as far as the envelope's stop from
 //! top speed (1.2 s) or not at all: the whole horizon had the fewest
 //! protective stops and the shortest times. It can hold the machine in
