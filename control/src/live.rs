@@ -233,6 +233,14 @@ impl LiveObstacle {
         self.shape.signed_distance(self.relative(c, t)) - r
     }
 
+    /// The point `c` of the obstacle as seen at its stamp, moved along its
+    /// velocity to time `t`.
+    #[inline]
+    pub fn moved(&self, c: P2, t: f64) -> P2 {
+        let dt = t - self.stamp;
+        [c[0] + self.velocity[0] * dt, c[1] + self.velocity[1] * dt]
+    }
+
     /// Where the point `c` is at time `t` relative to the obstacle seen at
     /// its stamp: `c` moved back along the obstacle's velocity.
     #[inline]

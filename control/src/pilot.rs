@@ -135,7 +135,7 @@ impl Live {
         };
         let gone = self.avoided[..self.n_avoided].iter().any(|&(id, at)| {
             !obstacles.iter().any(|o| {
-                let p = standing_at(o, now);
+                let p = o.moved(o.shape.bounding_circle().0, now);
                 o.id == id && (p[0] - at[0]).hypot(p[1] - at[1]) < live::JUMP_TOLERANCE
             })
         });
@@ -151,8 +151,8 @@ impl Live {
             return;
         }
         let o = &obstacles[i];
-        let (_, r) = o.shape.bounding_circle();
-        let at = standing_at(o, now);
+        let (c, r) = o.shape.bounding_circle();
+        let at = o.moved(c, now);
         self.avoided[self.n_avoided] = (id, at);
         self.n_avoided += 1;
         let radius = r + self.settings.reach(self.settings.max_age) + extra;
@@ -715,14 +715,6 @@ impl<C: StageCost> Pilot<C> {
         }
         best.map(|b| b.0)
     }
-}
-
-/// Where obstacle `o`'s bounding disc is at `now` (predicted along its
-/// velocity).
-fn standing_at(o: &live::LiveObstacle, now: f64) -> P2 {
-    let (c, _) = o.shape.bounding_circle();
-    let dt = now - o.stamp;
-    [c[0] + o.velocity[0] * dt, c[1] + o.velocity[1] * dt]
 }
 
 /// The slow-down field's factor ([`live::slow_factor`]) along the MPC's plan

@@ -17,7 +17,7 @@
 //!
 //! Allocation-free after [`LiveRows::new`].
 
-use crate::live::{LiveObstacle, LiveSet, LiveSettings, MAX_LIVE_OBSTACLES};
+use crate::live::{LiveSet, LiveSettings, MAX_LIVE_OBSTACLES};
 use crate::model::{ix, State};
 use crate::site::geometry::closest_on_segment_squared;
 use crate::site::outline::MAX_OUTLINE_CIRCLES;
@@ -96,8 +96,8 @@ impl LiveRows {
         let margin = self.margins.iter().copied().fold(0.0, f64::max);
         for (i, o) in self.set.obstacles().iter().enumerate() {
             let (c, r) = o.shape.bounding_circle();
-            let a = moved(c, o, t0);
-            let b = moved(c, o, t_end);
+            let a = o.moved(c, t0);
+            let b = o.moved(c, t_end);
             let grow = self.settings.reach(t_end - o.stamp) + margin + r;
             // A non-finite pose keeps every obstacle: the tick falls back anyway.
             if !(closest_on_segment_squared(p, a, b).1.sqrt() - grow > reach) {
@@ -122,10 +122,4 @@ impl LiveRows {
         let grow = self.settings.reach(t - o.stamp) + self.margins[circle];
         world.live_row(x, circle, o, t, grow)
     }
-}
-
-/// Point `c` of obstacle `o` at time `t`.
-fn moved(c: [f64; 2], o: &LiveObstacle, t: f64) -> [f64; 2] {
-    let dt = t - o.stamp;
-    [c[0] + o.velocity[0] * dt, c[1] + o.velocity[1] * dt]
 }
