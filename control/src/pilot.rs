@@ -519,6 +519,10 @@ impl<C: StageCost> Pilot<C> {
                     if self.costs_seen != Some(nav.cost_version()) {
                         self.costs_seen = Some(nav.cost_version());
                         self.mpc.set_path_cost(nav.path_cost());
+                        self.mpc.set_track_cost(nav.track_cost());
+                    }
+                    if let Some(track) = nav.track_cost() {
+                        self.mpc.set_track_time(track.time());
                     }
                     subgoal = (!final_target).then_some(target);
                 }

@@ -27,3 +27,4 @@ pub mod results;
 pub mod robustness;
 pub mod routes;
 pub mod runner;
+pub mod trajectory;

@@ -345,6 +345,10 @@ enum Command {
         /// `measured` (its wall time; not deterministic).
         #[arg(long, value_name = "S|measured", value_parser = parse_plan_delay)]
         plan_delay: Option<PlanDelay>,
+        /// Shape every searched route by a minimum-time trajectory (issue 42,
+        /// `sim::trajectory`) and follow it.
+        #[arg(long)]
+        trajectory: bool,
         /// Results file whose min-time rows give T* (e.g. docs/results/worksite.csv
         /// for obstacles200), so t / T* is reported without solving the bound again.
         #[arg(long, value_name = "FILE")]
@@ -505,6 +509,7 @@ fn main() -> Result<()> {
             no_planner,
             navigator_overrides,
             plan_delay,
+            trajectory,
             t_star,
             site,
             outline,
@@ -554,6 +559,7 @@ fn main() -> Result<()> {
             if let Some(d) = plan_delay {
                 cfg.plan_delay = d;
             }
+            cfg.trajectory = trajectory.then(sim::trajectory::TrajectorySettings::default);
             cfg.plant = PlantConfig {
                 delay,
                 tau_beta_dot: lag,

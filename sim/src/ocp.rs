@@ -204,44 +204,58 @@ impl IntervalFootprint {
     /// The interpolated state at τ and its Jacobian with respect to the
     /// local variables (6 × nv, row-major).
     fn point(&self, z: &[f64], tau: f64, jac: &mut [f64]) -> State {
-        let nv = self.vars.len();
-        let x0 = State::from_column_slice(&z[0..6]);
-        let u = Control::new(z[6], z[7]);
-        let x1 = State::from_column_slice(&z[8..14]);
-        let (h, dh_dt) = match self.h {
-            Some(h) => (h, 0.0),
-            None => (z[14] / self.intervals as f64, 1.0 / self.intervals as f64),
-        };
-        let (t2, t3) = (tau * tau, tau * tau * tau);
-        let h00 = 2.0 * t3 - 3.0 * t2 + 1.0;
-        let h10 = t3 - 2.0 * t2 + tau;
-        let h01 = -2.0 * t3 + 3.0 * t2;
-        let h11 = t3 - t2;
-        let p = &self.params;
-        let f0 = control::model::f_continuous(p, &x0, &u);
-        let f1 = control::model::f_continuous(p, &x1, &u);
-        let x = x0 * h00 + f0 * (h10 * h) + x1 * h01 + f1 * (h11 * h);
-        let a0 = crate::collocation::jacobian_x(p, &x0) * (h10 * h);
-        let a1 = crate::collocation::jacobian_x(p, &x1) * (h11 * h);
-        let b = crate::collocation::jacobian_u() * ((h10 + h11) * h);
-        let dh = (f0 * h10 + f1 * h11) * dh_dt;
-        jac[..6 * nv].fill(0.0);
-        for r in 0..6 {
-            let row = &mut jac[r * nv..(r + 1) * nv];
-            for c in 0..6 {
-                row[c] = a0[(r, c)];
-                row[8 + c] = a1[(r, c)];
-            }
-            row[r] += h00;
-            row[8 + r] += h01;
-            row[6] = b[(r, 0)];
-            row[7] = b[(r, 1)];
-            if nv == 15 {
-                row[14] = dh[r];
-            }
-        }
-        x
+        interval_point(&self.params, self.h, self.intervals, z, tau, jac)
     }
+}
+
+/// The state at τ ∈ [0, 1] inside the interval whose local variables are
+/// `z` = (x_k, u_k, x_{k+1}[, T]) (cubic Hermite on the nodes and their
+/// derivatives), and its Jacobian with respect to them (6 × nv, row-major;
+/// nv = 15 with T, h = T / `intervals`, else h fixed).
+pub(crate) fn interval_point(
+    p: &MachineParams,
+    fixed_h: Option<f64>,
+    intervals: usize,
+    z: &[f64],
+    tau: f64,
+    jac: &mut [f64],
+) -> State {
+    let nv = z.len();
+    let x0 = State::from_column_slice(&z[0..6]);
+    let u = Control::new(z[6], z[7]);
+    let x1 = State::from_column_slice(&z[8..14]);
+    let (h, dh_dt) = match fixed_h {
+        Some(h) => (h, 0.0),
+        None => (z[14] / intervals as f64, 1.0 / intervals as f64),
+    };
+    let (t2, t3) = (tau * tau, tau * tau * tau);
+    let h00 = 2.0 * t3 - 3.0 * t2 + 1.0;
+    let h10 = t3 - 2.0 * t2 + tau;
+    let h01 = -2.0 * t3 + 3.0 * t2;
+    let h11 = t3 - t2;
+    let f0 = control::model::f_continuous(p, &x0, &u);
+    let f1 = control::model::f_continuous(p, &x1, &u);
+    let x = x0 * h00 + f0 * (h10 * h) + x1 * h01 + f1 * (h11 * h);
+    let a0 = crate::collocation::jacobian_x(p, &x0) * (h10 * h);
+    let a1 = crate::collocation::jacobian_x(p, &x1) * (h11 * h);
+    let b = crate::collocation::jacobian_u() * ((h10 + h11) * h);
+    let dh = (f0 * h10 + f1 * h11) * dh_dt;
+    jac[..6 * nv].fill(0.0);
+    for r in 0..6 {
+        let row = &mut jac[r * nv..(r + 1) * nv];
+        for c in 0..6 {
+            row[c] = a0[(r, c)];
+            row[8 + c] = a1[(r, c)];
+        }
+        row[r] += h00;
+        row[8 + r] += h01;
+        row[6] = b[(r, 0)];
+        row[7] = b[(r, 1)];
+        if nv == 15 {
+            row[14] = dh[r];
+        }
+    }
+    x
 }
 
 impl Element for IntervalFootprint {
@@ -400,7 +414,7 @@ fn footprint_elements(
 }
 
 /// The start state inside the model's bounds (what the plant makes of it).
-fn admissible_start(p: &MachineParams, x: &State) -> State {
+pub(crate) fn admissible_start(p: &MachineParams, x: &State) -> State {
     let mut s = *x;
     control::model::clamp_state(p, &mut s);
     s
@@ -487,7 +501,7 @@ fn heading_branches(theta: f64, goal_theta: f64) -> [f64; 2] {
     [near, other]
 }
 
-fn ipopt_options(tol: f64, max_iter: i32) -> Vec<(&'static str, OptValue)> {
+pub(crate) fn ipopt_options(tol: f64, max_iter: i32) -> Vec<(&'static str, OptValue)> {
     vec![
         ("tol", OptValue::Num(tol)),
         ("acceptable_tol", OptValue::Num(tol * 100.0)),
@@ -500,7 +514,7 @@ fn ipopt_options(tol: f64, max_iter: i32) -> Vec<(&'static str, OptValue)> {
     ]
 }
 
-fn plan_from(z: &[f64], k_intervals: usize) -> (Vec<State>, Vec<Control>) {
+pub(crate) fn plan_from(z: &[f64], k_intervals: usize) -> (Vec<State>, Vec<Control>) {
     let states = (0..=k_intervals)
         .map(|k| State::from_column_slice(&z[xi(k)..xi(k) + 6]))
         .collect();
@@ -677,6 +691,36 @@ pub fn min_time_nlp(
     s: &MinTimeSettings,
     theta_goal: f64,
 ) -> ElementNlp {
+    let mut footprint: Vec<Box<dyn Element>> = Vec::new();
+    footprint_elements(
+        &mut footprint,
+        p,
+        &sc.obstacles,
+        s.intervals,
+        None,
+        s.obstacle_samples,
+    );
+    min_time_with(
+        p,
+        &sc.start,
+        &Goal::new(sc.goal.x, sc.goal.y, theta_goal),
+        s,
+        0.999 * s.tolerance,
+        footprint,
+    )
+}
+
+/// The min-time NLP from `start` to `goal` (its heading on the branch
+/// wanted) within `tolerance`, kept off the world by `footprint` (elements
+/// over (x_k, u_k, x_{k+1}, T), as [`footprint_elements`] makes them).
+pub(crate) fn min_time_with(
+    p: &MachineParams,
+    start: &State,
+    goal: &Goal,
+    s: &MinTimeSettings,
+    tolerance: f64,
+    footprint: Vec<Box<dyn Element>>,
+) -> ElementNlp {
     let k_intervals = s.intervals;
     let n = 8 * k_intervals + 7;
     let t_index = n - 1;
@@ -692,30 +736,23 @@ pub fn min_time_nlp(
             cost: None,
         }));
     }
-    footprint_elements(
-        &mut elements,
-        p,
-        &sc.obstacles,
-        k_intervals,
-        None,
-        s.obstacle_samples,
-    );
+    elements.extend(footprint);
     let kk = xi(k_intervals);
     elements.push(Box::new(TerminalSet {
         vars: [kk, kk + 1, kk + 2],
-        goal: Goal::new(sc.goal.x, sc.goal.y, theta_goal),
-        tolerance: 0.999 * s.tolerance,
+        goal: *goal,
+        tolerance,
     }));
     elements.push(Box::new(FinalTime { vars: [t_index] }));
     let mut nlp = ElementNlp::new(n, elements, s.hessian);
     set_model_bounds(&mut nlp, p, k_intervals, 1.0);
-    fix_state(&mut nlp, 0, &admissible_start(p, &sc.start));
+    fix_state(&mut nlp, 0, &admissible_start(p, start));
     nlp.z_lower[t_index] = s.t_min;
     nlp.z_upper[t_index] = s.t_max;
     nlp
 }
 
-fn guess_vector(g: &Guess, k_intervals: usize) -> Vec<f64> {
+pub(crate) fn guess_vector(g: &Guess, k_intervals: usize) -> Vec<f64> {
     let mut z = vec![0.0; 8 * k_intervals + 7];
     let h = g.duration / k_intervals as f64;
     let sample = |t: f64| -> (State, Control) {

@@ -44,6 +44,7 @@ use crate::clearance::ClearanceMeter;
 use crate::movers::{Mover, MoverMeter, Perception, PerceptionSettings};
 use crate::ocp::{self, BaselineSettings, Guess, MinTimeSettings};
 use crate::results::ResultRow;
+use crate::trajectory::{IpoptTrajectory, TrajectorySettings};
 use control::live::LiveSettings;
 use control::site::{Outline, SiteIndex};
 use control::world::{default_outline, World};
@@ -243,6 +244,8 @@ pub struct EvalConfig {
     /// own: an answer at the next tick). Default one tick, so the evaluation is
     /// deterministic and honest.
     pub plan_delay: PlanDelay,
+    /// Searched routes shaped by a minimum-time trajectory (issue 42).
+    pub trajectory: Option<TrajectorySettings>,
     /// The safety envelope after the MPC (DESIGN §14), as the daemon runs it;
     /// its tolerances also widen the MPC's planned clearances.
     pub envelope: EnvelopeSettings,
@@ -285,6 +288,7 @@ impl Default for EvalConfig {
             min_time: MinTimeSettings::default(),
             navigator: Some(NavigatorSettings::default()),
             plan_delay: PlanDelay::Fixed(MpcSettings::default().dt),
+            trajectory: None,
             envelope: EnvelopeSettings::default(),
             site: None,
             outline: default_outline(),
@@ -440,7 +444,10 @@ pub fn pilot(cfg: &EvalConfig, nets: &Networks) -> Result<Pilot<Critic>> {
             let s = &s
                 .clone()
                 .widened(cfg.envelope.tolerance_widening(&cfg.params));
-            let planner = RoutePlanner::new(cfg.params, s, Some(nets.actor.clone()))?;
+            let mut planner = RoutePlanner::new(cfg.params, s, Some(nets.actor.clone()))?;
+            if let Some(t) = cfg.trajectory {
+                planner = planner.with_trajectory(Box::new(IpoptTrajectory::new(cfg.params, t)));
+            }
             let routes = Box::new(InlineRoutes::new(planner, cfg.plan_delay));
             Some(Navigator::with_routes(
                 cfg.params,
@@ -549,6 +556,14 @@ pub fn run_mpc(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run> 
                         );
                         multiplier_max = multiplier_max.max(sol.obstacle_multiplier);
                     }
+                    if std::env::var_os("WLNAV_TICK_DEBUG").is_some() {
+                        eprintln!(
+                            "  status {:?} overridden {} mult {:?}",
+                            p.solution.map(|s| s.status),
+                            p.guarded.overridden(),
+                            p.solution.map(|s| s.obstacle_multiplier)
+                        );
+                    }
                     overrides += usize::from(p.guarded.overridden());
                     let holding = p.live.is_some_and(|l| l.holding);
                     protective_stops += usize::from(holding && !held);
@@ -559,6 +574,20 @@ pub fn run_mpc(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run> 
             // The tick without the route searches the inline planner ran in
             // it (charged as simulated delay; the daemon runs them on the
             // planner thread): what the daemon's tick costs.
+            if std::env::var_os("WLNAV_TICK_DEBUG").is_some() {
+                if let Some(nav) = pilot.navigator() {
+                    let t = nav
+                        .route()
+                        .get(nav.route().len() - nav.remaining_route().len())
+                        .copied();
+                    eprintln!(
+                        "tick {now:.1} x {:.2} {:.2} th {:.2} b {:.2} v {:.2} cmd {:.2} {:.2} target {:?} path {} track {:?}",
+                        x[0], x[1], x[2], x[3], x[5], cmd.beta_dot, cmd.v, t.map(|g| ((g.x*100.0).round()/100.0, (g.y*100.0).round()/100.0)),
+                        nav.path_cost().is_some_and(|c| !c.is_empty()),
+                        nav.track_cost().map(|c| { let r = c.reference(c.time()); format!("t {:.1}/{:.1} r {:.2} {:.2} v {:.2}", c.time(), c.duration(), r[0], r[1], r[5]) })
+                    );
+                }
+            }
             let on_tick = pilot.take_plan_time_on_tick();
             if let Some(rec) = navigation.as_mut() {
                 rec.tick_ms

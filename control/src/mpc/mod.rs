@@ -49,6 +49,7 @@ pub mod riccati;
 pub mod settings;
 pub mod solution;
 mod sqp;
+pub mod track_cost;
 
 pub use constraints::Obstacle;
 pub use cost::{QuadraticCost, StageCost};
@@ -60,6 +61,7 @@ pub use qp::{ClarabelBackend, QpBackend, QpData, QpOutcome, QpSolverBackend, QpS
 pub use riccati::RiccatiBackend;
 pub use settings::{MpcError, MpcSettings, ObstacleConstraint, QpSolver, MAX_OBSTACLES};
 pub use solution::{FallbackReason, Solution, StepStatus};
+pub use track_cost::{TrackCost, TrackWeights, MAX_TRACK_STATES};
 
 use crate::actor::{Actor, ActorWorkspace};
 use crate::delay::DelayCompensator;
@@ -102,6 +104,9 @@ pub struct Mpc<C: StageCost, D: Dynamics = Rk4Model, B: QpBackend = QpSolverBack
     path_cost: PathCost,
     /// The path segment the last tick's x̂ was projected onto.
     path_hint: usize,
+    /// While set, the cost of every stage and the terminal cost instead of
+    /// the path's and the critic's: the navigator's trajectory ([`TrackCost`]).
+    track_cost: TrackCost,
     /// The site, the goal's circles and the outline (DESIGN §17).
     world: World,
     /// Each row k's (outline circle, target) pairs: `rows[k · row_stride ..]`,
@@ -272,6 +277,7 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
             goal: None,
             path_cost: PathCost::new(),
             path_hint: 0,
+            track_cost: TrackCost::new(),
             world: World::with_axle_circles(params, settings.max_obstacles),
             rows: vec![RowPair::default(); n * row_stride(&settings)],
             row_len: vec![0; n],
@@ -392,6 +398,7 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
     pub fn clear_goal(&mut self) {
         self.goal = None;
         self.path_cost.clear();
+        self.track_cost.clear();
         self.world.clear_circles();
         self.has_plan = false;
         self.set_obstacle_weight(self.settings.obstacle_slack_weight);
@@ -491,6 +498,26 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
             None => self.path_cost.clear(),
         }
         self.path_hint = 0;
+    }
+
+    /// Sets the trajectory tracked from the next tick on, in place of the
+    /// path and the critic (`None`: those again). Allocation-free.
+    pub fn set_track_cost(&mut self, track: Option<&TrackCost>) {
+        match track {
+            Some(t) => self.track_cost.copy_from(t),
+            None => self.track_cost.clear(),
+        }
+    }
+
+    /// The first stage's time on the tracked trajectory (the navigator's,
+    /// every tick).
+    pub fn set_track_time(&mut self, t: f64) {
+        self.track_cost.set_time(t);
+    }
+
+    /// The tracked trajectory (empty: none).
+    pub fn track_cost(&self) -> &TrackCost {
+        &self.track_cost
     }
 
     /// The path cost in use (empty: the critic).

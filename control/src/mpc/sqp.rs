@@ -321,10 +321,14 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
         let (mut h, mut g) = ([[0.0; NZ]; NZ], [0.0; NZ]);
         // With a path, its progress is the cost (projected stage by stage
         // from x̂'s segment onwards), else the critic.
-        let path = !self.path_cost.is_empty();
+        let track = !self.track_cost.is_empty();
+        let path = !track && !self.path_cost.is_empty();
         let mut hint = self.path_hint;
         for k in 0..s.horizon {
-            if path {
+            if track {
+                self.track_cost
+                    .eval(&self.xs[k], &self.us[k], k as f64 * s.dt, &mut der);
+            } else if path {
                 let term = self.path_cost.eval(&self.xs[k], &self.us[k], hint);
                 hint = term.segment;
                 if k == 0 {
@@ -366,7 +370,16 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
         }
         let mut term = TerminalDerivatives::default();
         let (mut ht, mut gt) = ([[0.0; NX]; NX], [0.0; NX]);
-        if path {
+        if track {
+            let mut full = Derivatives::default();
+            self.track_cost.eval(
+                &self.xs[s.horizon],
+                &Control::zeros(),
+                s.horizon as f64 * s.dt,
+                &mut full,
+            );
+            term = TerminalDerivatives::state_block(&full);
+        } else if path {
             let mut full = Derivatives::default();
             let t = self
                 .path_cost

@@ -32,6 +32,7 @@ pub mod route;
 pub mod route_planner;
 pub mod service;
 pub mod settings;
+pub mod trajectory;
 pub mod world;
 
 use std::time::Duration;
@@ -43,6 +44,7 @@ pub use service::{
     mark_tick_thread, on_tick_thread, InlineRoutes, PlanDelay, PlannerThread, RouteService,
 };
 pub use settings::{FollowingSettings, NavigatorSettings, SearchSettings, StallSettings};
+pub use trajectory::TrajectoryOptimiser;
 pub use world::CheckedWorld;
 
 use crate::model::Goal;

@@ -7,7 +7,7 @@ use crate::critic::{Critic, CriticWorkspace};
 use crate::model::{
     goal_distance, ix, wrap_angle, Control, Goal, MachineParams, State, REACH_SPEED,
 };
-use crate::mpc::{PathCost, PathWeights};
+use crate::mpc::{PathCost, PathWeights, TrackCost, TrackWeights};
 use crate::obstacle::{AxlePoint, Obstacle};
 use crate::progress::ProgressChecker;
 use crate::Actor;
@@ -33,6 +33,17 @@ const PROJECTION_WINDOW: f64 = 6.0;
 /// it and change no other run; a machine turning towards the goal at speed is
 /// not stuck).
 const STUCK_SPEED: f64 = 0.2;
+
+/// How much farther than the nearest reference point a later one may be and
+/// still be taken as the machine's [m]: where the trajectory stands still (a
+/// cusp, its end) its points coincide, and the latest of them moves on.
+const TRACK_TIE: f64 = 0.05;
+
+/// How long the trajectory's last state (the goal, at rest) is tracked after
+/// the machine's time on it reached its end, before the critic takes over
+/// [s]: the machine settles on it rather than being handed over while it
+/// moves.
+const TRACK_SETTLE: f64 = 1.0;
 
 /// The critic's cost of a metre of way to the goal: its mean slope in the
 /// goal distance between 3 and 10 m (the range it was trained on), over goals
@@ -109,6 +120,14 @@ pub struct Navigator {
     path_handed: bool,
     /// The path cost's segment the machine was last projected onto.
     path_hint: usize,
+    /// The route's trajectory while it is tracked (issue 42), its time the
+    /// first stage's reference time; and the plan count it was set for.
+    track: TrackCost,
+    track_plan: u64,
+    /// The last tick's time [s].
+    track_now: f64,
+    /// When the track's time reached the trajectory's end [s].
+    track_ended: Option<f64>,
 }
 
 impl Navigator {
@@ -177,6 +196,10 @@ impl Navigator {
             path_key: None,
             path_handed: false,
             path_hint: 0,
+            track: TrackCost::new(),
+            track_plan: 0,
+            track_now: 0.0,
+            track_ended: None,
             settings,
         })
     }
@@ -354,7 +377,12 @@ impl Navigator {
             self.ask(PlanKind::Replan, x, now);
             self.advance(x, now);
         }
-        let (target, final_target) = self.drive_target();
+        self.refresh_track(x, now);
+        let (target, final_target) = if self.track.is_empty() {
+            self.drive_target()
+        } else {
+            (goal, true)
+        };
         self.refresh_path(x);
         NavStep::Drive {
             target,
@@ -539,7 +567,76 @@ impl Navigator {
         self.path_cost.clear();
         self.path_key = None;
         self.path_handed = false;
+        self.track.clear();
         self.cost_version += 1;
+    }
+
+    /// The trajectory of a new route is tracked from its start; each tick
+    /// the time on it moves to the reference point nearest to the machine's
+    /// front axle among those from the last time up to twice the tick ahead
+    /// (progress-indexed: it waits while the machine lags, never runs away
+    /// from it, and never goes back, so a cusp's two legs are not mixed up).
+    /// It ends [`TRACK_SETTLE`] after the time reached the trajectory's end
+    /// (the critic then holds the goal).
+    fn refresh_track(&mut self, x: &State, now: f64) {
+        let tick = (now - self.track_now).max(0.0);
+        self.track_now = now;
+        if self.track_plan != self.plans {
+            self.track_plan = self.plans;
+            let had = !self.track.is_empty();
+            self.track.clear();
+            if !self.route.trajectory.is_empty() {
+                let weights = TrackWeights::default();
+                self.track.set(
+                    &self.route.trajectory,
+                    self.route.trajectory_dt,
+                    weights,
+                    &self.params,
+                );
+            }
+            if had || !self.track.is_empty() {
+                self.cost_version += 1;
+            }
+            // Where the machine is now: it moved while the plan was made.
+            let ahead = self.route_age.max(0.0);
+            self.advance_track(x, ahead);
+            self.track_ended = None;
+            return;
+        }
+        if self.track.is_empty() {
+            return;
+        }
+        self.advance_track(x, 2.0 * tick);
+        let end = self.track.duration();
+        if self.track.time() >= end - 1e-9 {
+            let since = *self.track_ended.get_or_insert(now);
+            if now - since >= TRACK_SETTLE {
+                self.track.clear();
+                self.cost_version += 1;
+            }
+        }
+    }
+
+    /// Moves the track's time to the latest reference point within
+    /// [`TRACK_TIE`] of the nearest to the front axle, among those from now
+    /// to `window` ahead.
+    fn advance_track(&mut self, x: &State, window: f64) {
+        if self.track.is_empty() {
+            return;
+        }
+        let (t0, step) = (self.track.time(), self.track.step());
+        let steps = (window / step).ceil() as usize;
+        let distance = |t: f64| {
+            let r = self.track.reference(t);
+            (x[ix::X] - r[ix::X]).hypot(x[ix::Y] - r[ix::Y])
+        };
+        let times = (0..=steps).map(|j| (t0 + j as f64 * step).min(self.track.duration()));
+        let nearest = times.clone().map(distance).fold(f64::INFINITY, f64::min);
+        let t = times
+            .filter(|&t| distance(t) <= nearest + TRACK_TIE)
+            .last()
+            .unwrap_or(t0);
+        self.track.set_time(t);
     }
 
     /// Passes every subgoal within `subgoal_radius` (never the goal) and every
@@ -599,6 +696,14 @@ impl Navigator {
     /// and part; empty once the machine is within `handover` of its end (the
     /// critic's part), and without a path.
     fn refresh_path(&mut self, x: &State) {
+        if !self.track.is_empty() {
+            // The trajectory is tracked: no path.
+            if self.path_key.take().is_some() {
+                self.path_cost.clear();
+                self.cost_version += 1;
+            }
+            return;
+        }
         let goal = self.goal;
         let key = self
             .followed_end()
@@ -706,7 +811,14 @@ impl Navigator {
         (!self.path_cost.is_empty()).then_some(&self.path_cost)
     }
 
-    /// Counts the changes of [`Self::path_cost`].
+    /// The trajectory the MPC tracks now (`None`: the path cost or the
+    /// critic). It changes only when [`Self::cost_version`] does; its time
+    /// every tick.
+    pub fn track_cost(&self) -> Option<&TrackCost> {
+        (!self.track.is_empty()).then_some(&self.track)
+    }
+
+    /// Counts the changes of [`Self::path_cost`] and [`Self::track_cost`].
     pub fn cost_version(&self) -> u64 {
         self.cost_version
     }

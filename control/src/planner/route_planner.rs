@@ -12,12 +12,13 @@
 use std::time::{Duration, Instant};
 
 use crate::actor::{Actor, ActorWorkspace};
-use crate::model::{ix, Goal, MachineParams, State, REACH_SPEED};
+use crate::model::{ix, Goal, MachineParams, State};
 use crate::world::World;
 
 use super::hybrid_astar::{self, HybridAStar, SearchStats};
 use super::rollout::{roll_out, Arrival};
 use super::route::subgoals_from_path;
+use super::trajectory::{push_states_as_path, TrajectoryOptimiser};
 use super::world::CheckedWorld;
 use super::{FollowingSettings, NavError, PathPose, PlanOutcome, PlanReport, SearchSettings};
 
@@ -69,6 +70,10 @@ pub struct Route {
     /// its approach pose), not the search's: its reversing parts are
     /// followed too (by the rear axle).
     pub rolled_out: bool,
+    /// A minimum-time trajectory to the goal (issue 42), its states every
+    /// `trajectory_dt`: the MPC tracks it (empty: the path is followed).
+    pub trajectory: Vec<State>,
+    pub trajectory_dt: f64,
 }
 
 impl Route {
@@ -82,6 +87,8 @@ impl Route {
             target_path_index: Vec::with_capacity(s.max_nodes + 1),
             shot: Vec::with_capacity(hybrid_astar::shot_steps(s.shot_range, s.rollout_dt) + 1),
             rolled_out: false,
+            trajectory: Vec::with_capacity(crate::mpc::MAX_TRACK_STATES),
+            trajectory_dt: 0.0,
         }
     }
 
@@ -92,6 +99,8 @@ impl Route {
         self.target_path_index.clear();
         self.shot.clear();
         self.rolled_out = false;
+        self.trajectory.clear();
+        self.trajectory_dt = 0.0;
     }
 
     /// The targets along the path: its subgoals, then `goal`.
@@ -159,6 +168,8 @@ pub struct RoutePlanner {
     actor: Option<(Actor, ActorWorkspace)>,
     /// The actor's roll-out on the open way (its states, start first).
     open_way: Vec<State>,
+    /// Shapes a searched route by time (issue 42); `None`: the search's path.
+    trajectory: Option<Box<dyn TrajectoryOptimiser>>,
 }
 
 impl RoutePlanner {
@@ -181,13 +192,21 @@ impl RoutePlanner {
                 (a, ws)
             }),
             open_way: Vec::with_capacity(open_way_steps(s) + 1),
+            trajectory: None,
             search_settings: s.clone(),
             following: settings.following,
             approach_distance: settings.stall.approach_distance,
         })
     }
 
-    /// Answers `job.request` into `job.route`. Allocation-free.
+    /// Searched routes are shaped by `optimiser` from now on.
+    pub fn with_trajectory(mut self, optimiser: Box<dyn TrajectoryOptimiser>) -> Self {
+        self.trajectory = Some(optimiser);
+        self
+    }
+
+    /// Answers `job.request` into `job.route`. Allocation-free (but for a
+    /// trajectory optimiser's own).
     pub fn plan(&mut self, job: &mut PlanJob) {
         debug_assert!(
             !super::on_tick_thread(),
@@ -205,7 +224,18 @@ impl RoutePlanner {
         // The navigator validated the circles when the goal was set.
         self.world.copy_from(&request.world);
         report.outcome = match request.kind {
-            PlanKind::First | PlanKind::Replan => self.route(request, route, &mut report),
+            PlanKind::First | PlanKind::Replan => {
+                let outcome = self.route(request, route, &mut report);
+                // Every way among obstacles, searched or open, is shaped by
+                // time where an optimiser is given.
+                if matches!(outcome, PlanOutcome::Route | PlanOutcome::Direct)
+                    && !route.path.is_empty()
+                    && self.shape(&request.start, &request.goal, route)
+                {
+                    route.set_subgoals(request.goal, &self.following);
+                }
+                outcome
+            }
             PlanKind::Retry => self.retry(&request.start, &request.goal, route, &mut report),
         };
         report.duration = t0.elapsed();
@@ -296,6 +326,36 @@ impl RoutePlanner {
             .min(endpoints)
             .max(0.0);
         (margin, endpoints)
+    }
+
+    /// The searched route (its path and shot) replaced by the optimiser's
+    /// trajectory, followed like a roll-out (it is the model's: reversing
+    /// parts by the rear axle), where there is one.
+    fn shape(&mut self, start: &State, goal: &Goal, route: &mut Route) -> bool {
+        let Some(optimiser) = self.trajectory.as_mut() else {
+            return false;
+        };
+        let Some(dt) = optimiser.optimise(
+            &self.world,
+            start,
+            goal,
+            &route.path,
+            &route.shot,
+            &mut route.trajectory,
+        ) else {
+            route.trajectory.clear();
+            return false;
+        };
+        route.trajectory_dt = dt;
+        route.path.clear();
+        route.shot.clear();
+        route.rolled_out = true;
+        push_states_as_path(
+            &route.trajectory,
+            self.search_settings.sample_spacing,
+            &mut route.path,
+        );
+        true
     }
 
     /// The goal shot a path may end with (its last pose outside the search's
@@ -435,25 +495,7 @@ impl RoutePlanner {
         }
         route.clear();
         route.rolled_out = true;
-        let mut direction = 1;
-        for (i, x) in self.open_way.iter().enumerate() {
-            if route.path.len() == route.path.capacity() {
-                break;
-            }
-            // A pose's direction is the motion leaving it (the start's is the
-            // roll-out's first).
-            let v = self.open_way.get(i + 1).unwrap_or(x)[ix::V];
-            if v.abs() > REACH_SPEED {
-                direction = if v < 0.0 { -1 } else { 1 };
-            }
-            route.path.push(PathPose {
-                x: x[ix::X],
-                y: x[ix::Y],
-                theta: x[ix::THETA],
-                beta: x[ix::BETA],
-                direction,
-            });
-        }
+        push_states_as_path(&self.open_way, 0.0, &mut route.path);
         route.set_subgoals(goal, &self.following);
     }
 }

@@ -10,6 +10,7 @@ use std::sync::Arc;
 
 use crate::model::{MachineParams, State};
 use crate::obstacle::Obstacle;
+use crate::site::outline::MAX_OUTLINE_CIRCLES;
 use crate::site::{Body, Outline, SiteIndex};
 use crate::world::{World, WorldError};
 
@@ -139,12 +140,18 @@ impl CheckedWorld {
     /// (the MPC plans each circle that much wider: a route it could not
     /// follow would stall).
     pub fn state_free(&self, s: &State) -> bool {
+        // Only what comes nearer than the margins is searched for.
+        self.world.excess(s, &self.circle_margins(), 0.0).is_none()
+    }
+
+    /// What each outline circle keeps in every check: the margin plus its
+    /// extra, less the relief.
+    pub fn circle_margins(&self) -> [f64; MAX_OUTLINE_CIRCLES] {
         let mut margins = *self.world.extra_margins();
         for m in &mut margins {
             *m = (*m - self.relief).max(0.0) + self.margin;
         }
-        // Only what comes nearer than the margins is searched for.
-        self.world.excess(s, &margins, 0.0).is_none()
+        margins
     }
 
     /// The disc the outline surely covers around the front axle, swept along

@@ -1,0 +1,491 @@
+//! The trajectory optimiser `wlnav-sim` plans with (issue 42): the min-time
+//! problem of the bound ([`crate::ocp`], Hermite–Simpson collocation of paper
+//! eq. 5 with every bound, solved by IPOPT) from the planner's start to its
+//! goal, warm-started from the searched route, with the world's rows
+//! ([`World::row`], the MPC's and the envelope's) as its footprint: each
+//! interval keeps its outline circles off the features the warm start passes
+//! near, by the route's margins. The solution is checked against the whole
+//! world before it is used.
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use control::model::{ix, wrap_angle, Control, Goal, MachineParams, State};
+use control::planner::world::CheckedWorld;
+use control::planner::{PathPose, TrajectoryOptimiser};
+use control::site::index::Near;
+use control::site::outline::MAX_OUTLINE_CIRCLES;
+use control::world::{Target, World};
+
+use crate::guess::Guess;
+use crate::ipopt::{self, OptValue};
+use crate::nlp::{Element, HessianKind, INF};
+use crate::ocp::{self, MinTimeSettings};
+
+/// How the trajectory is optimised.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TrajectorySettings {
+    /// Collocation intervals.
+    pub intervals: usize,
+    /// How near the goal the trajectory ends (position and heading, the
+    /// success test's norm) [m].
+    pub tolerance: f64,
+    /// IPOPT's CPU-time limit [s]; a later solve keeps the route.
+    pub max_solve_seconds: f64,
+    /// A feature is a row of an interval when the warm start passes it
+    /// within this much beyond the margin [m].
+    pub reach: f64,
+    /// Rows per interval point at most (the nearest).
+    pub max_rows: usize,
+    /// The warm start's speed, as a fraction of v_max.
+    pub cruise: f64,
+}
+
+impl Default for TrajectorySettings {
+    fn default() -> Self {
+        Self {
+            intervals: 50,
+            tolerance: 0.01,
+            max_solve_seconds: 1.0,
+            reach: 2.0,
+            max_rows: 12,
+            cruise: 0.8,
+        }
+    }
+}
+
+/// Interval points the footprint is checked at (τ in (0, 1]).
+const TAUS: [f64; 2] = [0.5, 1.0];
+/// Points per interval written out (evenly spaced in time).
+const PATH_POINTS: usize = 3;
+
+/// [`TrajectoryOptimiser`] over IPOPT.
+pub struct IpoptTrajectory {
+    params: MachineParams,
+    settings: TrajectorySettings,
+}
+
+impl IpoptTrajectory {
+    pub fn new(params: MachineParams, settings: TrajectorySettings) -> Self {
+        Self { params, settings }
+    }
+}
+
+/// One outline circle kept off one target at one point of an interval.
+#[derive(Debug, Clone, Copy)]
+struct Row {
+    tau: f64,
+    circle: usize,
+    target: Target,
+    margin: f64,
+}
+
+/// An interval's footprint: its rows, on (x_k, u_k, x_{k+1}, T).
+struct WorldFootprint {
+    vars: Vec<usize>,
+    params: MachineParams,
+    intervals: usize,
+    world: Arc<World>,
+    rows: Vec<Row>,
+}
+
+impl Element for WorldFootprint {
+    fn vars(&self) -> &[usize] {
+        &self.vars
+    }
+
+    fn n_cons(&self) -> usize {
+        self.rows.len()
+    }
+
+    fn con_bounds(&self, lower: &mut [f64], upper: &mut [f64]) {
+        lower.fill(0.0);
+        upper.fill(INF);
+    }
+
+    fn eval(&self, z: &[f64], obj: &mut f64, grad: &mut [f64], g: &mut [f64], jac: &mut [f64]) {
+        *obj = 0.0;
+        grad.fill(0.0);
+        let nv = self.vars.len();
+        let mut dx = [0.0; 6 * 15];
+        let mut at = f64::NAN;
+        let mut x = State::zeros();
+        for (r, row) in self.rows.iter().enumerate() {
+            if row.tau != at {
+                x = ocp::interval_point(&self.params, None, self.intervals, z, row.tau, &mut dx);
+                at = row.tau;
+            }
+            let (h, dh) = self.world.row(&x, row.circle, row.target);
+            g[r] = h - row.margin;
+            let out = &mut jac[r * nv..(r + 1) * nv];
+            for (j, o) in out.iter_mut().enumerate() {
+                *o = (0..4).map(|i| dh[i] * dx[i * nv + j]).sum();
+            }
+        }
+    }
+}
+
+/// The route as a time-stamped warm start: the path's poses then the shot's
+/// states, driven at `cruise` with the acceleration bound from and into
+/// every stop (start, cusps, end), resampled on `k` intervals.
+fn route_guess(
+    p: &MachineParams,
+    start: &State,
+    path: &[PathPose],
+    shot: &[State],
+    cruise: f64,
+    k: usize,
+) -> Option<Guess> {
+    // (x, y, θ, β, direction)
+    let mut poses: Vec<[f64; 5]> = Vec::with_capacity(path.len() + shot.len() + 1);
+    let dir_of = |v: f64, last: f64| {
+        if v.abs() > control::model::REACH_SPEED {
+            v.signum()
+        } else {
+            last
+        }
+    };
+    let mut last_dir = dir_of(start[ix::V], 1.0);
+    poses.push([
+        start[ix::X],
+        start[ix::Y],
+        start[ix::THETA],
+        start[ix::BETA],
+        last_dir,
+    ]);
+    for q in path {
+        last_dir = if q.direction == 0 {
+            last_dir
+        } else {
+            q.direction as f64
+        };
+        poses.push([q.x, q.y, q.theta, q.beta, last_dir]);
+    }
+    for (i, x) in shot.iter().enumerate() {
+        let v = shot.get(i + 1).unwrap_or(x)[ix::V];
+        last_dir = dir_of(v, last_dir);
+        poses.push([x[ix::X], x[ix::Y], x[ix::THETA], x[ix::BETA], last_dir]);
+    }
+    poses.dedup_by(|b, a| (b[0] - a[0]).hypot(b[1] - a[1]) < 1e-6);
+    if poses.len() < 2 {
+        return None;
+    }
+    // Arc length, and the stops: where the direction changes.
+    let n = poses.len();
+    let mut s = vec![0.0; n];
+    for i in 1..n {
+        s[i] = s[i - 1] + (poses[i][0] - poses[i - 1][0]).hypot(poses[i][1] - poses[i - 1][1]);
+    }
+    let mut stops = vec![0.0];
+    for i in 1..n - 1 {
+        if poses[i][4] != poses[i + 1][4] {
+            stops.push(s[i]);
+        }
+    }
+    stops.push(s[n - 1]);
+    let v_top = cruise * p.v_max;
+    let a = 0.8 * p.a_max;
+    let speed = |si: f64| {
+        let j = stops
+            .partition_point(|&b| b <= si)
+            .clamp(1, stops.len() - 1);
+        let (from, to) = (si - stops[j - 1], stops[j] - si);
+        v_top
+            .min((2.0 * a * (from + 0.02)).sqrt())
+            .min((2.0 * a * (to + 0.02)).sqrt())
+    };
+    let mut t = vec![0.0; n];
+    for i in 1..n {
+        let v = 0.5 * (speed(s[i - 1]) + speed(s[i]));
+        t[i] = t[i - 1] + (s[i] - s[i - 1]) / v.max(0.05);
+    }
+    let duration = t[n - 1];
+    if !(duration.is_finite() && duration > 0.0) {
+        return None;
+    }
+    let h = duration / k as f64;
+    let mut theta_prev = start[ix::THETA];
+    let mut states = Vec::with_capacity(k + 1);
+    for m in 0..=k {
+        let tm = (m as f64 * h).min(duration);
+        let i = t.partition_point(|&ti| ti <= tm).clamp(1, n - 1);
+        let f = ((tm - t[i - 1]) / (t[i] - t[i - 1]).max(1e-9)).clamp(0.0, 1.0);
+        let (a0, a1) = (&poses[i - 1], &poses[i]);
+        let lerp = |c: usize| a0[c] + f * (a1[c] - a0[c]);
+        // Headings unwrapped along the route.
+        let th0 = theta_prev + wrap_angle(a0[2] - theta_prev);
+        let th = th0 + f * wrap_angle(a1[2] - a0[2]);
+        theta_prev = th;
+        let v = a1[4] * speed(s[i - 1] + f * (s[i] - s[i - 1]));
+        let beta = lerp(3).clamp(-p.beta_max, p.beta_max);
+        states.push(State::new(lerp(0), lerp(1), th, beta, 0.0, v));
+    }
+    states[0] = *start;
+    states[k][ix::V] = 0.0;
+    for m in 0..k {
+        let bd = (states[m + 1][ix::BETA] - states[m][ix::BETA]) / h;
+        states[m][ix::BETA_DOT] = bd.clamp(-p.beta_dot_max, p.beta_dot_max);
+    }
+    states[0][ix::BETA_DOT] = start[ix::BETA_DOT];
+    let controls = (0..k)
+        .map(|m| {
+            let dbd = (states[m + 1][ix::BETA_DOT] - states[m][ix::BETA_DOT]) / h;
+            let dv = (states[m + 1][ix::V] - states[m][ix::V]) / h;
+            Control::new(
+                dbd.clamp(-p.beta_ddot_max, p.beta_ddot_max),
+                dv.clamp(-p.a_max, p.a_max),
+            )
+        })
+        .collect();
+    Some(Guess {
+        states,
+        controls,
+        dt: h,
+        duration,
+    })
+}
+
+/// The rows of interval `k` at the warm start `z`: per point and outline
+/// circle, the targets it passes within `reach` beyond its margin, the
+/// nearest `max_rows` per point.
+fn interval_rows(
+    p: &MachineParams,
+    world: &World,
+    margins: &[f64; MAX_OUTLINE_CIRCLES],
+    s: &TrajectorySettings,
+    z: &[f64],
+    near: &mut [Near],
+) -> Vec<Row> {
+    let mut rows = Vec::new();
+    let mut dx = [0.0; 6 * 15];
+    for &tau in &TAUS {
+        let x = ocp::interval_point(p, None, s.intervals, z, tau, &mut dx);
+        let placed = world.place(&x);
+        let mut here: Vec<(f64, Row)> = Vec::new();
+        for (i, c) in placed[..world.outline().len()].iter().enumerate() {
+            let m = margins[i];
+            let mut consider = |target: Target| {
+                let h = world.row(&x, i, target).0 - m;
+                if h < s.reach {
+                    here.push((
+                        h,
+                        Row {
+                            tau,
+                            circle: i,
+                            target,
+                            margin: m,
+                        },
+                    ));
+                }
+            };
+            for j in 0..world.circles().len() {
+                consider(Target::Circle(j));
+            }
+            if world.site().is_some() {
+                let k = world
+                    .features_near(c.center, s.reach + c.radius + m, near)
+                    .unwrap_or(near.len());
+                for nr in &near[..k] {
+                    consider(Target::Feature(nr.feature));
+                }
+                consider(Target::Bounds);
+            }
+        }
+        here.sort_by(|a, b| a.0.total_cmp(&b.0));
+        rows.extend(here.into_iter().take(s.max_rows).map(|(_, r)| r));
+    }
+    rows
+}
+
+/// Whether every point of the trajectory (`PATH_POINTS` per interval and the
+/// nodes) keeps the margins, less 1 cm of slack for the solver's tolerance.
+fn keeps_margins(
+    p: &MachineParams,
+    world: &World,
+    margins: &[f64; MAX_OUTLINE_CIRCLES],
+    z: &[f64],
+    k: usize,
+) -> bool {
+    let mut m = *margins;
+    for v in &mut m {
+        *v -= 0.01;
+    }
+    let mut dx = [0.0; 6 * 15];
+    (0..k).all(|i| {
+        let local = interval_vars(z, i, k);
+        (0..=4).all(|j| {
+            let x = ocp::interval_point(p, None, k, &local, j as f64 / 4.0, &mut dx);
+            world.excess(&x, &m, 0.0).is_none()
+        })
+    })
+}
+
+/// Interval `i`'s local variables (x_i, u_i, x_{i+1}, T) out of z.
+fn interval_vars(z: &[f64], i: usize, k: usize) -> [f64; 15] {
+    let mut local = [0.0; 15];
+    local[..14].copy_from_slice(&z[ocp::xi(i)..ocp::xi(i) + 14]);
+    local[14] = z[8 * k + 6];
+    local
+}
+
+impl TrajectoryOptimiser for IpoptTrajectory {
+    fn optimise(
+        &mut self,
+        checked: &CheckedWorld,
+        start: &State,
+        goal: &Goal,
+        path: &[PathPose],
+        shot: &[State],
+        out: &mut Vec<State>,
+    ) -> Option<f64> {
+        let t0 = Instant::now();
+        let r = self.solve(checked, start, goal, path, shot, out);
+        if std::env::var_os("WLNAV_TRAJ_DEBUG").is_some() {
+            eprintln!(
+                "trajectory: {} in {:.0} ms",
+                match &r {
+                    Ok(t) => format!("T {t:.2} s"),
+                    Err(why) => format!("none ({why})"),
+                },
+                t0.elapsed().as_secs_f64() * 1e3
+            );
+        }
+        let k: usize = std::env::var("TRJ_K")
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(self.settings.intervals);
+        r.ok().map(|t| t / (PATH_POINTS * k) as f64)
+    }
+}
+
+impl IpoptTrajectory {
+    /// The trajectory's duration, or why there is none.
+    fn solve(
+        &self,
+        checked: &CheckedWorld,
+        start: &State,
+        goal: &Goal,
+        path: &[PathPose],
+        shot: &[State],
+        out: &mut Vec<State>,
+    ) -> Result<f64, &'static str> {
+        let p = &self.params;
+        let mut s = self.settings;
+        if let Some(r) = std::env::var("TRJ_ROWS").ok().and_then(|v| v.parse().ok()) {
+            s.max_rows = r;
+        }
+        if let Some(r) = std::env::var("TRJ_REACH").ok().and_then(|v| v.parse().ok()) {
+            s.reach = r;
+        }
+        let s = &s;
+        let k: usize = std::env::var("TRJ_K")
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(s.intervals);
+        let start = ocp::admissible_start(p, start);
+        let guess = route_guess(p, &start, path, shot, s.cruise, k).ok_or("no warm start")?;
+        let end = guess.states[k];
+        let theta_goal = end[ix::THETA] + wrap_angle(goal.theta - end[ix::THETA]);
+        let world = Arc::new(checked.world().clone());
+        let mut margins = checked.circle_margins();
+        let extra: f64 = std::env::var("TRJ_M")
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(0.0);
+        for m in &mut margins {
+            *m += extra;
+        }
+        let mut z0 = ocp::guess_vector(&guess, k);
+        z0[..6].copy_from_slice(start.as_slice());
+        let mt = MinTimeSettings {
+            intervals: k,
+            hessian: if std::env::var_os("TRJ_LBFGS").is_some() {
+                HessianKind::Lbfgs
+            } else {
+                HessianKind::FiniteDifference
+            },
+            t_min: 0.2,
+            t_max: (3.0 * guess.duration).max(5.0),
+            ..MinTimeSettings::default()
+        };
+        z0[8 * k + 6] = guess.duration.clamp(mt.t_min, mt.t_max);
+        let mut near = vec![Near::default(); 64];
+        let mut footprint: Vec<Box<dyn Element>> = Vec::new();
+        for i in 0..k {
+            let rows = interval_rows(p, &world, &margins, s, &interval_vars(&z0, i, k), &mut near);
+            if rows.is_empty() {
+                continue;
+            }
+            let mut vars: Vec<usize> = (ocp::xi(i)..ocp::xi(i) + 14).collect();
+            vars.push(8 * k + 6);
+            footprint.push(Box::new(WorldFootprint {
+                vars,
+                params: *p,
+                intervals: k,
+                world: world.clone(),
+                rows,
+            }));
+        }
+        let goal = Goal::new(goal.x, goal.y, theta_goal);
+        let mut nlp = ocp::min_time_with(p, &start, &goal, &mt, s.tolerance, footprint);
+        // At rest at the goal, the articulation still: the machine stops
+        // there (the bound's problem only asks for the pose).
+        for i in [ix::BETA_DOT, ix::V] {
+            nlp.z_lower[ocp::xi(k) + i] = 0.0;
+            nlp.z_upper[ocp::xi(k) + i] = 0.0;
+        }
+        let tol: f64 = std::env::var("TRJ_TOL")
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(1e-6);
+        let mut options = ocp::ipopt_options(tol, 500);
+        options.push(("max_cpu_time", OptValue::Num(s.max_solve_seconds)));
+        let r = ipopt::solve(&mut nlp, &z0, &options);
+        let violation = nlp.max_violation(&r.z);
+        if std::env::var_os("WLNAV_TRAJ_DEBUG").is_some() {
+            eprintln!(
+                "  ipopt {} guess T {:.2} violation {violation:.1e}",
+                r.status.name(),
+                guess.duration
+            );
+        }
+        if !(violation < 1e-5) || !r.objective.is_finite() {
+            return Err("not solved");
+        }
+        if !keeps_margins(p, &world, &margins, &r.z, k) {
+            return Err("leaves the margins");
+        }
+        out.clear();
+        let mut dx = [0.0; 6 * 15];
+        for i in 0..k {
+            let local = interval_vars(&r.z, i, k);
+            for j in 0..PATH_POINTS {
+                if out.len() == out.capacity() {
+                    return Err("too long");
+                }
+                let tau = j as f64 / PATH_POINTS as f64;
+                out.push(ocp::interval_point(p, None, k, &local, tau, &mut dx));
+            }
+        }
+        out.push(State::from_column_slice(&r.z[ocp::xi(k)..ocp::xi(k) + 6]));
+        if let Some(f) = std::env::var_os("WLNAV_TRAJ_DUMP") {
+            use std::io::Write;
+            if let Ok(mut w) = std::fs::OpenOptions::new()
+                .create(true)
+                .append(true)
+                .open(f)
+            {
+                for i in 0..=k {
+                    let x = &r.z[ocp::xi(i)..ocp::xi(i) + 6];
+                    let _ = writeln!(
+                        w,
+                        "{i},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3}",
+                        x[0], x[1], x[2], x[3], x[4], x[5]
+                    );
+                }
+                let _ = writeln!(w);
+            }
+        }
+        Ok(r.z[8 * k + 6])
+    }
+}
