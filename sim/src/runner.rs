@@ -556,14 +556,6 @@ pub fn run_mpc(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run> 
                         );
                         multiplier_max = multiplier_max.max(sol.obstacle_multiplier);
                     }
-                    if std::env::var_os("WLNAV_TICK_DEBUG").is_some() {
-                        eprintln!(
-                            "  status {:?} overridden {} mult {:?}",
-                            p.solution.map(|s| s.status),
-                            p.guarded.overridden(),
-                            p.solution.map(|s| s.obstacle_multiplier)
-                        );
-                    }
                     overrides += usize::from(p.guarded.overridden());
                     let holding = p.live.is_some_and(|l| l.holding);
                     protective_stops += usize::from(holding && !held);
@@ -574,20 +566,6 @@ pub fn run_mpc(cfg: &EvalConfig, nets: &Networks, sc: &Scenario) -> Result<Run> 
             // The tick without the route searches the inline planner ran in
             // it (charged as simulated delay; the daemon runs them on the
             // planner thread): what the daemon's tick costs.
-            if std::env::var_os("WLNAV_TICK_DEBUG").is_some() {
-                if let Some(nav) = pilot.navigator() {
-                    let t = nav
-                        .route()
-                        .get(nav.route().len() - nav.remaining_route().len())
-                        .copied();
-                    eprintln!(
-                        "tick {now:.1} x {:.2} {:.2} th {:.2} b {:.2} v {:.2} cmd {:.2} {:.2} target {:?} path {} track {:?}",
-                        x[0], x[1], x[2], x[3], x[5], cmd.beta_dot, cmd.v, t.map(|g| ((g.x*100.0).round()/100.0, (g.y*100.0).round()/100.0)),
-                        nav.path_cost().is_some_and(|c| !c.is_empty()),
-                        nav.track_cost().map(|c| { let r = c.reference(c.time()); format!("t {:.1}/{:.1} r {:.2} {:.2} v {:.2}", c.time(), c.duration(), r[0], r[1], r[5]) })
-                    );
-                }
-            }
             let on_tick = pilot.take_plan_time_on_tick();
             if let Some(rec) = navigation.as_mut() {
                 rec.tick_ms

@@ -39,6 +39,10 @@ pub struct TrajectorySettings {
     pub max_rows: usize,
     /// The warm start's speed, as a fraction of v_max.
     pub cruise: f64,
+    /// What the trajectory keeps beyond the route's margins [m]: the MPC
+    /// tracking it at speed and the envelope's stop check need room the
+    /// route's followers did not (measured: `docs/global-layer.md`).
+    pub margin: f64,
 }
 
 impl Default for TrajectorySettings {
@@ -46,10 +50,11 @@ impl Default for TrajectorySettings {
         Self {
             intervals: 50,
             tolerance: 0.01,
-            max_solve_seconds: 1.0,
-            reach: 2.0,
-            max_rows: 12,
+            max_solve_seconds: 0.5,
+            reach: 1.5,
+            max_rows: 6,
             cruise: 0.8,
+            margin: 0.2,
         }
     }
 }
@@ -350,10 +355,7 @@ impl TrajectoryOptimiser for IpoptTrajectory {
                 t0.elapsed().as_secs_f64() * 1e3
             );
         }
-        let k: usize = std::env::var("TRJ_K")
-            .ok()
-            .and_then(|v| v.parse().ok())
-            .unwrap_or(self.settings.intervals);
+        let k = self.settings.intervals;
         r.ok().map(|t| t / (PATH_POINTS * k) as f64)
     }
 }
@@ -370,40 +372,22 @@ impl IpoptTrajectory {
         out: &mut Vec<State>,
     ) -> Result<f64, &'static str> {
         let p = &self.params;
-        let mut s = self.settings;
-        if let Some(r) = std::env::var("TRJ_ROWS").ok().and_then(|v| v.parse().ok()) {
-            s.max_rows = r;
-        }
-        if let Some(r) = std::env::var("TRJ_REACH").ok().and_then(|v| v.parse().ok()) {
-            s.reach = r;
-        }
-        let s = &s;
-        let k: usize = std::env::var("TRJ_K")
-            .ok()
-            .and_then(|v| v.parse().ok())
-            .unwrap_or(s.intervals);
+        let s = &self.settings;
+        let k = s.intervals;
         let start = ocp::admissible_start(p, start);
         let guess = route_guess(p, &start, path, shot, s.cruise, k).ok_or("no warm start")?;
         let end = guess.states[k];
         let theta_goal = end[ix::THETA] + wrap_angle(goal.theta - end[ix::THETA]);
         let world = Arc::new(checked.world().clone());
         let mut margins = checked.circle_margins();
-        let extra: f64 = std::env::var("TRJ_M")
-            .ok()
-            .and_then(|v| v.parse().ok())
-            .unwrap_or(0.0);
         for m in &mut margins {
-            *m += extra;
+            *m += s.margin;
         }
         let mut z0 = ocp::guess_vector(&guess, k);
         z0[..6].copy_from_slice(start.as_slice());
         let mt = MinTimeSettings {
             intervals: k,
-            hessian: if std::env::var_os("TRJ_LBFGS").is_some() {
-                HessianKind::Lbfgs
-            } else {
-                HessianKind::FiniteDifference
-            },
+            hessian: HessianKind::FiniteDifference,
             t_min: 0.2,
             t_max: (3.0 * guess.duration).max(5.0),
             ..MinTimeSettings::default()
@@ -434,11 +418,7 @@ impl IpoptTrajectory {
             nlp.z_lower[ocp::xi(k) + i] = 0.0;
             nlp.z_upper[ocp::xi(k) + i] = 0.0;
         }
-        let tol: f64 = std::env::var("TRJ_TOL")
-            .ok()
-            .and_then(|v| v.parse().ok())
-            .unwrap_or(1e-6);
-        let mut options = ocp::ipopt_options(tol, 500);
+        let mut options = ocp::ipopt_options(1e-6, 500);
         options.push(("max_cpu_time", OptValue::Num(s.max_solve_seconds)));
         let r = ipopt::solve(&mut nlp, &z0, &options);
         let violation = nlp.max_violation(&r.z);
@@ -464,28 +444,14 @@ impl IpoptTrajectory {
                     return Err("too long");
                 }
                 let tau = j as f64 / PATH_POINTS as f64;
-                out.push(ocp::interval_point(p, None, k, &local, tau, &mut dx));
+                // Between the nodes the cubic may overshoot a bound by a
+                // hair: the model's own clamp (what the plant does).
+                let mut x = ocp::interval_point(p, None, k, &local, tau, &mut dx);
+                control::model::clamp_state(p, &mut x);
+                out.push(x);
             }
         }
         out.push(State::from_column_slice(&r.z[ocp::xi(k)..ocp::xi(k) + 6]));
-        if let Some(f) = std::env::var_os("WLNAV_TRAJ_DUMP") {
-            use std::io::Write;
-            if let Ok(mut w) = std::fs::OpenOptions::new()
-                .create(true)
-                .append(true)
-                .open(f)
-            {
-                for i in 0..=k {
-                    let x = &r.z[ocp::xi(i)..ocp::xi(i) + 6];
-                    let _ = writeln!(
-                        w,
-                        "{i},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3}",
-                        x[0], x[1], x[2], x[3], x[4], x[5]
-                    );
-                }
-                let _ = writeln!(w);
-            }
-        }
         Ok(r.z[8 * k + 6])
     }
 }

@@ -4,21 +4,30 @@
 //! path cost. At stage k, with r(t) the trajectory's state at time t (linear
 //! between its samples, its last state beyond its end) and t_k = t₀ + k·Δt,
 //!
-//!   V_k(x, u) = q_p‖p − p_r‖² + q_θ(1 − cos(θ − θ_r)) + q_β(β − β_r)²
+//!   V_k(x, u) = q_p‖p(x) − p(r)‖² + q_θ(1 − cos(θ − θ_r)) + q_β(β − β_r)²
 //!             + q_β̇(β̇ − β̇_r)² + q_v(v − v_r)² + r·Σ (u_i / u_max,i)²
 //!
-//! with p the front axle. The reference's speed and articulation carry what
+//! with p the leading axle's position: the front axle's where the reference
+//! drives forwards, the rear axle's where it reverses (as [`super::PathCost`]
+//! follows the leading point: tracked by its trailing front axle, a
+//! reversing machine is a trailer pushed backwards; measured on obstacles200,
+//! the front axle tracked reversing drifted up to 0.7 m off the reference and
+//! lost goals). The reference's speed and articulation carry what
 //! a path cannot: where the trajectory brakes, stops to reverse (a cusp is
 //! v_r passing through 0) and arrives at rest. t₀, the reference time of the
 //! first stage, is the navigator's ([`crate::planner::Navigator`]): it runs
 //! with the clock and waits while the machine lags behind.
 //!
-//! V is quadratic in x but for the heading; its Gauss–Newton Hessian takes
-//! q_θ·max(cos, 0) for it, as [`super::PathCost`] does. The terminal cost
-//! is V at t_N without the controls.
+//! Its Gauss–Newton Hessian takes 2q_p·JᵀJ for the position (J the point's
+//! Jacobian over (x_f, y_f, θ, β); the front axle's is constant) and
+//! q_θ·max(cos, 0) for the heading, as [`super::PathCost`] does. The
+//! terminal cost is V at t_N without the controls.
 
 use crate::critic::Derivatives;
 use crate::model::{ix, wrap_angle, Control, MachineParams, State, NU, NX};
+use crate::obstacle::AxlePoint;
+
+use super::path_cost::POSE_INDEX;
 
 /// The weights of [`TrackCost`], each on its squared error.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -40,16 +49,10 @@ pub struct TrackWeights {
 impl Default for TrackWeights {
     fn default() -> Self {
         Self {
-            position: std::env::var("TRK_P")
-                .ok()
-                .and_then(|v| v.parse().ok())
-                .unwrap_or(10.0),
+            position: 50.0,
             // 1 − cos(e) ≈ e²/2: a radian of heading weighs as a metre, as
             // in the success test (DESIGN §7).
-            heading: std::env::var("TRK_H")
-                .ok()
-                .and_then(|v| v.parse().ok())
-                .unwrap_or(20.0),
+            heading: 100.0,
             articulation: 1.0,
             articulation_rate: 0.1,
             speed: 1.0,
@@ -86,6 +89,7 @@ pub struct TrackCost {
     time: f64,
     weights: TrackWeights,
     control_scale: [f64; NU],
+    params: MachineParams,
 }
 
 impl Default for TrackCost {
@@ -103,6 +107,7 @@ impl TrackCost {
             time: 0.0,
             weights: TrackWeights::default(),
             control_scale: [0.0; NU],
+            params: MachineParams::default(),
         }
     }
 
@@ -143,6 +148,7 @@ impl TrackCost {
         self.dt = dt;
         self.weights = weights;
         self.control_scale = [1.0 / umax[0], 1.0 / umax[1]];
+        self.params = *params;
     }
 
     /// Copies `other` (no allocation).
@@ -153,6 +159,7 @@ impl TrackCost {
         self.time = other.time;
         self.weights = other.weights;
         self.control_scale = other.control_scale;
+        self.params = other.params;
     }
 
     /// t₀, the first stage's reference time [s].
@@ -208,15 +215,34 @@ impl TrackCost {
             out.grad[i] = 2.0 * q * e;
             out.hess[i][i] = 2.0 * q;
         };
-        square(ix::X, w.position);
-        square(ix::Y, w.position);
         square(ix::BETA, w.articulation);
         square(ix::BETA_DOT, w.articulation_rate);
         square(ix::V, w.speed);
+        // The leading axle's position: the front's forwards, the rear's
+        // reversing (a machine steered by its trailing axle is a trailer
+        // pushed backwards; Gauss–Newton through the point's Jacobian J).
+        let point = if r[ix::V] < 0.0 {
+            AxlePoint::Rear
+        } else {
+            AxlePoint::Front
+        };
+        let (p, pr) = (
+            point.position(&self.params, x),
+            point.position(&self.params, &r),
+        );
+        let e = [p[0] - pr[0], p[1] - pr[1]];
+        let j = point.jacobian(&self.params, x);
+        out.value += w.position * (e[0] * e[0] + e[1] * e[1]);
+        for (a, &ia) in POSE_INDEX.iter().enumerate() {
+            out.grad[ia] += 2.0 * w.position * (j[0][a] * e[0] + j[1][a] * e[1]);
+            for (b, &ib) in POSE_INDEX.iter().enumerate() {
+                out.hess[ia][ib] += 2.0 * w.position * (j[0][a] * j[0][b] + j[1][a] * j[1][b]);
+            }
+        }
         let (sin, cos) = wrap_angle(x[ix::THETA] - r[ix::THETA]).sin_cos();
         out.value += w.heading * (1.0 - cos);
-        out.grad[ix::THETA] = w.heading * sin;
-        out.hess[ix::THETA][ix::THETA] = w.heading * cos.max(0.0);
+        out.grad[ix::THETA] += w.heading * sin;
+        out.hess[ix::THETA][ix::THETA] += w.heading * cos.max(0.0);
         for c in 0..NU {
             let k = self.control_scale[c];
             out.value += w.control * (k * u[c]).powi(2);
@@ -272,7 +298,29 @@ mod tests {
 
     #[test]
     fn gradient_matches_central_differences_and_is_zero_on_the_reference() {
-        let mut c = trajectory();
+        // Forwards (the front axle tracked) and reversing (the rear axle).
+        for v0 in [1.0, -1.0] {
+            gradient_at(v0);
+        }
+    }
+
+    fn gradient_at(v0: f64) {
+        let p = MachineParams::default();
+        let states: Vec<State> = (0..=10)
+            .map(|k| {
+                let t = 0.2 * k as f64;
+                State::new(
+                    t,
+                    0.1 * t * t,
+                    3.0 + 0.2 * t,
+                    0.3 * t - 0.2,
+                    0.3,
+                    v0 - 0.1 * t,
+                )
+            })
+            .collect();
+        let mut c = TrackCost::new();
+        c.set(&states, 0.2, TrackWeights::default(), &p);
         c.set_time(0.5);
         let x = State::new(0.9, 0.2, -2.9, 0.1, 0.2, 0.6);
         let u = Control::new(0.3, -0.4);

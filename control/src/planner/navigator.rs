@@ -585,7 +585,7 @@ impl Navigator {
             self.track_plan = self.plans;
             let had = !self.track.is_empty();
             self.track.clear();
-            if !self.route.trajectory.is_empty() {
+            if !self.route.trajectory.is_empty() && std::env::var_os("WLNAV_TRACK_OFF").is_none() {
                 let weights = TrackWeights::default();
                 self.track.set(
                     &self.route.trajectory,

@@ -1022,3 +1022,124 @@ fn a_replan_that_hands_back_the_goal_alone_is_followed_by_a_retry() {
         "{outcomes:?}"
     );
 }
+
+/// A trajectory optimiser for the tests: the route's path (its poses, then
+/// the goal) timed at 1 m/s along its arc, every pose a state; or none.
+struct RouteTimed {
+    fail: bool,
+}
+
+impl TrajectoryOptimiser for RouteTimed {
+    fn optimise(
+        &mut self,
+        _world: &CheckedWorld,
+        start: &State,
+        goal: &Goal,
+        path: &[PathPose],
+        _shot: &[State],
+        out: &mut Vec<State>,
+    ) -> Option<f64> {
+        if self.fail {
+            return None;
+        }
+        // Resampled every 0.1 m (0.1 s at 1 m/s) along the poses.
+        let mut poses: Vec<[f64; 3]> = vec![[start[ix::X], start[ix::Y], start[ix::THETA]]];
+        poses.extend(path.iter().map(|p| [p.x, p.y, p.theta]));
+        poses.push([goal.x, goal.y, goal.theta]);
+        out.clear();
+        for w in poses.windows(2) {
+            let d = (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]);
+            let n = (d / 0.1).ceil().max(1.0) as usize;
+            for k in 0..n {
+                let f = k as f64 / n as f64;
+                let at = |i: usize| w[0][i] + f * (w[1][i] - w[0][i]);
+                out.push(State::new(at(0), at(1), at(2), 0.0, 0.0, 1.0));
+            }
+        }
+        out.push(State::new(goal.x, goal.y, goal.theta, 0.0, 0.0, 0.0));
+        Some(0.1)
+    }
+}
+
+fn tracking_navigator(fail: bool) -> Navigator {
+    let settings = NavigatorSettings::default();
+    let planner = RoutePlanner::new(params(), &settings, None)
+        .unwrap()
+        .with_trajectory(Box::new(RouteTimed { fail }));
+    let routes = Box::new(InlineRoutes::new(planner, PlanDelay::Fixed(0.0)));
+    Navigator::with_routes(params(), settings, None, routes).unwrap()
+}
+
+#[test]
+fn a_searched_route_shaped_by_a_trajectory_is_tracked_with_the_machine_then_handed_to_the_critic() {
+    let mut nav = tracking_navigator(false);
+    let goal = Goal::new(8.0, 0.0, 0.0);
+    nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &wall(), 0.0)
+        .unwrap();
+    assert_eq!(nav.last_plan().unwrap().outcome, PlanOutcome::Route);
+    // The route's path is the trajectory's (thinned, start to goal): it goes
+    // round the wall's end as the search's did.
+    let widest = nav.path().iter().map(|q| q.y.abs()).fold(0.0, f64::max);
+    assert!(widest > 3.8, "{widest}");
+    let end = nav.path().last().copied().unwrap();
+    assert!((end.x - goal.x).hypot(end.y - goal.y) < 1e-9);
+    // The goal is the MPC's target, the trajectory its cost (no path cost).
+    let x0 = at_rest(0.0, 0.0, 0.0);
+    assert_eq!(nav.update(&x0, 0.0), drive(goal, true));
+    let track = nav.track_cost().expect("the trajectory is tracked").clone();
+    assert!(nav.path_cost().is_none());
+    assert_eq!(track.time(), 0.0);
+    let duration = track.duration();
+    // Standing still, the time waits for the machine (the trajectory's
+    // first points are further from it than the ones it is at).
+    for k in 1..=5 {
+        nav.update(&x0, 0.2 * k as f64);
+        assert!(nav.track_cost().unwrap().time() <= 0.1 + 1e-9);
+    }
+    // Driven along the reference, the time keeps up with the machine's
+    // place on it (within a sample), never ahead of it.
+    let mut now = 1.0;
+    let mut t = 0.0;
+    while t < duration {
+        t = (t + 0.2).min(duration);
+        now += 0.2;
+        let x = track.reference(t);
+        let version = nav.cost_version();
+        assert_eq!(nav.update(&x, now), drive(goal, true));
+        let on = nav.track_cost().unwrap();
+        assert!((on.time() - t).abs() <= 0.1 + 1e-9, "{} vs {t}", on.time());
+        assert_eq!(nav.cost_version(), version, "the trajectory set again");
+    }
+    // At its end, the goal at rest is tracked a little longer, then the
+    // critic has the goal.
+    let at_goal = at_rest(goal.x, goal.y, goal.theta);
+    let version = nav.cost_version();
+    let mut handed = None;
+    for k in 1..=10 {
+        nav.update(&at_goal, now + 0.2 * k as f64);
+        if nav.track_cost().is_none() {
+            handed = Some(0.2 * k as f64);
+            break;
+        }
+    }
+    let after = handed.expect("handed over to the critic");
+    assert!((0.8..=1.2).contains(&after), "after {after} s");
+    assert!(nav.cost_version() > version);
+    assert!(nav.path_cost().is_none());
+}
+
+#[test]
+fn without_a_trajectory_the_searched_route_is_followed_as_before() {
+    let mut shaped = tracking_navigator(true);
+    let mut plain = Navigator::new(params(), NavigatorSettings::default(), None).unwrap();
+    let goal = Goal::new(8.0, 0.0, 0.0);
+    let x0 = at_rest(0.0, 0.0, 0.0);
+    for nav in [&mut shaped, &mut plain] {
+        nav.set_goal(&x0, goal, &wall(), 0.0).unwrap();
+        nav.update(&x0, 0.0);
+        assert!(nav.track_cost().is_none());
+        assert!(nav.path_cost().is_some());
+    }
+    assert_eq!(shaped.path(), plain.path());
+    assert_eq!(shaped.route(), plain.route());
+}

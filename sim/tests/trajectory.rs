@@ -1,0 +1,128 @@
+//! The trajectory optimiser `wlnav-sim` plans with (issue 42,
+//! `sim::trajectory`), checked against computations of its own: the model's
+//! position rates between the samples, the bounds, the world's whole
+//! clearance query (not the NLP's rows), the min-time bound with no margin
+//! (a lower bound on its duration) and the route it was warm-started from.
+
+use control::model::{f_continuous, ix, wrap_angle, Control, Goal, MachineParams, State};
+use control::obstacle::Obstacle;
+use control::planner::world::CheckedWorld;
+use control::planner::{NavigatorSettings, PlanJob, PlanKind, RoutePlanner, TrajectoryOptimiser};
+use control::scenario::Scenario;
+use sim::ocp::{solve_min_time, MinTimeSettings};
+use sim::trajectory::{IpoptTrajectory, TrajectorySettings};
+
+/// A wall across the straight path at x = 4, |y| ≤ 3.2 (the planner's tests').
+fn wall() -> Vec<Obstacle> {
+    (-4..=4)
+        .map(|k| Obstacle::new(4.0, 0.8 * k as f64, 0.6))
+        .collect()
+}
+
+#[test]
+fn the_trajectory_round_a_wall_follows_the_model_keeps_the_margins_and_beats_its_route() {
+    let p = MachineParams::default();
+    let settings = NavigatorSettings::default();
+    let start = State::new(0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+    let goal = Goal::new(8.0, 0.0, 0.0);
+    // The searched route, as the planner makes it (no optimiser).
+    let mut planner = RoutePlanner::new(p, &settings, None).unwrap();
+    let mut job = PlanJob::new(&p, &settings.search);
+    job.request.kind = PlanKind::First;
+    job.request.start = start;
+    job.request.goal = goal;
+    job.request.world.set_circles(&wall()).unwrap();
+    planner.plan(&mut job);
+    let path = job.route.path.clone();
+    assert!(path.len() > 10);
+    let route_length: f64 = path
+        .windows(2)
+        .map(|w| (w[1].x - w[0].x).hypot(w[1].y - w[0].y))
+        .sum();
+
+    let margin = settings.search.clearance_margin;
+    let mut world = CheckedWorld::new(p, 16, margin);
+    world.set(&wall()).unwrap();
+    let ts = TrajectorySettings::default();
+    let mut optimiser = IpoptTrajectory::new(p, ts);
+    let mut out = Vec::with_capacity(4096);
+    let dt = optimiser
+        .optimise(&world, &start, &goal, &path, &job.route.shot, &mut out)
+        .expect("a trajectory round the wall");
+    let duration = dt * (out.len() - 1) as f64;
+
+    // From the start to the goal (within the tolerance), at rest there.
+    assert_eq!(out[0], start);
+    let end = out.last().unwrap();
+    let error = (end[ix::X] - goal.x)
+        .hypot(end[ix::Y] - goal.y)
+        .hypot(wrap_angle(end[ix::THETA] - goal.theta));
+    assert!(error <= ts.tolerance + 1e-6, "ends {error} from the goal");
+    assert!(end[ix::V].abs() < 1e-6 && end[ix::BETA_DOT].abs() < 1e-6);
+    for (i, x) in out.iter().enumerate() {
+        // Within the model's bounds.
+        assert!(x[ix::BETA].abs() <= p.beta_max + 1e-6, "state {i}: {x:?}");
+        assert!(x[ix::BETA_DOT].abs() <= p.beta_dot_max + 1e-6, "state {i}");
+        assert!(x[ix::V].abs() <= p.v_max + 1e-6, "state {i}");
+        // The whole world's clearance, not the rows the NLP kept: the
+        // route's margin plus the trajectory's own, less 1 cm of slack.
+        let c = world.state_clearance(x);
+        assert!(c >= margin + ts.margin - 0.0101, "state {i}: clearance {c}");
+    }
+    // The front axle moves as the model says between samples (trapezoid
+    // of the model's position rates; the controls do not enter them).
+    for (i, w) in out.windows(2).enumerate() {
+        let (f0, f1) = (
+            f_continuous(&p, &w[0], &Control::zeros()),
+            f_continuous(&p, &w[1], &Control::zeros()),
+        );
+        for c in [ix::X, ix::Y, ix::THETA] {
+            let measured = (w[1][c] - w[0][c]) / dt;
+            let model = 0.5 * (f0[c] + f1[c]);
+            assert!(
+                (measured - model).abs() < 0.03,
+                "interval {i}, component {c}: {measured} vs {model}"
+            );
+        }
+    }
+    // No faster than the bound without margins; shorter than the route,
+    // and faster than the route driven at top speed from rest to rest.
+    let scenario = Scenario {
+        name: "wall".into(),
+        start,
+        goal,
+        obstacles: wall(),
+    };
+    let bound = solve_min_time(&p, &scenario, &MinTimeSettings::default(), &[]);
+    assert!(bound.plan.is_some());
+    assert!(
+        duration >= bound.time - 1e-3,
+        "{duration} < T* {}",
+        bound.time
+    );
+    let length: f64 = out
+        .windows(2)
+        .map(|w| (w[1][ix::X] - w[0][ix::X]).hypot(w[1][ix::Y] - w[0][ix::Y]))
+        .sum();
+    assert!(length < route_length, "{length} m, route {route_length} m");
+    let route_time = route_length / p.v_max + p.v_max / p.a_max;
+    assert!(duration < route_time, "{duration} s, route {route_time} s");
+}
+
+#[test]
+fn no_trajectory_where_the_warm_start_is_empty() {
+    let p = MachineParams::default();
+    let world = CheckedWorld::new(p, 16, 0.15);
+    let mut optimiser = IpoptTrajectory::new(p, TrajectorySettings::default());
+    let mut out = Vec::with_capacity(16);
+    let start = State::zeros();
+    let none = optimiser.optimise(
+        &world,
+        &start,
+        &Goal::new(0.0, 0.0, 0.0),
+        &[],
+        &[],
+        &mut out,
+    );
+    assert_eq!(none, None);
+}
