@@ -13,9 +13,10 @@ use control::model::{Goal, MachineParams, State};
 use control::mpc::{Mpc, MpcSettings};
 use control::obstacle::Obstacle;
 use control::pilot::{Pilot, PilotDecision};
+use control::planner::world::CheckedWorld;
 use control::planner::{
-    InlineRoutes, NavStep, Navigator, NavigatorSettings, PlanDelay, PlanOutcome, PlannerThread,
-    RoutePlanner, RouteService,
+    InlineRoutes, NavStep, Navigator, NavigatorSettings, PathPose, PlanDelay, PlanOutcome,
+    PlannerThread, RoutePlanner, RouteService, TrajectoryOptimiser,
 };
 use control::weights;
 use control::{Actor, Critic, VelocityCommand};
@@ -145,6 +146,66 @@ fn the_global_layer_and_the_pilot_do_not_allocate() {
         "the wall is planned around"
     );
     assert_eq!(after - before, 0, "{} allocations (pilot)", after - before);
+
+    // The pilot tracking a trajectory (issue 42): the route shaped by an
+    // optimiser that allocates nothing itself (the searched path timed at
+    // 1 m/s), the trajectory copied into the MPC and its time every tick.
+    struct Timed;
+    impl TrajectoryOptimiser for Timed {
+        fn optimise(
+            &mut self,
+            _: &CheckedWorld,
+            _: &State,
+            _: &Goal,
+            path: &[PathPose],
+            _: &[State],
+            out: &mut Vec<State>,
+        ) -> Option<f64> {
+            out.clear();
+            for q in path.iter().take(out.capacity()) {
+                let v = if q.direction < 0 { -1.0 } else { 1.0 };
+                out.push(State::new(q.x, q.y, q.theta, q.beta, 0.0, v));
+            }
+            // The search's sample spacing (0.15 m) at 1 m/s.
+            Some(0.15)
+        }
+    }
+    let s = NavigatorSettings::default();
+    let planner = RoutePlanner::new(p, &s, Some(trained().0))
+        .unwrap()
+        .with_trajectory(Box::new(Timed));
+    let routes = Box::new(InlineRoutes::new(planner, PlanDelay::Fixed(0.2)));
+    let nav = Navigator::with_routes(p, s, Some(&critic), routes).unwrap();
+    let mpc = Mpc::new(p, critic.clone(), Some(trained().0), MpcSettings::default()).unwrap();
+    let mut pilot = Pilot::new(
+        p,
+        mpc,
+        Some(nav),
+        EnvelopeSettings::default(),
+        Default::default(),
+    )
+    .unwrap();
+    let before = common::allocations();
+    pilot.set_goal(&start, goal, wall, 0.0).unwrap();
+    let mut tracked = 0;
+    for k in 0..80 {
+        let now = k as f64 * 0.2;
+        let x = State::new(0.1 * k as f64, -0.05 * k as f64, 0.0, 0.0, 0.0, 0.5);
+        let command = match pilot.step(&x, now, Instant::now()).unwrap() {
+            PilotDecision::Drive(s) => s.command,
+            PilotDecision::Abort(_) | PilotDecision::Stop { .. } => VelocityCommand::ZERO,
+        };
+        tracked += usize::from(pilot.navigator().unwrap().track_cost().is_some());
+        pilot.sent(now, command);
+    }
+    let after = common::allocations();
+    assert!(tracked > 10, "tracked {tracked} ticks");
+    assert_eq!(
+        after - before,
+        0,
+        "{} allocations (pilot tracking)",
+        after - before
+    );
 
     // The pilot in the ≥ 500-feature site with the Avant 635's outline (DESIGN
     // §17): rows from the site's index, the envelope through it, the route

@@ -429,7 +429,8 @@ impl IpoptTrajectory {
                 guess.duration
             );
         }
-        if !(violation < 1e-5) || !r.objective.is_finite() {
+        // (A NaN violation fails too.)
+        if violation.is_nan() || violation >= 1e-5 || !r.objective.is_finite() {
             return Err("not solved");
         }
         if !keeps_margins(p, &world, &margins, &r.z, k) {

@@ -585,7 +585,7 @@ impl Navigator {
             self.track_plan = self.plans;
             let had = !self.track.is_empty();
             self.track.clear();
-            if !self.route.trajectory.is_empty() && std::env::var_os("WLNAV_TRACK_OFF").is_none() {
+            if !self.route.trajectory.is_empty() {
                 let weights = TrackWeights::default();
                 self.track.set(
                     &self.route.trajectory,
@@ -633,8 +633,8 @@ impl Navigator {
         let times = (0..=steps).map(|j| (t0 + j as f64 * step).min(self.track.duration()));
         let nearest = times.clone().map(distance).fold(f64::INFINITY, f64::min);
         let t = times
-            .filter(|&t| distance(t) <= nearest + TRACK_TIE)
-            .last()
+            .rev()
+            .find(|&t| distance(t) <= nearest + TRACK_TIE)
             .unwrap_or(t0);
         self.track.set_time(t);
     }

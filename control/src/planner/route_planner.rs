@@ -168,7 +168,8 @@ pub struct RoutePlanner {
     actor: Option<(Actor, ActorWorkspace)>,
     /// The actor's roll-out on the open way (its states, start first).
     open_way: Vec<State>,
-    /// Shapes a searched route by time (issue 42); `None`: the search's path.
+    /// Shapes every way among obstacles (searched, or the open way's
+    /// roll-out) by time (issue 42); `None`: the path is followed.
     trajectory: Option<Box<dyn TrajectoryOptimiser>>,
 }
 
@@ -199,7 +200,7 @@ impl RoutePlanner {
         })
     }
 
-    /// Searched routes are shaped by `optimiser` from now on.
+    /// Every way among obstacles is shaped by `optimiser` from now on.
     pub fn with_trajectory(mut self, optimiser: Box<dyn TrajectoryOptimiser>) -> Self {
         self.trajectory = Some(optimiser);
         self
@@ -328,9 +329,9 @@ impl RoutePlanner {
         (margin, endpoints)
     }
 
-    /// The searched route (its path and shot) replaced by the optimiser's
-    /// trajectory, followed like a roll-out (it is the model's: reversing
-    /// parts by the rear axle), where there is one.
+    /// The route's path (and shot) replaced by the optimiser's trajectory,
+    /// where there is one: the MPC tracks it; the path (its poses, thinned)
+    /// keeps the subgoals the progress checker and the replans go by.
     fn shape(&mut self, start: &State, goal: &Goal, route: &mut Route) -> bool {
         let Some(optimiser) = self.trajectory.as_mut() else {
             return false;

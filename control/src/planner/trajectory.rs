@@ -1,6 +1,7 @@
 //! The route shaped by time (issue 42, design (d) of `docs/global-layer.md`):
 //! a minimum-time trajectory on the machine model, warm-started from the
-//! searched route, that the MPC follows in place of the search's path.
+//! route (the search's path, or the open way's roll-out), that the MPC
+//! tracks ([`crate::mpc::TrackCost`]) in place of following the path.
 //!
 //! Why: Hybrid A*'s lattice (0.6 m arcs at three articulations) and the
 //! actor's goal shot from rest reach the goal's heading by loops the time
@@ -10,8 +11,9 @@
 //!
 //! The optimiser is a trait so that the planner (pure, in `control`) does not
 //! depend on the solver: `wlnav-sim` implements it over IPOPT, the bound's
-//! own collocation. It runs on the planner thread, after the search; a failed
-//! or rejected solve leaves the route as the search made it (anytime).
+//! own collocation (`sim::trajectory`, `wlnav-sim eval --trajectory`). It
+//! runs where the route is planned, after the search; a failed or rejected
+//! solve leaves the route as the search made it, followed as before.
 
 use crate::model::{ix, Goal, State, REACH_SPEED};
 
