@@ -1,10 +1,11 @@
 //! The trajectory optimiser `wlnav-sim` plans with (issue 42): the min-time
 //! problem of the bound ([`crate::ocp`], Hermite–Simpson collocation of paper
 //! eq. 5 with every bound, solved by IPOPT) from the planner's start to its
-//! goal, warm-started from the searched route, with the world's rows
-//! ([`World::row`], the MPC's and the envelope's) as its footprint: each
-//! interval keeps its outline circles off the features the warm start passes
-//! near, by the route's margins. The solution is checked against the whole
+//! goal, warm-started from the route (the search's path and shot, or the
+//! open way's roll-out), with the world's rows ([`World::row`], the MPC's and
+//! the envelope's) as its footprint: each interval keeps its outline circles
+//! off the features the warm start passes near, by the route's margins plus
+//! [`TrajectorySettings::margin`]. The solution is checked against the whole
 //! world before it is used.
 
 use std::sync::Arc;
@@ -380,8 +381,12 @@ impl IpoptTrajectory {
         let theta_goal = end[ix::THETA] + wrap_angle(goal.theta - end[ix::THETA]);
         let world = Arc::new(checked.world().clone());
         let mut margins = checked.circle_margins();
+        let extra = std::env::var("TRJ_M")
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(s.margin);
         for m in &mut margins {
-            *m += s.margin;
+            *m += extra;
         }
         let mut z0 = ocp::guess_vector(&guess, k);
         z0[..6].copy_from_slice(start.as_slice());
@@ -419,7 +424,11 @@ impl IpoptTrajectory {
             nlp.z_upper[ocp::xi(k) + i] = 0.0;
         }
         let mut options = ocp::ipopt_options(1e-6, 500);
-        options.push(("max_cpu_time", OptValue::Num(s.max_solve_seconds)));
+        let cap = std::env::var("TRJ_CAP")
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(s.max_solve_seconds);
+        options.push(("max_cpu_time", OptValue::Num(cap)));
         let r = ipopt::solve(&mut nlp, &z0, &options);
         let violation = nlp.max_violation(&r.z);
         if std::env::var_os("WLNAV_TRAJ_DEBUG").is_some() {
