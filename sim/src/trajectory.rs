@@ -381,12 +381,8 @@ impl IpoptTrajectory {
         let theta_goal = end[ix::THETA] + wrap_angle(goal.theta - end[ix::THETA]);
         let world = Arc::new(checked.world().clone());
         let mut margins = checked.circle_margins();
-        let extra = std::env::var("TRJ_M")
-            .ok()
-            .and_then(|v| v.parse().ok())
-            .unwrap_or(s.margin);
         for m in &mut margins {
-            *m += extra;
+            *m += s.margin;
         }
         let mut z0 = ocp::guess_vector(&guess, k);
         z0[..6].copy_from_slice(start.as_slice());
@@ -424,11 +420,7 @@ impl IpoptTrajectory {
             nlp.z_upper[ocp::xi(k) + i] = 0.0;
         }
         let mut options = ocp::ipopt_options(1e-6, 500);
-        let cap = std::env::var("TRJ_CAP")
-            .ok()
-            .and_then(|v| v.parse().ok())
-            .unwrap_or(s.max_solve_seconds);
-        options.push(("max_cpu_time", OptValue::Num(cap)));
+        options.push(("max_cpu_time", OptValue::Num(s.max_solve_seconds)));
         let r = ipopt::solve(&mut nlp, &z0, &options);
         let violation = nlp.max_violation(&r.z);
         if std::env::var_os("WLNAV_TRAJ_DEBUG").is_some() {

@@ -55,14 +55,8 @@ impl Default for TrackWeights {
             heading: 100.0,
             articulation: 1.0,
             articulation_rate: 0.1,
-            speed: std::env::var("TRK_V")
-                .ok()
-                .and_then(|v| v.parse().ok())
-                .unwrap_or(1.0),
-            control: std::env::var("TRK_U")
-                .ok()
-                .and_then(|v| v.parse().ok())
-                .unwrap_or(0.1),
+            speed: 1.0,
+            control: 0.1,
         }
     }
 }

@@ -610,11 +610,7 @@ impl Navigator {
         let end = self.track.duration();
         if self.track.time() >= end - 1e-9 {
             let since = *self.track_ended.get_or_insert(now);
-            let settle = std::env::var("TRK_SETTLE")
-                .ok()
-                .and_then(|v| v.parse().ok())
-                .unwrap_or(TRACK_SETTLE);
-            if now - since >= settle {
+            if now - since >= TRACK_SETTLE {
                 self.track.clear();
                 self.cost_version += 1;
             }
