@@ -304,8 +304,10 @@ pub fn publish(cli: &Cli, a: &ObstaclesPublishArgs) -> anyhow::Result<u8> {
             )
         })?;
     let period = Duration::from_secs_f64(1.0 / a.rate);
-    let start = Instant::now();
-    let end = a.duration.map(|d| start + Duration::from_secs_f64(d));
+    // The rate's ticks and the duration count from the first set: standard
+    // input may deliver its first line late (a loaded machine), and a tick
+    // with nothing to publish would be lost from the count.
+    let mut clock: Option<(Instant, Option<Instant>)> = None;
     let mut last: Option<ParsedSet> = None;
     let (mut sequence, mut from_input, mut tick) = (0u32, 0usize, 0u32);
     let mut input_open = true;
@@ -327,10 +329,26 @@ pub fn publish(cli: &Cli, a: &ObstaclesPublishArgs) -> anyhow::Result<u8> {
         if !input_open && a.once {
             break;
         }
-        if let Some(obstacles) = &last {
-            publisher.publish(&stamped(obstacles, monotonic_now_ns(), sequence))?;
-            sequence = sequence.wrapping_add(1);
-        }
+        let Some(obstacles) = &last else {
+            if !input_open {
+                break;
+            }
+            // Nothing to publish yet: wait for the first line.
+            if !sleep_until(Instant::now() + Duration::from_millis(1)) {
+                emit("interrupted: published 0 sets (0 from the input)");
+                return Ok(exit::INTERRUPTED);
+            }
+            continue;
+        };
+        let (start, end) = *clock.get_or_insert_with(|| {
+            let start = Instant::now();
+            (
+                start,
+                a.duration.map(|d| start + Duration::from_secs_f64(d)),
+            )
+        });
+        publisher.publish(&stamped(obstacles, monotonic_now_ns(), sequence))?;
+        sequence = sequence.wrapping_add(1);
         // Absolute deadlines: the rate does not drift with the time a publish takes.
         tick = tick.saturating_add(1);
         let deadline = start + period * tick;

@@ -145,6 +145,12 @@ fn a_file_is_checked_whole_and_the_bad_line_named() {
 }
 
 fn wlnav(config: &IpcConfig, args: &[&str], stdin: Option<&str>) -> Output {
+    wlnav_after(config, args, stdin, Duration::ZERO)
+}
+
+/// [`wlnav`] with standard input written `delay` after the start (a slow
+/// producer, or a loaded machine).
+fn wlnav_after(config: &IpcConfig, args: &[&str], stdin: Option<&str>, delay: Duration) -> Output {
     let mut child = Command::new(env!("CARGO_BIN_EXE_wlnav"))
         .arg("--prefix")
         .arg(&config.prefix)
@@ -156,6 +162,7 @@ fn wlnav(config: &IpcConfig, args: &[&str], stdin: Option<&str>) -> Output {
         .spawn()
         .expect("wlnav");
     let mut pipe = child.stdin.take().expect("stdin");
+    std::thread::sleep(delay);
     if let Some(text) = stdin {
         pipe.write_all(text.as_bytes()).expect("write stdin");
     }
@@ -233,14 +240,23 @@ fn sets_reach_the_daemon_in_turn_stamped_when_sent() {
 
 #[test]
 fn the_last_set_repeats_with_fresh_stamps_until_the_duration() {
+    // The first line written at once, and 0.3 s late: the ticks count from
+    // the first set either way (a late first line once cost a tick under load).
+    for delay in [0, 300] {
+        repeats_until_the_duration(Duration::from_millis(delay));
+    }
+}
+
+fn repeats_until_the_duration(delay: Duration) {
     let config = unique_config("repeat");
     let ep = DaemonEndpoint::new(&config).expect("daemon");
     let started = Instant::now();
     let (out, sets) = collect_while(&ep, || {
-        wlnav(
+        wlnav_after(
             &config,
             &["-", "--rate", "20", "--duration", "0.5"],
             Some(&format!("{EXAMPLE}\n")),
+            delay,
         )
     });
     assert!(out.status.success(), "{out:?}");
