@@ -378,19 +378,6 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
                 s.horizon as f64 * s.dt,
                 &mut full,
             );
-            let f: f64 = std::env::var("TRK_TERM")
-                .ok()
-                .and_then(|v| v.parse().ok())
-                .unwrap_or(1.0);
-            full.value *= f;
-            for g in full.grad.iter_mut() {
-                *g *= f;
-            }
-            for row in full.hess.iter_mut() {
-                for h in row.iter_mut() {
-                    *h *= f;
-                }
-            }
             term = TerminalDerivatives::state_block(&full);
         } else if path {
             let mut full = Derivatives::default();
