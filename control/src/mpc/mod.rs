@@ -515,11 +515,6 @@ impl<C: StageCost, D: Dynamics, B: QpBackend> Mpc<C, D, B> {
         self.track_cost.set_time(t);
     }
 
-    /// The tracked trajectory (empty: none).
-    pub fn track_cost(&self) -> &TrackCost {
-        &self.track_cost
-    }
-
     /// The path cost in use (empty: the critic).
     pub fn path_cost(&self) -> &PathCost {
         &self.path_cost

@@ -181,11 +181,6 @@ impl TrackCost {
         self.dt
     }
 
-    /// Its last state.
-    pub fn last(&self) -> Option<&State> {
-        self.states.last()
-    }
-
     /// r(t): linear between samples (the heading along the shorter way),
     /// the first before the start and the last beyond the end. Call only on
     /// a non-empty trajectory.
@@ -285,7 +280,7 @@ mod tests {
         assert!((r[ix::X] - 0.3).abs() < 1e-12);
         assert!((r[ix::V] - (1.0 - 0.4 * 0.3)).abs() < 1e-12);
         assert_eq!(c.reference(-1.0), c.reference(0.0));
-        assert_eq!(c.reference(9.0), *c.last().unwrap());
+        assert_eq!(c.reference(9.0), c.states[10]);
         // The heading across ±π goes the shorter way.
         c.states[1][ix::THETA] = -3.0;
         c.states[0][ix::THETA] = 3.0;
