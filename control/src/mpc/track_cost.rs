@@ -251,20 +251,15 @@ impl TrackCost {
 mod tests {
     use super::*;
 
-    fn trajectory() -> TrackCost {
+    /// Along x with a turn, starting at speed `v0` and slowing by `braking`
+    /// per second: forwards for v0 > 0, reversing for v0 < 0.
+    fn trajectory(v0: f64, braking: f64) -> TrackCost {
         let p = MachineParams::default();
-        // Forward along x at 1 m/s with a turn, then a stop.
         let states: Vec<State> = (0..=10)
             .map(|k| {
                 let t = 0.2 * k as f64;
-                State::new(
-                    t,
-                    0.1 * t * t,
-                    3.0 + 0.2 * t,
-                    0.3 * t - 0.2,
-                    0.3,
-                    1.0 - 0.4 * t,
-                )
+                let v = v0 - braking * t;
+                State::new(t, 0.1 * t * t, 3.0 + 0.2 * t, 0.3 * t - 0.2, 0.3, v)
             })
             .collect();
         let mut c = TrackCost::new();
@@ -274,7 +269,7 @@ mod tests {
 
     #[test]
     fn the_reference_interpolates_and_holds_the_ends() {
-        let mut c = trajectory();
+        let mut c = trajectory(1.0, 0.4);
         assert_eq!(c.duration(), 2.0);
         let r = c.reference(0.3);
         assert!((r[ix::X] - 0.3).abs() < 1e-12);
@@ -300,22 +295,7 @@ mod tests {
     }
 
     fn gradient_at(v0: f64) {
-        let p = MachineParams::default();
-        let states: Vec<State> = (0..=10)
-            .map(|k| {
-                let t = 0.2 * k as f64;
-                State::new(
-                    t,
-                    0.1 * t * t,
-                    3.0 + 0.2 * t,
-                    0.3 * t - 0.2,
-                    0.3,
-                    v0 - 0.1 * t,
-                )
-            })
-            .collect();
-        let mut c = TrackCost::new();
-        c.set(&states, 0.2, TrackWeights::default(), &p);
+        let mut c = trajectory(v0, 0.1);
         c.set_time(0.5);
         let x = State::new(0.9, 0.2, -2.9, 0.1, 0.2, 0.6);
         let u = Control::new(0.3, -0.4);
