@@ -77,6 +77,8 @@ if has_phase setup; then
     apt-get update -qq
     apt-get install -y -qq --no-install-recommends "${pkgs[@]}" >/dev/null
   fi
+  # wlnavd links IPOPT (trajopt): its arm64 library beside the amd64 one.
+  bash scripts/arm64-ipopt.sh "$CARGO_TARGET_DIR/arm64-ipopt" || fail "arm64 IPOPT (scripts/arm64-ipopt.sh)"
 fi
 CARGO=/usr/bin/cargo
 RUSTC=/usr/bin/rustc

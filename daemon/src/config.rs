@@ -21,7 +21,8 @@
 //! [controller]
 //! cost = "critic"      # "critic" (the trained network) or "quadratic" (no weights; for bring-up)
 //! planner = "hybrid-astar"  # the global layer (DESIGN §10): "hybrid-astar" or "none"
-//! [navigator]          # control::planner::NavigatorSettings: [navigator.search], [navigator.following], [navigator.stall], max_route_age
+//! [navigator]          # control::planner::NavigatorSettings: [navigator.search], [navigator.following], [navigator.stall], max_route_age, trajectory
+//! [trajectory]         # trajopt::trajectory::TrajectorySettings: the min-time trajectory's solve (max_solve_seconds, margin, ...)
 //! [weights]
 //! critic = "critic-weights/avant635/critic.safetensors"   # control::weights::DEFAULT_DIR
 //! actor = "critic-weights/avant635/actor.safetensors"     # "" = no actor (zero-control warm start)
@@ -120,6 +121,9 @@ pub struct Config {
     /// progress window and reach tolerance are the loop's (`loop.progress_*`,
     /// `loop.reach_tolerance`): one owner each.
     pub navigator: control::planner::NavigatorSettings,
+    /// How the planner's min-time trajectory is optimised, where
+    /// `navigator.trajectory` asks for one (issue 42).
+    pub trajectory: trajopt::trajectory::TrajectorySettings,
     /// Weight files.
     pub weights: WeightsConfig,
     /// Control loop timing and safety thresholds.
@@ -855,6 +859,9 @@ impl Config {
             n.validate()
                 .map_err(|e| invalid("navigator", e.to_string()))?;
         }
+        self.trajectory
+            .validate()
+            .map_err(|e| invalid(format!("trajectory.{}", e.key), e.message))?;
         if self.can.backend == CanBackend::Socketcan && self.can.interface.trim().is_empty() {
             return Err(invalid("can.interface", "must not be empty"));
         }
@@ -1110,6 +1117,15 @@ mod tests {
         assert!(err("[loop.realtime]\npriority = 100\n").contains("`loop.realtime.priority`"));
         assert!(err("[loop.realtime]\ncpu = 100000\n").contains("`loop.realtime.cpu`"));
         assert!(err("[loop.realtime]\nprio = 10\n").contains("prio"));
+        assert!(
+            err("[trajectory]\nmax_solve_seconds = 0\n").contains("`trajectory.max_solve_seconds`")
+        );
+        assert!(err("[trajectory]\nintervals = 1\n").contains("`trajectory.intervals`"));
+        assert!(err("[trajectory]\nmax_iterations = 0\n").contains("`trajectory.max_iterations`"));
+        assert!(err("[trajectory]\nmargin = -0.1\n").contains("`trajectory.margin`"));
+        assert!(err("[trajectory]\nsolver = \"x\"\n").contains("solver"));
+        let on = Config::from_toml("[navigator]\ntrajectory = true\n", "t").unwrap();
+        assert!(on.navigator.trajectory);
     }
 
     #[test]

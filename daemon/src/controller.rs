@@ -26,6 +26,7 @@ use control::{Actor, Critic, Goal, MachineParams, Obstacle, State, VelocityComma
 use shm_ipc::{Pose2, Telemetry};
 use std::sync::Arc;
 use thiserror::Error;
+use trajopt::trajectory::{IpoptTrajectory, TrajectorySettings};
 
 use crate::config::{Config, CostKind};
 use crate::ipc::wire_state;
@@ -358,6 +359,7 @@ pub fn load_controller(config: &Config) -> Result<ControllerFactory, LoadError> 
     let parts = ControllerParts {
         machine,
         navigator: config.navigator_settings(),
+        trajectory: config.trajectory,
         envelope: config.envelope,
         progress: config.control.progress(),
         outline: config
@@ -398,10 +400,12 @@ pub fn load_controller(config: &Config) -> Result<ControllerFactory, LoadError> 
 
 /// The global layer for `machine`: a navigator whose routes are planned on a
 /// planner thread of their own (`networks`: the actor's roll-outs and shots, the
-/// critic's cost of a metre).
+/// critic's cost of a metre), shaped there into min-time trajectories where the
+/// settings ask for them.
 fn build_navigator(
     machine: MachineParams,
     settings: &NavigatorSettings,
+    trajectory: TrajectorySettings,
     networks: Option<(Actor, Critic)>,
 ) -> Result<Navigator, LoadError> {
     let fail = |e: &dyn std::fmt::Display| LoadError::Navigator(e.to_string());
@@ -409,7 +413,11 @@ fn build_navigator(
         Some((a, c)) => (Some(a), Some(c)),
         None => (None, None),
     };
-    let planner = RoutePlanner::new(machine, settings, actor).map_err(|e| fail(&e))?;
+    let mut planner = RoutePlanner::new(machine, settings, actor).map_err(|e| fail(&e))?;
+    if settings.trajectory {
+        let optimiser = IpoptTrajectory::new(machine, trajectory);
+        planner = planner.with_trajectory(Box::new(optimiser));
+    }
     let thread = PlannerThread::spawn(planner).map_err(|e| fail(&e))?;
     Navigator::with_routes(machine, settings.clone(), critic.as_ref(), Box::new(thread))
         .map_err(|e| fail(&e))
@@ -422,7 +430,9 @@ fn controller<C: StageCost + 'static>(
     networks: Option<(Actor, Critic)>,
 ) -> Result<Box<dyn Controller>, ControllerError> {
     let navigator = match &config.navigator {
-        Some(s) => Some(build_navigator(config.machine, s, networks).map_err(err)?),
+        Some(s) => {
+            Some(build_navigator(config.machine, s, config.trajectory, networks).map_err(err)?)
+        }
         None => None,
     };
     let mut pilot = Pilot::new(
@@ -443,6 +453,7 @@ fn controller<C: StageCost + 'static>(
 struct ControllerParts {
     machine: MachineParams,
     navigator: Option<NavigatorSettings>,
+    trajectory: TrajectorySettings,
     envelope: control::envelope::EnvelopeSettings,
     progress: control::progress::ProgressSettings,
     outline: Outline,

@@ -345,8 +345,9 @@ enum Command {
         /// `measured` (its wall time; not deterministic).
         #[arg(long, value_name = "S|measured", value_parser = parse_plan_delay)]
         plan_delay: Option<PlanDelay>,
-        /// Shape every searched route by a minimum-time trajectory (issue 42,
-        /// `sim::trajectory`) and follow it.
+        /// Shape every way among obstacles by a minimum-time trajectory and
+        /// track it (issue 42, `trajopt::trajectory`): the same as
+        /// `--navigator trajectory=true`.
         #[arg(long)]
         trajectory: bool,
         /// Results file whose min-time rows give T* (e.g. docs/results/worksite.csv
@@ -554,12 +555,13 @@ fn main() -> Result<()> {
             cfg.navigator = if no_planner {
                 None
             } else {
-                Some(navigator_settings(&navigator_overrides)?)
+                let mut s = navigator_settings(&navigator_overrides)?;
+                s.trajectory |= trajectory;
+                Some(s)
             };
             if let Some(d) = plan_delay {
                 cfg.plan_delay = d;
             }
-            cfg.trajectory = trajectory.then(sim::trajectory::TrajectorySettings::default);
             cfg.plant = PlantConfig {
                 delay,
                 tau_beta_dot: lag,

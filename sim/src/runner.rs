@@ -6,9 +6,9 @@
 //!   delay). One tick every Δt = 0.2 s for 30 s.
 //! - `actor`: the actor's deterministic action, sent as the velocity of the
 //!   model's next state, on the same plant (delay compensated the same way).
-//! - `baseline`: [`crate::ocp::solve_baseline`], its open-loop controls replayed
+//! - `baseline`: [`trajopt::ocp::solve_baseline`], its open-loop controls replayed
 //!   on the ideal model.
-//! - `min-time`: [`crate::ocp::solve_min_time`] from several initial guesses
+//! - `min-time`: [`trajopt::ocp::solve_min_time`] from several initial guesses
 //!   (the other methods' converged trajectories among them).
 //!
 //! Every trajectory is sampled every 0.2 s (min-time at its own step) and
@@ -42,13 +42,13 @@ use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::clearance::ClearanceMeter;
 use crate::movers::{Mover, MoverMeter, Perception, PerceptionSettings};
-use crate::ocp::{self, BaselineSettings, Guess, MinTimeSettings};
 use crate::results::ResultRow;
-use crate::trajectory::{IpoptTrajectory, TrajectorySettings};
 use control::live::LiveSettings;
 use control::site::{Outline, SiteIndex};
 use control::world::{default_outline, World};
 use std::sync::Arc;
+use trajopt::ocp::{self, BaselineSettings, Guess, MinTimeSettings};
+use trajopt::trajectory::{IpoptTrajectory, TrajectorySettings};
 
 /// How long a run with [`EvalConfig::end_at_rest`] must stay converged and at rest [s].
 pub const AT_REST_FOR: f64 = 1.0;
@@ -244,8 +244,9 @@ pub struct EvalConfig {
     /// own: an answer at the next tick). Default one tick, so the evaluation is
     /// deterministic and honest.
     pub plan_delay: PlanDelay,
-    /// Searched routes shaped by a minimum-time trajectory (issue 42).
-    pub trajectory: Option<TrajectorySettings>,
+    /// How the planner's trajectory is optimised, where the navigator's
+    /// settings ask for one (`NavigatorSettings::trajectory`, issue 42).
+    pub trajectory: TrajectorySettings,
     /// The safety envelope after the MPC (DESIGN §14), as the daemon runs it;
     /// its tolerances also widen the MPC's planned clearances.
     pub envelope: EnvelopeSettings,
@@ -288,7 +289,7 @@ impl Default for EvalConfig {
             min_time: MinTimeSettings::default(),
             navigator: Some(NavigatorSettings::default()),
             plan_delay: PlanDelay::Fixed(MpcSettings::default().dt),
-            trajectory: None,
+            trajectory: TrajectorySettings::default(),
             envelope: EnvelopeSettings::default(),
             site: None,
             outline: default_outline(),
@@ -445,8 +446,9 @@ pub fn pilot(cfg: &EvalConfig, nets: &Networks) -> Result<Pilot<Critic>> {
                 .clone()
                 .widened(cfg.envelope.tolerance_widening(&cfg.params));
             let mut planner = RoutePlanner::new(cfg.params, s, Some(nets.actor.clone()))?;
-            if let Some(t) = cfg.trajectory {
-                planner = planner.with_trajectory(Box::new(IpoptTrajectory::new(cfg.params, t)));
+            if s.trajectory {
+                let optimiser = IpoptTrajectory::new(cfg.params, cfg.trajectory);
+                planner = planner.with_trajectory(Box::new(optimiser));
             }
             let routes = Box::new(InlineRoutes::new(planner, cfg.plan_delay));
             Some(Navigator::with_routes(

@@ -71,6 +71,7 @@ fn sim_config(c: &Config) -> EvalConfig {
             ..c.sim.plant
         },
         navigator: Some(c.navigator.clone()),
+        trajectory: c.trajectory,
         plan_delay: PlanDelay::Fixed(c.period()),
         envelope: c.envelope,
         jobs: 1,
@@ -215,5 +216,33 @@ fn the_daemons_controller_and_the_sims_pilot_give_identical_commands() {
         ours.iter().any(|t| t.command.v > 0.3),
         "it drives: {:?}",
         ours.iter().map(|t| t.command.v).collect::<Vec<_>>()
+    );
+}
+
+/// The same with the planner's min-time trajectory (`[navigator] trajectory`,
+/// issue 42): the daemon's planner thread solves it as the sim's inline
+/// planner does (a solve cap no solve reaches, so the machine's load decides
+/// nothing), and both track it tick for tick. It changes the drive: a wiring
+/// that dropped it on both sides fails the last assertion.
+#[test]
+fn with_the_trajectory_the_daemon_and_the_sim_track_the_same() {
+    let mut config = daemon_config();
+    config.navigator.trajectory = true;
+    config.trajectory.max_solve_seconds = 60.0;
+    config.validate().expect("valid");
+    let eval = sim_config(&config);
+    let (ours, theirs) = run(&config, &eval);
+    if let Some(diff) = first_difference(&ours, &theirs) {
+        panic!("with the trajectory, the daemon and wlnav-sim differ at {diff}");
+    }
+    assert!(ours[1].new_plan, "the route arrived at tick 1");
+    let mut plain = daemon_config();
+    plain.trajectory = config.trajectory;
+    let (without, _) = run(&plain, &sim_config(&plain));
+    assert!(
+        ours.iter()
+            .zip(&without)
+            .any(|(a, b)| bits(a.command) != bits(b.command)),
+        "the trajectory changed nothing: is it wired?"
     );
 }

@@ -5,8 +5,11 @@ use control::model::{goal_distance, ix, Goal, MachineParams, State};
 use control::obstacle::AxlePoint;
 use control::scenario::{Obstacle, Scenario};
 use sim::clearance::ClearanceMeter;
-use sim::nlp::{finite_difference_check, HessianKind};
-use sim::ocp::{self, BaselineSettings, MinTimeSettings};
+use trajopt::ipopt::Nlp;
+use trajopt::nlp::{
+    finite_difference_check, hessian_check, ElementNlp, HessianKind, NEGLIGIBLE_MULTIPLIER,
+};
+use trajopt::ocp::{self, BaselineSettings, MinTimeSettings};
 
 fn scenario(goal: Goal, obstacles: Vec<Obstacle>) -> Scenario {
     Scenario {
@@ -24,8 +27,9 @@ fn wiggly_point(n: usize) -> Vec<f64> {
         .collect()
 }
 
-#[test]
-fn baseline_and_min_time_gradients_match_finite_differences() {
+/// The baseline's and the min-time NLP (6 intervals) near two circles, each
+/// with a point that exercises every term: (name, problem, point).
+fn small_problems() -> [(&'static str, ElementNlp, Vec<f64>); 2] {
     let p = MachineParams::default();
     // Circles near both axle points' paths, so every footprint term counts.
     let sc = scenario(
@@ -36,22 +40,53 @@ fn baseline_and_min_time_gradients_match_finite_differences() {
         horizon: 2.0,
         ..Default::default()
     };
-    let mut nlp = ocp::baseline_nlp(&p, &sc, &s, 2.5);
-    let z = wiggly_point(sim::ipopt::Nlp::n(&nlp));
-    let (eg, ej) = finite_difference_check(&mut nlp, &z);
-    assert!(eg < 1e-6, "baseline objective gradient error {eg}");
-    assert!(ej < 1e-6, "baseline constraint Jacobian error {ej}");
-
+    let baseline = ocp::baseline_nlp(&p, &sc, &s, 2.5);
+    let z_baseline = wiggly_point(baseline.n());
     let s = MinTimeSettings {
         intervals: 6,
         ..Default::default()
     };
-    let mut nlp = ocp::min_time_nlp(&p, &sc, &s, 2.5);
-    let mut z = wiggly_point(sim::ipopt::Nlp::n(&nlp));
-    *z.last_mut().unwrap() = 3.0;
-    let (eg, ej) = finite_difference_check(&mut nlp, &z);
-    assert!(eg < 1e-6, "min-time objective gradient error {eg}");
-    assert!(ej < 1e-6, "min-time constraint Jacobian error {ej}");
+    let min_time = ocp::min_time_nlp(&p, &sc, &s, 2.5);
+    let mut z_min_time = wiggly_point(min_time.n());
+    *z_min_time.last_mut().unwrap() = 3.0;
+    [
+        ("baseline", baseline, z_baseline),
+        ("min-time", min_time, z_min_time),
+    ]
+}
+
+#[test]
+fn baseline_and_min_time_gradients_match_finite_differences() {
+    for (name, mut nlp, z) in small_problems() {
+        let (eg, ej) = finite_difference_check(&mut nlp, &z);
+        assert!(eg < 1e-6, "{name} objective gradient error {eg}");
+        assert!(ej < 1e-6, "{name} constraint Jacobian error {ej}");
+    }
+}
+
+/// Multipliers of every size: large, small, and some below the negligible
+/// one (those elements' curvature is left out; the check sees it).
+fn multipliers(m: usize) -> Vec<f64> {
+    (0..m)
+        .map(|i| match i % 4 {
+            0 => 0.5 * ((i as f64) * 1.3).cos(),
+            1 => 0.3 * NEGLIGIBLE_MULTIPLIER,
+            2 => -0.02,
+            _ => 1e-3,
+        })
+        .collect()
+}
+
+/// The element-wise Hessian (forward differences of exact gradients, the
+/// positions the defects are linear in skipped, negligible multipliers left
+/// out) against central differences of the assembled Lagrangian's gradient.
+#[test]
+fn hessians_of_the_lagrangian_match_second_differences() {
+    for (name, mut nlp, z) in small_problems() {
+        let lambda = multipliers(nlp.m());
+        let e = hessian_check(&mut nlp, &z, 0.7, &lambda);
+        assert!(e < 1e-4, "{name} Hessian error {e}");
+    }
 }
 
 #[test]
@@ -273,12 +308,12 @@ fn brute_force_finds_nothing_faster_than_min_time() {
             if sc.obstacles.iter().any(|o| o.clearance_of(via) < 0.2) {
                 continue;
             }
-            let Some(route) = sim::routes::via_route(sc, &[via]) else {
+            let Some(route) = trajopt::routes::via_route(sc, &[via]) else {
                 continue;
             };
             let reverse = uniform() < 0.25;
             let cruise = 0.5 + 0.5 * uniform();
-            let g = sim::routes::route_guess(&p, sc, &route, reverse, cruise, 0.8);
+            let g = trajopt::routes::route_guess(&p, sc, &route, reverse, cruise, 0.8);
             if let (Some(plan), _) = ocp::min_time_attempt(&p, sc, &s, &g) {
                 solved += 1;
                 best = best.min(plan.objective);

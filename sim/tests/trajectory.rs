@@ -1,5 +1,5 @@
 //! The trajectory optimiser `wlnav-sim` plans with (issue 42,
-//! `sim::trajectory`), checked against computations of its own: the model's
+//! `trajopt::trajectory`), checked against computations of its own: the model's
 //! position rates between the samples, the bounds, the world's whole
 //! clearance query (not the NLP's rows), the min-time bound with no margin
 //! (a lower bound on its duration) and the route it was warm-started from.
@@ -9,9 +9,9 @@ use control::obstacle::Obstacle;
 use control::planner::world::CheckedWorld;
 use control::planner::{NavigatorSettings, PlanJob, PlanKind, RoutePlanner, TrajectoryOptimiser};
 use control::scenario::{self, Scenario};
-use sim::ocp::{solve_min_time, MinTimeSettings};
 use sim::runner::{EvalConfig, Method, Networks};
-use sim::trajectory::{IpoptTrajectory, TrajectorySettings};
+use trajopt::ocp::{solve_min_time, MinTimeSettings};
+use trajopt::trajectory::{IpoptTrajectory, TrajectorySettings};
 
 /// The default settings with time enough for a debug build on a loaded
 /// machine: the CPU-time cap (the anytime bound) must not decide a test.
@@ -158,12 +158,15 @@ fn tracking_the_trajectory_is_faster_than_following_the_route() {
         .filter(|s| names.contains(&s.name.as_str()))
         .collect();
     assert_eq!(set.len(), names.len());
-    let [followed, tracked] = [None, Some(generous())].map(|trajectory| {
+    let [followed, tracked] = [false, true].map(|trajectory| {
         let mut cfg = EvalConfig {
             params: nets.machine,
             methods: vec![Method::Mpc],
-            navigator: Some(NavigatorSettings::default()),
-            trajectory,
+            navigator: Some(NavigatorSettings {
+                trajectory,
+                ..Default::default()
+            }),
+            trajectory: generous(),
             jobs: 2,
             progress: false,
             ..Default::default()

@@ -26,6 +26,11 @@ pub struct NavigatorSettings {
     /// for again from where the machine is) [s]. Default 2 (plans take
     /// milliseconds; a planner that falls this far behind is stuck).
     pub max_route_age: f64,
+    /// Shape every way among obstacles into a minimum-time trajectory on the
+    /// planner's side and track it (issue 42; [`super::TrajectoryOptimiser`],
+    /// given by the program that builds the planner: `trajopt`'s IPOPT
+    /// one in `wlnavd` and `wlnav-sim`). Default false.
+    pub trajectory: bool,
 }
 
 impl Default for NavigatorSettings {
@@ -35,6 +40,7 @@ impl Default for NavigatorSettings {
             following: FollowingSettings::default(),
             stall: StallSettings::default(),
             max_route_age: 2.0,
+            trajectory: false,
         }
     }
 }

@@ -10,9 +10,10 @@
 //! β and as short in time as the optimiser finds.
 //!
 //! The optimiser is a trait so that the planner (pure, in `control`) does not
-//! depend on the solver: `wlnav-sim` implements it over IPOPT, the bound's
-//! own collocation (`sim::trajectory`, `wlnav-sim eval --trajectory`). It
-//! runs where the route is planned, after the search; a failed or rejected
+//! depend on the solver: `trajopt::trajectory` implements it over IPOPT, the
+//! bound's own collocation, for `wlnavd` and `wlnav-sim` (`[navigator]
+//! trajectory = true`, `wlnav-sim eval --trajectory`). It runs where the
+//! route is planned, after the search; a failed or rejected
 //! solve leaves the route as the search made it, followed as before.
 
 use crate::model::{ix, Goal, State, REACH_SPEED};

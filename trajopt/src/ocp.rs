@@ -124,6 +124,16 @@ impl Element for Interval {
         &self.vars
     }
 
+    /// The model does not depend on the position (x, y): the defects are
+    /// linear in both nodes' positions (the baseline's cost is not).
+    fn is_linear_in(&self, local: usize) -> bool {
+        self.cost.is_none() && matches!(local, 0 | 1 | 8 | 9)
+    }
+
+    fn has_objective(&self) -> bool {
+        self.cost.is_some()
+    }
+
     fn n_cons(&self) -> usize {
         6
     }
@@ -263,6 +273,10 @@ impl Element for IntervalFootprint {
         &self.vars
     }
 
+    fn has_objective(&self) -> bool {
+        false
+    }
+
     fn n_cons(&self) -> usize {
         self.taus.len() * self.obstacles.len() * AxlePoint::ALL.len()
     }
@@ -309,6 +323,10 @@ impl Element for TerminalSet {
         &self.vars
     }
 
+    fn has_objective(&self) -> bool {
+        false
+    }
+
     fn n_cons(&self) -> usize {
         1
     }
@@ -341,6 +359,10 @@ struct FinalTime {
 impl Element for FinalTime {
     fn vars(&self) -> &[usize] {
         &self.vars
+    }
+
+    fn is_linear_in(&self, _local: usize) -> bool {
+        true
     }
 
     fn n_cons(&self) -> usize {

@@ -9,6 +9,8 @@
 //! world before it is used.
 
 use std::sync::Arc;
+
+use serde::{Deserialize, Serialize};
 use std::time::Instant;
 
 use control::model::{ix, wrap_angle, Control, Goal, MachineParams, State};
@@ -23,15 +25,23 @@ use crate::ipopt::{self, OptValue};
 use crate::nlp::{Element, HessianKind, INF};
 use crate::ocp::{self, MinTimeSettings};
 
-/// How the trajectory is optimised.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// How the trajectory is optimised (`wlnavd`'s `[trajectory]`; used where
+/// `[navigator] trajectory = true`). `Default` gives the measured best.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
 pub struct TrajectorySettings {
     /// Collocation intervals.
     pub intervals: usize,
     /// How near the goal the trajectory ends (position and heading, the
     /// success test's norm) [m].
     pub tolerance: f64,
-    /// IPOPT's CPU-time limit [s]; a later solve keeps the route.
+    /// IPOPT's iterations at most; a solve that needs more keeps the route.
+    /// The solve's budget in work, the same on every machine and load (an
+    /// evaluation is repeatable), sized so that a plan stays inside a tick
+    /// here (measured: `docs/global-layer.md`).
+    pub max_iterations: u32,
+    /// IPOPT's CPU-time limit [s], a backstop on slower or loaded machines;
+    /// a later solve keeps the route.
     pub max_solve_seconds: f64,
     /// A feature is a row of an interval when the warm start passes it
     /// within this much beyond the margin [m].
@@ -51,12 +61,58 @@ impl Default for TrajectorySettings {
         Self {
             intervals: 50,
             tolerance: 0.01,
-            max_solve_seconds: 0.5,
+            max_iterations: 60,
+            max_solve_seconds: 0.3,
             reach: 1.5,
             max_rows: 6,
             cruise: 0.8,
             margin: 0.2,
         }
+    }
+}
+
+/// Rows per interval point at most a configuration may ask for (each is a
+/// constraint per interval point: more only slows the solve).
+const MAX_ROWS: usize = 64;
+
+/// A setting out of its range.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("trajectory.{key}: {message}")]
+pub struct SettingsError {
+    pub key: &'static str,
+    pub message: &'static str,
+}
+
+impl TrajectorySettings {
+    /// Checks every setting's range.
+    pub fn validate(&self) -> Result<(), SettingsError> {
+        let err = |key, message| Err(SettingsError { key, message });
+        if !(4..=200).contains(&self.intervals) {
+            return err("intervals", "must be 4 to 200");
+        }
+        let positive = [
+            ("tolerance", self.tolerance),
+            ("max_solve_seconds", self.max_solve_seconds),
+            ("reach", self.reach),
+        ];
+        for (key, v) in positive {
+            if !(v.is_finite() && v > 0.0) {
+                return err(key, "must be finite and > 0");
+            }
+        }
+        if !(1..=10_000).contains(&self.max_iterations) {
+            return err("max_iterations", "must be 1 to 10000");
+        }
+        if !(1..=MAX_ROWS).contains(&self.max_rows) {
+            return err("max_rows", "must be 1 to 64");
+        }
+        if !(self.cruise.is_finite() && self.cruise > 0.0 && self.cruise <= 1.0) {
+            return err("cruise", "must be in (0, 1]");
+        }
+        if !(self.margin.is_finite() && self.margin >= 0.0) {
+            return err("margin", "must be finite and >= 0");
+        }
+        Ok(())
     }
 }
 
@@ -98,6 +154,10 @@ struct WorldFootprint {
 impl Element for WorldFootprint {
     fn vars(&self) -> &[usize] {
         &self.vars
+    }
+
+    fn has_objective(&self) -> bool {
+        false
     }
 
     fn n_cons(&self) -> usize {
@@ -419,7 +479,13 @@ impl IpoptTrajectory {
             nlp.z_lower[ocp::xi(k) + i] = 0.0;
             nlp.z_upper[ocp::xi(k) + i] = 0.0;
         }
-        let mut options = ocp::ipopt_options(1e-6, 500);
+        let mut options = ocp::ipopt_options(1e-6, s.max_iterations as i32);
+        // The warm start is near a solution: a small fixed barrier parameter
+        // reaches it in fewer iterations than the adaptive rule (measured:
+        // `docs/global-layer.md`, the same times, p90 2/3 of them).
+        options.retain(|(name, _)| *name != "mu_strategy");
+        options.push(("mu_strategy", OptValue::Str("monotone".into())));
+        options.push(("mu_init", OptValue::Num(1e-3)));
         options.push(("max_cpu_time", OptValue::Num(s.max_solve_seconds)));
         let r = ipopt::solve(&mut nlp, &z0, &options);
         let violation = nlp.max_violation(&r.z);
