@@ -257,9 +257,7 @@ impl RoutePlanner {
         let direct_margin = s.direct_margin.min(endpoints).max(margin);
         let plan_every_goal = s.plan_every_goal;
         self.world.set_margin(direct_margin);
-        let shape_open_ground =
-            self.trajectory.is_some() && std::env::var_os("WLNAV_TRAJ_OPEN").is_some();
-        let open_cost = if self.world.is_empty() && !shape_open_ground {
+        let open_cost = if self.world.is_empty() {
             Some(0.0)
         } else if req.kind == PlanKind::Replan {
             None
@@ -270,11 +268,7 @@ impl RoutePlanner {
         // Planning every goal, an open way is searched too, and kept (the
         // roll-out's path) unless the search finds a cheaper one.
         if self.world.is_empty() {
-            if shape_open_ground {
-                self.follow_open_way(goal, route);
-            } else {
-                route.direct(goal);
-            }
+            route.direct(goal);
             return PlanOutcome::Direct;
         }
         if open_cost.is_some() && !plan_every_goal {
