@@ -345,11 +345,6 @@ enum Command {
         /// `measured` (its wall time; not deterministic).
         #[arg(long, value_name = "S|measured", value_parser = parse_plan_delay)]
         plan_delay: Option<PlanDelay>,
-        /// Shape every way among obstacles by a minimum-time trajectory and
-        /// track it (issue 42, `trajopt::trajectory`): the same as
-        /// `--navigator trajectory=true`.
-        #[arg(long)]
-        trajectory: bool,
         /// Results file whose min-time rows give T* (e.g. docs/results/worksite.csv
         /// for obstacles200), so t / T* is reported without solving the bound again.
         #[arg(long, value_name = "FILE")]
@@ -510,7 +505,6 @@ fn main() -> Result<()> {
             no_planner,
             navigator_overrides,
             plan_delay,
-            trajectory,
             t_star,
             site,
             outline,
@@ -555,9 +549,7 @@ fn main() -> Result<()> {
             cfg.navigator = if no_planner {
                 None
             } else {
-                let mut s = navigator_settings(&navigator_overrides)?;
-                s.trajectory |= trajectory;
-                Some(s)
+                Some(navigator_settings(&navigator_overrides)?)
             };
             if let Some(d) = plan_delay {
                 cfg.plan_delay = d;

@@ -289,7 +289,14 @@ impl Default for EvalConfig {
             min_time: MinTimeSettings::default(),
             navigator: Some(NavigatorSettings::default()),
             plan_delay: PlanDelay::Fixed(MpcSettings::default().dt),
-            trajectory: TrajectorySettings::default(),
+            // The daemon's, but for the CPU-time backstop: the iteration budget
+            // decides, and the evaluation's own load (its jobs, other work on
+            // the machine) cannot (on this machine the backstop never binds:
+            // `docs/global-layer.md`).
+            trajectory: TrajectorySettings {
+                max_solve_seconds: 10.0,
+                ..TrajectorySettings::default()
+            },
             envelope: EnvelopeSettings::default(),
             site: None,
             outline: default_outline(),

@@ -619,6 +619,13 @@ fn the_envelope_names_the_assumption_a_machine_breaks_in_closed_loop() {
             ..Default::default()
         },
         end_at_rest: true,
+        // The route followed, not the trajectory tracked: the run long enough
+        // for the gain estimate to reach what the machine does (tracked, the
+        // goal is reached at 9.4 s with the estimate at 1.32).
+        navigator: Some(control::planner::NavigatorSettings {
+            trajectory: false,
+            ..Default::default()
+        }),
         jobs: 1,
         progress: false,
         ..Default::default()

@@ -62,7 +62,7 @@ impl Default for TrajectorySettings {
             intervals: 50,
             tolerance: 0.01,
             max_iterations: 60,
-            max_solve_seconds: 0.3,
+            max_solve_seconds: 0.5,
             reach: 1.5,
             max_rows: 6,
             cruise: 0.8,
