@@ -335,9 +335,11 @@ enum Command {
         /// Without the global layer: the MPC drives straight to the goal.
         #[arg(long)]
         no_planner: bool,
-        /// A navigator setting, `group.key=value` (repeatable), e.g.
-        /// `--navigator search.heuristic_weight=1.5`; the groups and keys are
-        /// `control::planner::NavigatorSettings`' (search, following, stall).
+        /// A navigator setting, `group.key=value` or `key=value` (repeatable),
+        /// e.g. `--navigator search.heuristic_weight=1.5`, `--navigator
+        /// trajectory=false` (the route followed, not shaped); the groups and
+        /// keys are `control::planner::NavigatorSettings`' (search, following,
+        /// stall, max_route_age, trajectory).
         #[arg(long = "navigator", value_name = "KEY=VALUE", value_parser = navigator_override)]
         navigator_overrides: Vec<(String, toml::Value)>,
         /// How a route plan's time is charged: a fixed delay [s] (default one

@@ -128,6 +128,9 @@ pub struct Navigator {
     track_now: f64,
     /// When the track's time reached the trajectory's end [s].
     track_ended: Option<f64>,
+    /// The machine's distance from the trajectory's reference at the
+    /// track's time [m] (0 while nothing is tracked).
+    track_deviation: f64,
 }
 
 impl Navigator {
@@ -200,6 +203,7 @@ impl Navigator {
             track_plan: 0,
             track_now: 0.0,
             track_ended: None,
+            track_deviation: 0.0,
             settings,
         })
     }
@@ -371,7 +375,10 @@ impl Navigator {
             } else {
                 self.ask(PlanKind::Retry, x, now);
             }
-        } else if stalled && !self.world.is_empty() && self.replans < st.max_replans {
+        } else if (stalled || self.off_track(now))
+            && !self.world.is_empty()
+            && self.replans < st.max_replans
+        {
             self.replans += 1;
             self.last_replan = now;
             self.ask(PlanKind::Replan, x, now);
@@ -578,7 +585,20 @@ impl Navigator {
     /// from it, and never goes back, so a cusp's two legs are not mixed up).
     /// It ends [`TRACK_SETTLE`] after the time reached the trajectory's end
     /// (the critic then holds the goal).
+    /// Off its trajectory by more than the settings allow, with nothing asked
+    /// and no replan for `replan_after` (issue 42: re-optimised on a large
+    /// deviation).
+    fn off_track(&self, now: f64) -> bool {
+        let st = &self.settings.stall;
+        !self.track.is_empty()
+            && self.track_deviation > st.max_track_deviation
+            && self.wanted.is_none()
+            && self.spare.is_some()
+            && now - self.last_replan >= st.replan_after
+    }
+
     fn refresh_track(&mut self, x: &State, now: f64) {
+        self.track_deviation = 0.0;
         let tick = (now - self.track_now).max(0.0);
         self.track_now = now;
         if self.track_plan != self.plans {
@@ -607,6 +627,8 @@ impl Navigator {
             return;
         }
         self.advance_track(x, 2.0 * tick);
+        let r = self.track.reference(self.track.time());
+        self.track_deviation = (x[ix::X] - r[ix::X]).hypot(x[ix::Y] - r[ix::Y]);
         let end = self.track.duration();
         if self.track.time() >= end - 1e-9 {
             let since = *self.track_ended.get_or_insert(now);

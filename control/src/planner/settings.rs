@@ -213,6 +213,11 @@ pub struct StallSettings {
     /// Within this pose error of the goal the machine is holding it, not
     /// stalled. Default [`SUCCESS_TOLERANCE`].
     pub reached_tolerance: f64,
+    /// A tracked machine this far from its trajectory's reference [m] (a
+    /// push, a slip, a machine unlike the model) is planned again from where
+    /// it is, as a stall is (counted among `max_replans`, at most every
+    /// `replan_after`). Default 1.
+    pub max_track_deviation: f64,
 }
 
 impl Default for StallSettings {
@@ -225,6 +230,7 @@ impl Default for StallSettings {
             max_retries: 2,
             retry_in_sight: true,
             reached_tolerance: SUCCESS_TOLERANCE,
+            max_track_deviation: 1.0,
         }
     }
 }
@@ -263,6 +269,7 @@ impl NavigatorSettings {
             ("stall.replan_after", st.replan_after),
             ("stall.approach_distance", st.approach_distance),
             ("stall.reached_tolerance", st.reached_tolerance),
+            ("stall.max_track_deviation", st.max_track_deviation),
             ("search.workspace_half_size", s.workspace_half_size),
             ("search.grid_resolution", s.grid_resolution),
             ("search.primitive_length", s.primitive_length),

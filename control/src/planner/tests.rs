@@ -1143,3 +1143,46 @@ fn without_a_trajectory_the_searched_route_is_followed_as_before() {
     assert_eq!(shaped.path(), plain.path());
     assert_eq!(shaped.route(), plain.route());
 }
+
+/// Issue 42: a tracked machine pushed off its trajectory (here 1.5 m
+/// sideways, beyond the default 1 m) is planned again from where it is, once
+/// `replan_after` has passed since the last plan; within the limit it is not.
+#[test]
+fn a_machine_far_off_its_trajectory_is_planned_again_from_where_it_is() {
+    let st = NavigatorSettings::default().stall;
+    let goal = Goal::new(8.0, 0.0, 0.0);
+    let x0 = at_rest(0.0, 0.0, 0.0);
+    for (offset, replans) in [(0.5, false), (1.5, true)] {
+        let mut nav = tracking_navigator(false);
+        nav.set_goal(&x0, goal, &wall(), 0.0).unwrap();
+        nav.update(&x0, 0.0);
+        let track = nav.track_cost().expect("tracked").clone();
+        let plans = nav.plans();
+        // Along the reference until a replan may come, then off it sideways
+        // (the reference's heading, offset to its left).
+        let mut now = 0.0;
+        let mut t: f64 = 0.0;
+        while now < st.replan_after + 0.5 {
+            now += 0.2;
+            t = (t + 0.2).min(track.duration());
+            let mut x = track.reference(t);
+            let th = x[ix::THETA];
+            if now > st.replan_after {
+                x[ix::X] -= offset * th.sin();
+                x[ix::Y] += offset * th.cos();
+            }
+            nav.update(&x, now);
+        }
+        assert!(nav.plans() >= plans, "plans counted down");
+        assert_eq!(
+            nav.plans() > plans,
+            replans,
+            "{offset} m off: plans {} from {plans}",
+            nav.plans()
+        );
+        if replans {
+            let last = nav.last_plan().unwrap();
+            assert!(last.replan, "{last:?}");
+        }
+    }
+}
