@@ -1124,8 +1124,9 @@ mod tests {
         assert!(err("[trajectory]\nmax_iterations = 0\n").contains("`trajectory.max_iterations`"));
         assert!(err("[trajectory]\nmargin = -0.1\n").contains("`trajectory.margin`"));
         assert!(err("[trajectory]\nsolver = \"x\"\n").contains("solver"));
-        let on = Config::from_toml("[navigator]\ntrajectory = true\n", "t").unwrap();
-        assert!(on.navigator.trajectory);
+        assert!(Config::default().navigator.trajectory);
+        let off = Config::from_toml("[navigator]\ntrajectory = false\n", "t").unwrap();
+        assert!(!off.navigator.trajectory);
     }
 
     #[test]

@@ -5,7 +5,7 @@
 //! Jacobian. The assembled problem implements [`Nlp`] for IPOPT.
 //!
 //! The Hessian of the Lagrangian is either left to IPOPT's L-BFGS, or formed
-//! element by element by central differences of the *exact* element
+//! element by element by forward differences of the *exact* element
 //! gradients (each element has at most ~15 variables, so this is cheap and
 //! accurate to ~1e-7, and keeps the block-banded sparsity).
 
@@ -50,7 +50,7 @@ pub const NEGLIGIBLE_MULTIPLIER: f64 = 1e-7;
 /// How IPOPT gets the Hessian.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum HessianKind {
-    /// Central differences of the exact element gradients.
+    /// Forward differences of the exact element gradients.
     FiniteDifference,
     /// IPOPT's limited-memory quasi-Newton approximation.
     Lbfgs,
@@ -277,14 +277,14 @@ impl Nlp for ElementNlp {
             h_local.clear();
             h_local.resize(nv * nv, 0.0);
             let mut zl = self.local_z[..nv].to_vec();
-            let (gp_buf, rest) = self.grad.split_at_mut(nv);
-            let (gm_buf, gr) = rest.split_at_mut(nv);
+            let (g_step, rest) = self.grad.split_at_mut(nv);
+            let (g_base, gr) = rest.split_at_mut(nv);
             // Forward differences of the exact gradient from the point itself
             // (one evaluation per variable; the error O(h) ~ 1e-7 relative is
             // far below what the Newton step needs; central ones cost twice).
             lagrangian_grad(
                 &zl,
-                gm_buf,
+                g_base,
                 &mut self.g[..nc],
                 &mut self.jac[..nc * nv],
                 &mut gr[..nv],
@@ -298,7 +298,7 @@ impl Nlp for ElementNlp {
                 zl[j] = orig + h;
                 lagrangian_grad(
                     &zl,
-                    gp_buf,
+                    g_step,
                     &mut self.g[..nc],
                     &mut self.jac[..nc * nv],
                     &mut gr[..nv],
@@ -307,7 +307,7 @@ impl Nlp for ElementNlp {
                 // The step actually taken (z + h rounded).
                 let h = (orig + h) - orig;
                 for a in 0..nv {
-                    h_local[a * nv + j] = (gp_buf[a] - gm_buf[a]) / h;
+                    h_local[a * nv + j] = (g_step[a] - g_base[a]) / h;
                 }
             }
             let idx = &self.hess_index[e];

@@ -35,13 +35,14 @@ pub struct TrajectorySettings {
     /// How near the goal the trajectory ends (position and heading, the
     /// success test's norm) [m].
     pub tolerance: f64,
-    /// IPOPT's iterations at most; a solve that needs more keeps the route.
-    /// The solve's budget in work, the same on every machine and load (an
-    /// evaluation is repeatable), sized so that a plan stays inside a tick
-    /// here (measured: `docs/global-layer.md`).
+    /// IPOPT's iterations at most: the solve's budget in work, the same on
+    /// every machine and load (an evaluation repeats), sized so that plans
+    /// stay within 200 ms at p99 here (measured: `docs/decisions.md`). A solve
+    /// cut there gives its last iterate if that passes the checks a solution
+    /// passes; else the route stays.
     pub max_iterations: u32,
-    /// IPOPT's CPU-time limit [s], a backstop on slower or loaded machines;
-    /// a later solve keeps the route.
+    /// IPOPT's CPU-time limit [s], a backstop on slower or loaded machines
+    /// (cut there as at `max_iterations`).
     pub max_solve_seconds: f64,
     /// A feature is a row of an interval when the warm start passes it
     /// within this much beyond the margin [m].
@@ -482,7 +483,7 @@ impl IpoptTrajectory {
         let mut options = ocp::ipopt_options(1e-6, s.max_iterations as i32);
         // The warm start is near a solution: a small fixed barrier parameter
         // reaches it in fewer iterations than the adaptive rule (measured:
-        // `docs/global-layer.md`, the same times, p90 2/3 of them).
+        // `docs/decisions.md`, the same times, solves p90 2/3 of them).
         options.retain(|(name, _)| *name != "mu_strategy");
         options.push(("mu_strategy", OptValue::Str("monotone".into())));
         options.push(("mu_init", OptValue::Num(1e-3)));

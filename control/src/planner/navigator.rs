@@ -578,13 +578,6 @@ impl Navigator {
         self.cost_version += 1;
     }
 
-    /// The trajectory of a new route is tracked from its start; each tick
-    /// the time on it moves to the reference point nearest to the machine's
-    /// front axle among those from the last time up to twice the tick ahead
-    /// (progress-indexed: it waits while the machine lags, never runs away
-    /// from it, and never goes back, so a cusp's two legs are not mixed up).
-    /// It ends [`TRACK_SETTLE`] after the time reached the trajectory's end
-    /// (the critic then holds the goal).
     /// Off its trajectory by more than the settings allow, with nothing asked
     /// and no replan for `replan_after` (issue 42: re-optimised on a large
     /// deviation).
@@ -597,6 +590,13 @@ impl Navigator {
             && now - self.last_replan >= st.replan_after
     }
 
+    /// The trajectory of a new route is tracked from its start; each tick
+    /// the time on it moves to the reference point nearest to the machine's
+    /// front axle among those from the last time up to twice the tick ahead
+    /// (progress-indexed: it waits while the machine lags, never runs away
+    /// from it, and never goes back, so a cusp's two legs are not mixed up).
+    /// It ends [`TRACK_SETTLE`] after the time reached the trajectory's end
+    /// (the critic then holds the goal).
     fn refresh_track(&mut self, x: &State, now: f64) {
         self.track_deviation = 0.0;
         let tick = (now - self.track_now).max(0.0);

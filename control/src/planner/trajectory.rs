@@ -12,8 +12,8 @@
 //! The optimiser is a trait so that the planner (pure, in `control`) does not
 //! depend on the solver: `trajopt::trajectory` implements it over IPOPT, the
 //! bound's own collocation, for `wlnavd` and `wlnav-sim` (`[navigator]
-//! trajectory = true`, `wlnav-sim eval --trajectory`). It runs where the
-//! route is planned, after the search; a failed or rejected
+//! trajectory`, on by default). It runs where the route is planned, after
+//! the search; a failed or rejected
 //! solve leaves the route as the search made it, followed as before.
 
 use crate::model::{ix, Goal, State, REACH_SPEED};
