@@ -271,7 +271,7 @@ CARGO_TARGET_DIR=$stage cargo deb -p daemon --target $TARGET --no-build --locked
   --output "$stage/" --quiet >/dev/null || fail "cargo deb --target $TARGET"
 deb_arm=$(ls "$stage"/wlnavd_*_arm64.deb 2>/dev/null | head -1)
 [ -f "$deb_arm" ] || fail "cargo deb made no wlnavd_*_arm64.deb in $stage"
-deb_amd=$(ls target/package-check/wlnavd_*_amd64.deb 2>/dev/null | head -1)
+deb_amd=$(ls target/package-check/wlnavd_*_amd64.deb 2>/dev/null | head -1 || true)
 if [ -z "$deb_amd" ]; then
   # No package check ran before (e.g. WLNAV_SKIP_PACKAGE_CHECK=1): package target/debug.
   for b in wlnavd wlnav wlnav-fleet; do cp "target/debug/$b" "$stage/release/" || fail "target/debug/$b missing"; done

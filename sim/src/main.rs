@@ -342,6 +342,11 @@ enum Command {
         /// stall, max_route_age, trajectory).
         #[arg(long = "navigator", value_name = "KEY=VALUE", value_parser = navigator_override)]
         navigator_overrides: Vec<(String, toml::Value)>,
+        /// A setting of the planner's trajectory solve, `key=value` (repeatable),
+        /// e.g. `--trajectory max_iterations=40`; the keys are
+        /// `trajopt::trajectory::TrajectorySettings`' (`wlnavd`'s `[trajectory]`).
+        #[arg(long = "trajectory", value_name = "KEY=VALUE", value_parser = navigator_override)]
+        trajectory_overrides: Vec<(String, toml::Value)>,
         /// How a route plan's time is charged: a fixed delay [s] (default one
         /// tick, as the daemon's planner thread answers at the next tick) or
         /// `measured` (its wall time; not deterministic).
@@ -506,6 +511,7 @@ fn main() -> Result<()> {
             no_scenario_plots,
             no_planner,
             navigator_overrides,
+            trajectory_overrides,
             plan_delay,
             t_star,
             site,
@@ -553,6 +559,24 @@ fn main() -> Result<()> {
             } else {
                 Some(navigator_settings(&navigator_overrides)?)
             };
+            if !trajectory_overrides.is_empty() {
+                let t: trajopt::trajectory::TrajectorySettings =
+                    with_overrides(&trajectory_overrides, "--trajectory")?;
+                t.validate()?;
+                // The evaluation's CPU backstop unless given: the iteration
+                // budget decides (`EvalConfig::default`).
+                let backstop = trajectory_overrides
+                    .iter()
+                    .all(|(k, _)| k != "max_solve_seconds");
+                cfg.trajectory = trajopt::trajectory::TrajectorySettings {
+                    max_solve_seconds: if backstop {
+                        cfg.trajectory.max_solve_seconds
+                    } else {
+                        t.max_solve_seconds
+                    },
+                    ..t
+                };
+            }
             if let Some(d) = plan_delay {
                 cfg.plan_delay = d;
             }
@@ -595,6 +619,18 @@ fn main() -> Result<()> {
                         .collect::<Vec<_>>()
                         .join(", ")
                 ),
+            };
+            let navigation = if trajectory_overrides.is_empty() {
+                navigation
+            } else {
+                format!(
+                    "{navigation}, trajectory ({})",
+                    trajectory_overrides
+                        .iter()
+                        .map(|(k, v)| format!("{k}={v}"))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                )
             };
             let header = format!(
                 "# eval: {}\n\nmethods {methods}, planner {navigation}, plan delay {:?}, time budget {} s, N = {}, Hessian {:?}, obstacles {:?} with margin {} m, SQP iterations {} × step {}, gain estimation {}, delay estimation {}, delay {delay} s, lag {lag} s, plant perturbation: {}, tolerance {}, networks: {}, machine (MPC, plant and min-time bound): {}\n",

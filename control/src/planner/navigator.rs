@@ -131,6 +131,8 @@ pub struct Navigator {
     /// The machine's distance from the trajectory's reference at the
     /// track's time [m] (0 while nothing is tracked).
     track_deviation: f64,
+    /// When the tracked trajectory was set [s].
+    track_started: f64,
 }
 
 impl Navigator {
@@ -204,6 +206,7 @@ impl Navigator {
             track_now: 0.0,
             track_ended: None,
             track_deviation: 0.0,
+            track_started: 0.0,
             settings,
         })
     }
@@ -621,16 +624,28 @@ impl Navigator {
             let ahead = self.route_age.max(0.0);
             self.advance_track(x, ahead);
             self.track_ended = None;
+            self.track_started = now - self.track.time();
             return;
         }
         if self.track.is_empty() {
             return;
         }
         self.advance_track(x, 2.0 * tick);
+        let end = self.track.duration();
+        let at_end = self.track.time() >= end - 1e-9;
+        if !at_end
+            && now - self.track_started - self.track.time() > self.settings.stall.max_track_lag
+        {
+            // The machine does not keep up with the trajectory (weaker or
+            // later than the model, or held): the rest of the way is the
+            // route's path, followed (the trajectory's, as the route has it).
+            self.track.clear();
+            self.cost_version += 1;
+            return;
+        }
         let r = self.track.reference(self.track.time());
         self.track_deviation = (x[ix::X] - r[ix::X]).hypot(x[ix::Y] - r[ix::Y]);
-        let end = self.track.duration();
-        if self.track.time() >= end - 1e-9 {
+        if at_end {
             let since = *self.track_ended.get_or_insert(now);
             if now - since >= TRACK_SETTLE {
                 self.track.clear();

@@ -218,6 +218,10 @@ pub struct StallSettings {
     /// it is, as a stall is (counted among `max_replans`, at most every
     /// `replan_after`). Default 1.
     pub max_track_deviation: f64,
+    /// A tracked machine this far behind its trajectory's time [s] (weaker
+    /// or later than the model, or held) follows the rest of the route's path
+    /// instead. Default 1 (measured: `docs/decisions.md`).
+    pub max_track_lag: f64,
 }
 
 impl Default for StallSettings {
@@ -231,6 +235,7 @@ impl Default for StallSettings {
             retry_in_sight: true,
             reached_tolerance: SUCCESS_TOLERANCE,
             max_track_deviation: 1.0,
+            max_track_lag: 1.0,
         }
     }
 }
@@ -270,6 +275,7 @@ impl NavigatorSettings {
             ("stall.approach_distance", st.approach_distance),
             ("stall.reached_tolerance", st.reached_tolerance),
             ("stall.max_track_deviation", st.max_track_deviation),
+            ("stall.max_track_lag", st.max_track_lag),
             ("search.workspace_half_size", s.workspace_half_size),
             ("search.grid_resolution", s.grid_resolution),
             ("search.primitive_length", s.primitive_length),

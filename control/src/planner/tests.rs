@@ -1092,13 +1092,14 @@ fn a_searched_route_shaped_by_a_trajectory_is_tracked_with_the_machine_then_hand
     let duration = track.duration();
     // Standing still, the time waits for the machine (the trajectory's
     // first points are further from it than the ones it is at).
-    for k in 1..=5 {
+    // (Less than `max_track_lag`: later it would follow the route's path.)
+    for k in 1..=3 {
         nav.update(&x0, 0.2 * k as f64);
         assert!(nav.track_cost().unwrap().time() <= 0.1 + 1e-9);
     }
     // Driven along the reference, the time keeps up with the machine's
     // place on it (within a sample), never ahead of it.
-    let mut now = 1.0;
+    let mut now = 0.6;
     let mut t = 0.0;
     while t < duration {
         t = (t + 0.2).min(duration);
@@ -1185,4 +1186,36 @@ fn a_machine_far_off_its_trajectory_is_planned_again_from_where_it_is() {
             assert!(last.replan, "{last:?}");
         }
     }
+}
+
+/// Issue 42: a machine that does not keep up with its trajectory (held here,
+/// as a weaker or later machine falls behind) follows the rest of the route's
+/// path once `max_track_lag` behind; until then it tracks.
+#[test]
+fn a_machine_far_behind_its_trajectory_follows_the_routes_path() {
+    let lag = NavigatorSettings::default().stall.max_track_lag;
+    let mut nav = tracking_navigator(false);
+    let goal = Goal::new(8.0, 0.0, 0.0);
+    let x0 = at_rest(0.0, 0.0, 0.0);
+    nav.set_goal(&x0, goal, &wall(), 0.0).unwrap();
+    nav.update(&x0, 0.0);
+    assert!(nav.track_cost().is_some());
+    let mut now = 0.0;
+    while now < lag - 0.3 {
+        now += 0.2;
+        nav.update(&x0, now);
+        assert!(nav.track_cost().is_some(), "dropped {now} s behind");
+    }
+    let version = nav.cost_version();
+    nav.update(&x0, lag + 0.2);
+    assert!(
+        nav.track_cost().is_none(),
+        "still tracked {} s behind",
+        lag + 0.2
+    );
+    assert!(nav.path_cost().is_some(), "the route's path followed");
+    assert!(nav.cost_version() > version);
+    // Not set again for the same plan.
+    nav.update(&x0, lag + 0.4);
+    assert!(nav.track_cost().is_none());
 }
