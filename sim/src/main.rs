@@ -92,6 +92,15 @@ fn with_overrides<T: serde::de::DeserializeOwned>(
         .with_context(|| flag.to_string())
 }
 
+/// Overrides as given, `key=value, ...` (for the summary's header).
+fn overrides_text(overrides: &[(String, toml::Value)]) -> String {
+    overrides
+        .iter()
+        .map(|(k, v)| format!("{k}={v}"))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
 /// The default navigator settings with `overrides` applied (each a dotted key
 /// of [`NavigatorSettings`]); unknown keys are errors.
 fn navigator_settings(overrides: &[(String, toml::Value)]) -> Result<NavigatorSettings> {
@@ -560,22 +569,18 @@ fn main() -> Result<()> {
                 Some(navigator_settings(&navigator_overrides)?)
             };
             if !trajectory_overrides.is_empty() {
-                let t: trajopt::trajectory::TrajectorySettings =
+                let mut t: trajopt::trajectory::TrajectorySettings =
                     with_overrides(&trajectory_overrides, "--trajectory")?;
-                t.validate()?;
                 // The evaluation's CPU backstop unless given: the iteration
                 // budget decides (`EvalConfig::default`).
-                let backstop = trajectory_overrides
+                if trajectory_overrides
                     .iter()
-                    .all(|(k, _)| k != "max_solve_seconds");
-                cfg.trajectory = trajopt::trajectory::TrajectorySettings {
-                    max_solve_seconds: if backstop {
-                        cfg.trajectory.max_solve_seconds
-                    } else {
-                        t.max_solve_seconds
-                    },
-                    ..t
-                };
+                    .all(|(k, _)| k != "max_solve_seconds")
+                {
+                    t.max_solve_seconds = cfg.trajectory.max_solve_seconds;
+                }
+                t.validate()?;
+                cfg.trajectory = t;
             }
             if let Some(d) = plan_delay {
                 cfg.plan_delay = d;
@@ -611,25 +616,14 @@ fn main() -> Result<()> {
             let navigation = match &cfg.navigator {
                 None => "none".to_string(),
                 Some(n) if *n == nd => "hybrid-astar (defaults)".to_string(),
-                Some(_) => format!(
-                    "hybrid-astar ({})",
-                    navigator_overrides
-                        .iter()
-                        .map(|(k, v)| format!("{k}={v}"))
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                ),
+                Some(_) => format!("hybrid-astar ({})", overrides_text(&navigator_overrides)),
             };
             let navigation = if trajectory_overrides.is_empty() {
                 navigation
             } else {
                 format!(
                     "{navigation}, trajectory ({})",
-                    trajectory_overrides
-                        .iter()
-                        .map(|(k, v)| format!("{k}={v}"))
-                        .collect::<Vec<_>>()
-                        .join(", ")
+                    overrides_text(&trajectory_overrides)
                 )
             };
             let header = format!(
