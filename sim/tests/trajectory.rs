@@ -123,6 +123,55 @@ fn the_trajectory_round_a_wall_follows_the_model_keeps_the_margins_and_beats_its
     assert!(duration < route_time, "{duration} s, route {route_time} s");
 }
 
+/// A goal facing a wall closer than the route's margin plus the trajectory's
+/// own (a bucket at a pile face): the trajectory keeps what the goal leaves
+/// (the route's margin, no less) instead of asking the impossible.
+#[test]
+fn a_goal_nearer_a_wall_than_the_trajectorys_margin_is_still_reached() {
+    let p = MachineParams::default();
+    let settings = NavigatorSettings::default();
+    let margin = settings.search.clearance_margin;
+    let ts = generous();
+    let wall: Vec<Obstacle> = (-4..=4)
+        .map(|k| Obstacle::new(8.0, 0.8 * k as f64, 0.6))
+        .collect();
+    let start = State::new(0.0, 1.0, 0.0, 0.0, 0.0, 0.0);
+    // Half the trajectory's margin beyond the route's.
+    let goal = Goal::new(8.0 - 0.6 - margin - 0.5 * ts.margin, 0.0, 0.0);
+    let mut planner = RoutePlanner::new(p, &settings, None).unwrap();
+    let mut job = PlanJob::new(&p, &settings.search);
+    job.request.kind = PlanKind::Replan; // always a search
+    job.request.start = start;
+    job.request.goal = goal;
+    job.request.world.set_circles(&wall).unwrap();
+    planner.plan(&mut job);
+    assert!(!job.route.path.is_empty() || !job.route.shot.is_empty());
+
+    let mut world = CheckedWorld::new(p, 16, margin);
+    world.set(&wall).unwrap();
+    let mut optimiser = IpoptTrajectory::new(p, ts);
+    let mut out = Vec::with_capacity(4096);
+    optimiser
+        .optimise(
+            &world,
+            &start,
+            &goal,
+            &job.route.path,
+            &job.route.shot,
+            &mut out,
+        )
+        .expect("a trajectory to the goal at the wall");
+    let end = out.last().unwrap();
+    let error = (end[ix::X] - goal.x)
+        .hypot(end[ix::Y] - goal.y)
+        .hypot(wrap_angle(end[ix::THETA] - goal.theta));
+    assert!(error <= ts.tolerance + 1e-6, "ends {error} from the goal");
+    for (i, x) in out.iter().enumerate() {
+        let c = world.state_clearance(x);
+        assert!(c >= margin - 0.0101, "state {i}: clearance {c}");
+    }
+}
+
 #[test]
 fn no_trajectory_where_the_warm_start_is_empty() {
     let p = MachineParams::default();

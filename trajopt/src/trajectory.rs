@@ -53,7 +53,9 @@ pub struct TrajectorySettings {
     pub cruise: f64,
     /// What the trajectory keeps beyond the route's margins [m]: the MPC
     /// tracking it at speed and the envelope's stop check need room the
-    /// route's followers did not (measured: `docs/global-layer.md`).
+    /// route's followers did not (measured: `docs/global-layer.md`). Less
+    /// where the start or the goal lies nearer (a bucket at a pile face):
+    /// the trajectory must end there.
     pub margin: f64,
 }
 
@@ -364,6 +366,32 @@ fn interval_rows(
     rows
 }
 
+/// What each outline circle keeps along the trajectory: the route's margin
+/// `route` plus `extra`, the extra cut to what the endpoints leave (the
+/// trajectory starts and ends there: a goal at a pile face, a bucket 0.3 m
+/// from it, would otherwise make the problem infeasible), less 2 cm for the
+/// goal's tolerance. The route's margin itself is never cut.
+fn kept_margins(
+    world: &World,
+    route: &[f64; MAX_OUTLINE_CIRCLES],
+    extra: f64,
+    endpoints: &[State],
+) -> [f64; MAX_OUTLINE_CIRCLES] {
+    const ENDPOINT_SLACK: f64 = 0.02;
+    let mut margins = *route;
+    for (i, m) in margins.iter_mut().enumerate().take(world.outline().len()) {
+        let mut e = extra;
+        for x in endpoints {
+            let c = world.place(x)[i];
+            let cutoff = route[i] + extra + ENDPOINT_SLACK;
+            let clearance = world.disc_clearance(c.center, c.radius, cutoff);
+            e = e.min(clearance - route[i] - ENDPOINT_SLACK);
+        }
+        *m += e.max(0.0);
+    }
+    margins
+}
+
 /// Whether every point of the trajectory (`PATH_POINTS` per interval and the
 /// nodes) keeps the margins, less 1 cm of slack for the solver's tolerance.
 fn keeps_margins(
@@ -441,10 +469,13 @@ impl IpoptTrajectory {
         let end = guess.states[k];
         let theta_goal = end[ix::THETA] + wrap_angle(goal.theta - end[ix::THETA]);
         let world = Arc::new(checked.world().clone());
-        let mut margins = checked.circle_margins();
-        for m in &mut margins {
-            *m += s.margin;
-        }
+        let at_goal = State::new(goal.x, goal.y, goal.theta, 0.0, 0.0, 0.0);
+        let margins = kept_margins(
+            &world,
+            &checked.circle_margins(),
+            s.margin,
+            &[start, at_goal],
+        );
         let mut z0 = ocp::guess_vector(&guess, k);
         z0[..6].copy_from_slice(start.as_slice());
         let mt = MinTimeSettings {
