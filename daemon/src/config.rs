@@ -1123,6 +1123,8 @@ mod tests {
         assert!(err("[trajectory]\nintervals = 1\n").contains("`trajectory.intervals`"));
         assert!(err("[trajectory]\nmax_iterations = 0\n").contains("`trajectory.max_iterations`"));
         assert!(err("[trajectory]\nmargin = -0.1\n").contains("`trajectory.margin`"));
+        assert!(err("[trajectory]\nbeta_dot_fraction = 1.5\n")
+            .contains("`trajectory.beta_dot_fraction`"));
         assert!(err("[trajectory]\nsolver = \"x\"\n").contains("solver"));
         assert!(Config::default().navigator.trajectory);
         let off = Config::from_toml("[navigator]\ntrajectory = false\n", "t").unwrap();

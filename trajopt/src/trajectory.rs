@@ -57,6 +57,11 @@ pub struct TrajectorySettings {
     /// where the start or the goal lies nearer (a bucket at a pile face):
     /// the trajectory must end there.
     pub margin: f64,
+    /// The share of β̇_max the trajectory may use between its ends: planned
+    /// at the full rate, the tracking MPC has none left to catch up a lag,
+    /// and a machine late into a turn at full articulation ends off the goal
+    /// (measured: `docs/decisions.md`).
+    pub beta_dot_fraction: f64,
 }
 
 impl Default for TrajectorySettings {
@@ -70,6 +75,7 @@ impl Default for TrajectorySettings {
             max_rows: 6,
             cruise: 0.8,
             margin: 0.2,
+            beta_dot_fraction: 0.9,
         }
     }
 }
@@ -114,6 +120,12 @@ impl TrajectorySettings {
         }
         if !(self.margin.is_finite() && self.margin >= 0.0) {
             return err("margin", "must be finite and >= 0");
+        }
+        if !(self.beta_dot_fraction.is_finite()
+            && self.beta_dot_fraction > 0.0
+            && self.beta_dot_fraction <= 1.0)
+        {
+            return err("beta_dot_fraction", "must be in (0, 1]");
         }
         Ok(())
     }
@@ -510,6 +522,12 @@ impl IpoptTrajectory {
         for i in [ix::BETA_DOT, ix::V] {
             nlp.z_lower[ocp::xi(k) + i] = 0.0;
             nlp.z_upper[ocp::xi(k) + i] = 0.0;
+        }
+        // The articulation rate between the ends within its share (the ends
+        // are the start's and the goal's own).
+        for i in 1..k {
+            nlp.z_lower[ocp::xi(i) + ix::BETA_DOT] *= s.beta_dot_fraction;
+            nlp.z_upper[ocp::xi(i) + ix::BETA_DOT] *= s.beta_dot_fraction;
         }
         let mut options = ocp::ipopt_options(1e-6, s.max_iterations as i32);
         // The warm start is near a solution: a small fixed barrier parameter
