@@ -131,6 +131,9 @@ impl TrajectorySettings {
     }
 }
 
+/// The options file IPOPT reads: always there and empty.
+const NO_OPTIONS_FILE: &str = "/dev/null";
+
 /// Interval points the footprint is checked at (τ in (0, 1]).
 const TAUS: [f64; 2] = [0.5, 1.0];
 /// Points per interval written out (evenly spaced in time).
@@ -537,6 +540,10 @@ impl IpoptTrajectory {
         options.push(("mu_strategy", OptValue::Str("monotone".into())));
         options.push(("mu_init", OptValue::Num(1e-3)));
         options.push(("max_cpu_time", OptValue::Num(s.max_solve_seconds)));
+        // IPOPT reads `ipopt.opt` in the working directory and lets it
+        // override these: a file nobody configured would change the daemon's
+        // plans. The settings are `TrajectorySettings`, nothing else.
+        options.push(("option_file_name", OptValue::Str(NO_OPTIONS_FILE.into())));
         let r = ipopt::solve(&mut nlp, &z0, &options);
         let violation = nlp.max_violation(&r.z);
         if std::env::var_os("WLNAV_TRAJ_DEBUG").is_some() {
