@@ -26,7 +26,7 @@ use crate::live::{self, Freshness, FreshnessState, LiveSet, LiveSettings};
 use crate::model::{ix, Goal, MachineParams, State, VelocityCommand};
 use crate::mpc::{Mpc, MpcError, Solution, StageCost};
 use crate::obstacle::Obstacle;
-use crate::planner::{AbortReason, NavError, NavStep, Navigator};
+use crate::planner::{AbortReason, NavError, NavStep, Navigator, PlanReport};
 use crate::progress::{ProgressChecker, ProgressSettings};
 use crate::site::outline::{Body, Outline, MAX_OUTLINE_CIRCLES};
 use crate::site::SiteIndex;
@@ -63,9 +63,10 @@ pub struct PilotStep<'a> {
     pub route: &'a [Goal],
     /// How old the route followed was when it arrived [s].
     pub route_age: f64,
-    /// The last plan's wall time (0 without one).
-    pub plan_time: Duration,
-    /// A plan was taken this step (its time is `plan_time`).
+    /// The last plan: what it did (its outcome, whether its route was
+    /// shaped into a trajectory) and its wall time (`None` without one).
+    pub last_plan: Option<PlanReport>,
+    /// A plan was taken this step (it is `last_plan`).
     pub new_plan: bool,
     /// The check of the envelope's assumptions this tick (`Continue`, or
     /// `Widen` with the finding the envelope was widened to).
@@ -537,13 +538,9 @@ impl<C: StageCost> Pilot<C> {
         let plans = self.navigator.as_ref().map_or(0, |n| n.plans());
         let new_plan = plans != self.plans_seen;
         self.plans_seen = plans;
-        let (route, route_age, plan_time) = match &self.navigator {
-            Some(nav) => (
-                nav.remaining_route(),
-                nav.route_age(),
-                nav.last_plan().map_or(Duration::ZERO, |p| p.duration),
-            ),
-            None => (&[][..], 0.0, Duration::ZERO),
+        let (route, route_age, last_plan) = match &self.navigator {
+            Some(nav) => (nav.remaining_route(), nav.route_age(), nav.last_plan()),
+            None => (&[][..], 0.0, None),
         };
         // The envelope's margins as they are now (widened or not by the
         // assumptions' check): the MPC's live rows keep them.
@@ -653,7 +650,7 @@ impl<C: StageCost> Pilot<C> {
             subgoal,
             route: if holding { &[] } else { route },
             route_age,
-            plan_time,
+            last_plan,
             new_plan,
             assumptions,
             live: live_status,

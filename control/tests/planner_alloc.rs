@@ -16,7 +16,7 @@ use control::pilot::{Pilot, PilotDecision};
 use control::planner::world::CheckedWorld;
 use control::planner::{
     InlineRoutes, NavStep, Navigator, NavigatorSettings, PathPose, PlanDelay, PlanOutcome,
-    PlannerThread, RoutePlanner, RouteService, TrajectoryOptimiser,
+    PlannerThread, RoutePlanner, RouteService, TrajectoryFailure, TrajectoryOptimiser,
 };
 use control::weights;
 use control::{Actor, Critic, VelocityCommand};
@@ -160,14 +160,14 @@ fn the_global_layer_and_the_pilot_do_not_allocate() {
             path: &[PathPose],
             _: &[State],
             out: &mut Vec<State>,
-        ) -> Option<f64> {
+        ) -> Result<f64, TrajectoryFailure> {
             out.clear();
             for q in path.iter().take(out.capacity()) {
                 let v = if q.direction < 0 { -1.0 } else { 1.0 };
                 out.push(State::new(q.x, q.y, q.theta, q.beta, 0.0, v));
             }
             // The search's sample spacing (0.15 m) at 1 m/s.
-            Some(0.15)
+            Ok(0.15)
         }
     }
     let s = NavigatorSettings::default();

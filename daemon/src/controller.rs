@@ -259,6 +259,14 @@ impl<C: StageCost> Controller for PilotController<C> {
             }
             PilotDecision::Drive(p) => p,
         };
+        if let (true, Some(r)) = (p.new_plan, p.last_plan) {
+            tracing::info!(
+                "plan: {} in {:.0} ms, trajectory {}",
+                r.outcome.name(),
+                r.duration.as_secs_f64() * 1e3,
+                r.trajectory
+            );
+        }
         let status = match p.solution.map(|s| s.status) {
             None => PlanStatus::Holding,
             Some(StepStatus::Solved) => PlanStatus::Solved,
@@ -276,7 +284,7 @@ impl<C: StageCost> Controller for PilotController<C> {
             solve_time: p.solution.map_or(Duration::ZERO, |s| s.solve_time),
             subgoal: p.subgoal,
             route: p.route,
-            plan_time: p.plan_time,
+            plan_time: p.last_plan.map_or(Duration::ZERO, |r| r.duration),
             new_plan: p.new_plan,
             route_age: p.route_age,
             assumptions_broken: p.assumptions.broken,

@@ -7,7 +7,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use anyhow::{Context, Result};
-use control::planner::PlanOutcome;
+use control::planner::{PlanOutcome, TrajectoryOutcome};
 use control::scenario::Scenario;
 use control::site::{Site, SiteIndex};
 use std::sync::Arc;
@@ -240,6 +240,14 @@ pub fn navigation_text(ev: &Evaluation) -> String {
         .map(|n| n.plan_ms.len().saturating_sub(1))
         .sum::<usize>()
         - retries;
+    let trajectories = navs.iter().flat_map(|n| n.plan_trajectory.iter());
+    let shaped = trajectories
+        .clone()
+        .filter(|t| matches!(t, TrajectoryOutcome::Shaped { .. }))
+        .count();
+    let unshaped = trajectories
+        .filter(|t| matches!(t, TrajectoryOutcome::Failed(_)))
+        .count();
     let aborts =
         |r: control::planner::AbortReason| navs.iter().filter(|n| n.abort == Some(r)).count();
     let stats = |v: &[f64]| {
@@ -256,7 +264,8 @@ pub fn navigation_text(ev: &Evaluation) -> String {
     };
     format!(
         "navigation: {} runs, {routed} with a route, {replans} replans, {retries} retries; aborted no-route {}, no-progress {}\n\
-         navigation: plan {} ({} plans, on the planner's side); tick {} (the pilot's step: navigator, MPC, envelope)\n",
+         navigation: plan {} ({} plans, on the planner's side); tick {} (the pilot's step: navigator, MPC, envelope)\n\
+         navigation: {shaped} plans shaped into a trajectory, {unshaped} not (their route followed; navigation.csv says why)\n",
         navs.len(),
         aborts(control::planner::AbortReason::NoRoute),
         aborts(control::planner::AbortReason::NoProgress),
@@ -271,7 +280,7 @@ pub fn navigation_text(ev: &Evaluation) -> String {
 /// run's navigation ended.
 pub fn navigation_csv(ev: &Evaluation) -> Option<String> {
     let mut out = String::from(
-        "name,method,plan,outcome,at,plan_ms,expansions,shots,route,abort,aborted_at\n",
+        "name,method,plan,outcome,at,plan_ms,expansions,shots,trajectory,route,abort,aborted_at\n",
     );
     let mut any = false;
     for s in &ev.runs {
@@ -284,7 +293,7 @@ pub fn navigation_csv(ev: &Evaluation) -> Option<String> {
                     .map(|g| format!("{:.3}:{:.3}:{:.3}", g.x, g.y, g.theta))
                     .collect();
                 out.push_str(&format!(
-                    "{},{},{k},{},{},{:.3},{},{},{},{},{}\n",
+                    "{},{},{k},{},{},{:.3},{},{},{},{},{},{}\n",
                     s.scenario.name,
                     m.name(),
                     n.plan_outcome.get(k).map_or("", |o| o.name()),
@@ -292,6 +301,9 @@ pub fn navigation_csv(ev: &Evaluation) -> Option<String> {
                     n.plan_ms.get(k).copied().unwrap_or(0.0),
                     n.plan_work.get(k).map_or(0, |w| w.0),
                     n.plan_work.get(k).map_or(0, |w| w.1),
+                    n.plan_trajectory
+                        .get(k)
+                        .map_or(String::new(), |t| trajectory_cell(t)),
                     goals.join(";"),
                     n.abort.map_or("", |a| a.name()),
                     n.aborted_at.map_or(String::new(), |t| format!("{t:.1}")),
@@ -300,6 +312,15 @@ pub fn navigation_csv(ev: &Evaluation) -> Option<String> {
         }
     }
     any.then_some(out)
+}
+
+/// A plan's trajectory in navigation.csv: its duration [s], `none: why`
+/// (the route followed), or empty where none was asked.
+fn trajectory_cell(t: &TrajectoryOutcome) -> String {
+    match t {
+        TrajectoryOutcome::NotAsked => String::new(),
+        t => t.to_string(),
+    }
 }
 
 /// Writes results.csv, summary.md and the plots into `dir`.

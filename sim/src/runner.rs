@@ -31,6 +31,7 @@ use control::mpc::{FallbackReason, Mpc, MpcSettings, StepStatus};
 use control::pilot::{Pilot, PilotDecision};
 use control::planner::{
     AbortReason, InlineRoutes, Navigator, NavigatorSettings, PlanDelay, PlanOutcome, RoutePlanner,
+    TrajectoryOutcome,
 };
 use control::plant::{Plant, PlantConfig, PlantPerturbation};
 use control::progress::ProgressSettings;
@@ -348,6 +349,8 @@ pub struct Navigation {
     pub plan_work: Vec<(usize, usize)>,
     /// How each plan ended (direct, route, no route, retry).
     pub plan_outcome: Vec<PlanOutcome>,
+    /// Whether each plan's route was shaped into a trajectory, or why not.
+    pub plan_trajectory: Vec<TrajectoryOutcome>,
     /// Duration of every tick of the pilot [ms] (navigator, MPC, envelope;
     /// plans run beside it and are charged as simulated delay).
     pub tick_ms: Vec<f64>,
@@ -366,6 +369,7 @@ impl Navigation {
                 self.plan_ms.push(r.duration.as_secs_f64() * 1e3);
                 self.plan_work.push((r.search.expansions, r.search.shots));
                 self.plan_outcome.push(r.outcome);
+                self.plan_trajectory.push(r.trajectory);
             }
             self.plan_at.push(now);
             self.routes.push(nav.route().to_vec());

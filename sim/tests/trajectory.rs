@@ -7,7 +7,9 @@
 use control::model::{f_continuous, ix, wrap_angle, Control, Goal, MachineParams, State};
 use control::obstacle::Obstacle;
 use control::planner::world::CheckedWorld;
-use control::planner::{NavigatorSettings, PlanJob, PlanKind, RoutePlanner, TrajectoryOptimiser};
+use control::planner::{
+    NavigatorSettings, PlanJob, PlanKind, RoutePlanner, TrajectoryFailure, TrajectoryOptimiser,
+};
 use control::scenario::{self, Scenario};
 use sim::runner::{EvalConfig, Method, Networks};
 use trajopt::ocp::{solve_min_time, MinTimeSettings};
@@ -198,7 +200,7 @@ fn no_trajectory_where_the_warm_start_is_empty() {
         &[],
         &mut out,
     );
-    assert_eq!(none, None);
+    assert_eq!(none, Err(TrajectoryFailure::NoWarmStart));
 }
 
 /// In closed loop (the committed networks, the daemon's pilot, plans charged
@@ -241,4 +243,34 @@ fn tracking_the_trajectory_is_faster_than_following_the_route() {
         let (tf, tt) = (f.t_converge.unwrap_or(f64::INFINITY), t.t_converge.unwrap());
         assert!(tt + 2.0 < tf, "{}: tracked {tt} s, followed {tf} s", t.name);
     }
+    // navigation.csv says which plans were shaped: each goal's first plan
+    // tracked (the trajectory's duration: about the run's, which enters the
+    // goal's tolerance a little before the trajectory's end at rest), none
+    // followed.
+    let trajectory_cells = |ev: &sim::eval::Evaluation| -> Vec<(String, String)> {
+        let csv = sim::eval::navigation_csv(ev).unwrap();
+        let mut lines = csv.lines();
+        let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+        let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+        let (plan, trajectory) = (col("plan"), col("trajectory"));
+        lines
+            .map(|l| l.split(',').collect::<Vec<_>>())
+            .filter(|f| f[plan] == "0")
+            .map(|f| (f[0].to_string(), f[trajectory].to_string()))
+            .collect()
+    };
+    let firsts = trajectory_cells(&tracked);
+    assert_eq!(firsts.len(), names.len());
+    for (name, cell) in firsts {
+        let row = tracked.rows.iter().find(|r| r.name == name).unwrap();
+        let seconds: f64 = cell.trim_end_matches(" s").parse().unwrap_or(f64::NAN);
+        let t = row.t_converge.unwrap();
+        assert!(
+            seconds > 0.5 * t && seconds < t + 1.0,
+            "{name}: {cell}, run {t} s"
+        );
+    }
+    assert!(trajectory_cells(&followed)
+        .iter()
+        .all(|(_, c)| c.is_empty()));
 }

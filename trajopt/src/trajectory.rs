@@ -11,11 +11,10 @@
 use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
-use std::time::Instant;
 
 use control::model::{ix, wrap_angle, Control, Goal, MachineParams, State};
 use control::planner::world::CheckedWorld;
-use control::planner::{PathPose, TrajectoryOptimiser};
+use control::planner::{PathPose, TrajectoryFailure, TrajectoryOptimiser};
 use control::site::index::Near;
 use control::site::outline::MAX_OUTLINE_CIRCLES;
 use control::world::{Target, World};
@@ -131,8 +130,10 @@ impl TrajectorySettings {
     }
 }
 
-/// The options file IPOPT reads: always there and empty.
-const NO_OPTIONS_FILE: &str = "/dev/null";
+/// The options file IPOPT reads: none (an empty name reads nothing and
+/// prints nothing; a path, even `/dev/null`, is announced on stdout at every
+/// solve).
+const NO_OPTIONS_FILE: &str = "";
 
 /// Interval points the footprint is checked at (τ in (0, 1]).
 const TAUS: [f64; 2] = [0.5, 1.0];
@@ -447,21 +448,9 @@ impl TrajectoryOptimiser for IpoptTrajectory {
         path: &[PathPose],
         shot: &[State],
         out: &mut Vec<State>,
-    ) -> Option<f64> {
-        let t0 = Instant::now();
-        let r = self.solve(checked, start, goal, path, shot, out);
-        if std::env::var_os("WLNAV_TRAJ_DEBUG").is_some() {
-            eprintln!(
-                "trajectory: {} in {:.0} ms",
-                match &r {
-                    Ok(t) => format!("T {t:.2} s"),
-                    Err(why) => format!("none ({why})"),
-                },
-                t0.elapsed().as_secs_f64() * 1e3
-            );
-        }
-        let k = self.settings.intervals;
-        r.ok().map(|t| t / (PATH_POINTS * k) as f64)
+    ) -> Result<f64, TrajectoryFailure> {
+        let t = self.solve(checked, start, goal, path, shot, out)?;
+        Ok(t / (PATH_POINTS * self.settings.intervals) as f64)
     }
 }
 
@@ -475,12 +464,13 @@ impl IpoptTrajectory {
         path: &[PathPose],
         shot: &[State],
         out: &mut Vec<State>,
-    ) -> Result<f64, &'static str> {
+    ) -> Result<f64, TrajectoryFailure> {
         let p = &self.params;
         let s = &self.settings;
         let k = s.intervals;
         let start = ocp::admissible_start(p, start);
-        let guess = route_guess(p, &start, path, shot, s.cruise, k).ok_or("no warm start")?;
+        let guess = route_guess(p, &start, path, shot, s.cruise, k)
+            .ok_or(TrajectoryFailure::NoWarmStart)?;
         let end = guess.states[k];
         let theta_goal = end[ix::THETA] + wrap_angle(goal.theta - end[ix::THETA]);
         let world = Arc::new(checked.world().clone());
@@ -546,19 +536,14 @@ impl IpoptTrajectory {
         options.push(("option_file_name", OptValue::Str(NO_OPTIONS_FILE.into())));
         let r = ipopt::solve(&mut nlp, &z0, &options);
         let violation = nlp.max_violation(&r.z);
-        if std::env::var_os("WLNAV_TRAJ_DEBUG").is_some() {
-            eprintln!(
-                "  ipopt {} guess T {:.2} violation {violation:.1e}",
-                r.status.name(),
-                guess.duration
-            );
-        }
         // (A NaN violation fails too.)
         if violation.is_nan() || violation >= 1e-5 || !r.objective.is_finite() {
-            return Err("not solved");
+            return Err(TrajectoryFailure::NotSolved {
+                status: r.status.name(),
+            });
         }
         if !keeps_margins(p, &world, &margins, &r.z, k) {
-            return Err("leaves the margins");
+            return Err(TrajectoryFailure::LeavesMargins);
         }
         out.clear();
         let mut dx = [0.0; 6 * 15];
@@ -566,7 +551,7 @@ impl IpoptTrajectory {
             let local = interval_vars(&r.z, i, k);
             for j in 0..PATH_POINTS {
                 if out.len() == out.capacity() {
-                    return Err("too long");
+                    return Err(TrajectoryFailure::TooLong);
                 }
                 let tau = j as f64 / PATH_POINTS as f64;
                 // Between the nodes the cubic may overshoot a bound by a

@@ -44,7 +44,7 @@ pub use service::{
     mark_tick_thread, on_tick_thread, InlineRoutes, PlanDelay, PlannerThread, RouteService,
 };
 pub use settings::{FollowingSettings, NavigatorSettings, SearchSettings, StallSettings};
-pub use trajectory::TrajectoryOptimiser;
+pub use trajectory::{TrajectoryFailure, TrajectoryOptimiser, TrajectoryOutcome};
 pub use world::CheckedWorld;
 
 use crate::model::Goal;
@@ -145,11 +145,14 @@ impl PlanOutcome {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PlanReport {
     pub outcome: PlanOutcome,
-    /// The whole plan: the "in the way" test, the search and the shot.
+    /// The whole plan: the "in the way" test, the search, the shot and the
+    /// trajectory.
     pub duration: Duration,
     pub search: SearchStats,
     /// A replan from `update` (not a new goal).
     pub replan: bool,
+    /// Whether the route was shaped into a trajectory, or why not.
+    pub trajectory: TrajectoryOutcome,
 }
 
 impl Default for PlanReport {
@@ -159,6 +162,7 @@ impl Default for PlanReport {
             duration: Duration::ZERO,
             search: SearchStats::default(),
             replan: false,
+            trajectory: TrajectoryOutcome::NotAsked,
         }
     }
 }

@@ -18,7 +18,7 @@ use crate::world::World;
 use super::hybrid_astar::{self, HybridAStar, SearchStats};
 use super::rollout::{roll_out, Arrival};
 use super::route::subgoals_from_path;
-use super::trajectory::{push_states_as_path, TrajectoryOptimiser};
+use super::trajectory::{push_states_as_path, TrajectoryOptimiser, TrajectoryOutcome};
 use super::world::CheckedWorld;
 use super::{FollowingSettings, NavError, PathPose, PlanOutcome, PlanReport, SearchSettings};
 
@@ -221,6 +221,7 @@ impl RoutePlanner {
             duration: Duration::ZERO,
             search: SearchStats::default(),
             replan: request.kind != PlanKind::First,
+            trajectory: TrajectoryOutcome::NotAsked,
         };
         // The navigator validated the circles when the goal was set.
         self.world.copy_from(&request.world);
@@ -231,9 +232,11 @@ impl RoutePlanner {
                 // time where an optimiser is given.
                 if matches!(outcome, PlanOutcome::Route | PlanOutcome::Direct)
                     && !route.path.is_empty()
-                    && self.shape(&request.start, &request.goal, route)
                 {
-                    route.set_subgoals(request.goal, &self.following);
+                    report.trajectory = self.shape(&request.start, &request.goal, route);
+                    if matches!(report.trajectory, TrajectoryOutcome::Shaped { .. }) {
+                        route.set_subgoals(request.goal, &self.following);
+                    }
                 }
                 outcome
             }
@@ -332,20 +335,23 @@ impl RoutePlanner {
     /// The route's path (and shot) replaced by the optimiser's trajectory,
     /// where there is one: the MPC tracks it; the path (its poses, thinned)
     /// keeps the subgoals the progress checker and the replans go by.
-    fn shape(&mut self, start: &State, goal: &Goal, route: &mut Route) -> bool {
+    fn shape(&mut self, start: &State, goal: &Goal, route: &mut Route) -> TrajectoryOutcome {
         let Some(optimiser) = self.trajectory.as_mut() else {
-            return false;
+            return TrajectoryOutcome::NotAsked;
         };
-        let Some(dt) = optimiser.optimise(
+        let dt = match optimiser.optimise(
             &self.world,
             start,
             goal,
             &route.path,
             &route.shot,
             &mut route.trajectory,
-        ) else {
-            route.trajectory.clear();
-            return false;
+        ) {
+            Ok(dt) => dt,
+            Err(why) => {
+                route.trajectory.clear();
+                return TrajectoryOutcome::Failed(why);
+            }
         };
         route.trajectory_dt = dt;
         route.path.clear();
@@ -356,7 +362,9 @@ impl RoutePlanner {
             self.search_settings.sample_spacing,
             &mut route.path,
         );
-        true
+        TrajectoryOutcome::Shaped {
+            duration: dt * route.trajectory.len().saturating_sub(1) as f64,
+        }
     }
 
     /// The goal shot a path may end with (its last pose outside the search's

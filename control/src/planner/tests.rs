@@ -1038,9 +1038,9 @@ impl TrajectoryOptimiser for RouteTimed {
         path: &[PathPose],
         _shot: &[State],
         out: &mut Vec<State>,
-    ) -> Option<f64> {
+    ) -> Result<f64, TrajectoryFailure> {
         if self.fail {
-            return None;
+            return Err(TrajectoryFailure::NotSolved { status: "test" });
         }
         // Resampled every 0.1 m (0.1 s at 1 m/s) along the poses.
         let mut poses: Vec<[f64; 3]> = vec![[start[ix::X], start[ix::Y], start[ix::THETA]]];
@@ -1057,7 +1057,7 @@ impl TrajectoryOptimiser for RouteTimed {
             }
         }
         out.push(State::new(goal.x, goal.y, goal.theta, 0.0, 0.0, 0.0));
-        Some(0.1)
+        Ok(0.1)
     }
 }
 
@@ -1076,7 +1076,14 @@ fn a_searched_route_shaped_by_a_trajectory_is_tracked_with_the_machine_then_hand
     let goal = Goal::new(8.0, 0.0, 0.0);
     nav.set_goal(&at_rest(0.0, 0.0, 0.0), goal, &wall(), 0.0)
         .unwrap();
-    assert_eq!(nav.last_plan().unwrap().outcome, PlanOutcome::Route);
+    let report = nav.last_plan().unwrap();
+    assert_eq!(report.outcome, PlanOutcome::Route);
+    // The report says it was shaped, and how long the trajectory takes (the
+    // test optimiser's: 1 m/s along the route, so at least the 8 m).
+    let TrajectoryOutcome::Shaped { duration: shaped } = report.trajectory else {
+        panic!("{:?}", report.trajectory)
+    };
+    assert!(shaped > 8.0, "{shaped}");
     // The route's path is the trajectory's (thinned, start to goal): it goes
     // round the wall's end as the search's did.
     let widest = nav.path().iter().map(|q| q.y.abs()).fold(0.0, f64::max);
@@ -1090,6 +1097,7 @@ fn a_searched_route_shaped_by_a_trajectory_is_tracked_with_the_machine_then_hand
     assert!(nav.path_cost().is_none());
     assert_eq!(track.time(), 0.0);
     let duration = track.duration();
+    assert!((duration - shaped).abs() < 1e-9, "{duration} vs {shaped}");
     // Standing still, the time waits for the machine (the trajectory's
     // first points are further from it than the ones it is at).
     // (Less than `max_track_lag`: later it would follow the route's path.)
@@ -1143,6 +1151,15 @@ fn without_a_trajectory_the_searched_route_is_followed_as_before() {
     }
     assert_eq!(shaped.path(), plain.path());
     assert_eq!(shaped.route(), plain.route());
+    // Each report says why: the optimiser failed, or none was asked.
+    assert_eq!(
+        shaped.last_plan().unwrap().trajectory,
+        TrajectoryOutcome::Failed(TrajectoryFailure::NotSolved { status: "test" })
+    );
+    assert_eq!(
+        plain.last_plan().unwrap().trajectory,
+        TrajectoryOutcome::NotAsked
+    );
 }
 
 /// Issue 42: a tracked machine pushed off its trajectory (here 1.5 m

@@ -21,6 +21,47 @@ use crate::model::{ix, Goal, State, REACH_SPEED};
 use super::world::CheckedWorld;
 use super::PathPose;
 
+/// Why a route was not shaped (the route stays and is followed).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum TrajectoryFailure {
+    /// The route gives no warm start (empty, or shorter than a step).
+    #[error("no warm start")]
+    NoWarmStart,
+    /// The optimiser stopped without a feasible solution (its status).
+    #[error("not solved ({status})")]
+    NotSolved { status: &'static str },
+    /// The solution comes nearer than the margins to something among none
+    /// of its rows.
+    #[error("leaves the margins")]
+    LeavesMargins,
+    /// More states than the buffer holds.
+    #[error("too long")]
+    TooLong,
+}
+
+/// What shaping did with a plan's route ([`super::PlanReport::trajectory`]).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum TrajectoryOutcome {
+    /// Not asked: no optimiser, no path (open ground driven by the critic),
+    /// a retry, or no route.
+    #[default]
+    NotAsked,
+    /// Shaped: the trajectory's duration [s].
+    Shaped { duration: f64 },
+    /// Asked and failed: the route is followed.
+    Failed(TrajectoryFailure),
+}
+
+impl std::fmt::Display for TrajectoryOutcome {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            TrajectoryOutcome::NotAsked => f.write_str("not asked"),
+            TrajectoryOutcome::Shaped { duration } => write!(f, "{duration:.2} s"),
+            TrajectoryOutcome::Failed(why) => write!(f, "none: {why}"),
+        }
+    }
+}
+
 /// A minimum-time trajectory from a route.
 pub trait TrajectoryOptimiser: Send {
     /// A trajectory from `start` to `goal` that keeps `world`'s margins (the
@@ -28,7 +69,7 @@ pub trait TrajectoryOptimiser: Send {
     /// the route: the search's `path`, then its goal `shot` (may be empty).
     /// Writes the trajectory's states, start first, evenly spaced in time,
     /// into `out` (cleared first, within its capacity) and returns their
-    /// spacing [s]; `None` when there is none (the route stays).
+    /// spacing [s]; why there is none otherwise (the route stays).
     fn optimise(
         &mut self,
         world: &CheckedWorld,
@@ -37,7 +78,7 @@ pub trait TrajectoryOptimiser: Send {
         path: &[PathPose],
         shot: &[State],
         out: &mut Vec<State>,
-    ) -> Option<f64>;
+    ) -> Result<f64, TrajectoryFailure>;
 }
 
 /// Appends states (a roll-out's or a trajectory's, start first) to `path`
